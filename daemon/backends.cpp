@@ -1,0 +1,50 @@
+#include "daemon/backends.hpp"
+
+#include "hal/registry.hpp"
+
+namespace laserline::daemon {
+
+namespace {
+
+std::string join(const std::vector<std::string>& names) {
+  std::string list;
+  for (const auto& n : names)
+    list += (list.empty() ? "" : ", ") + n;
+  return list;
+}
+
+}  // namespace
+
+Backends create_backends(DaemonConfig& config) {
+  Backends b;
+  b.laser = hal::make_laser(config.laser_backend, config.laser_options);
+  if (!b.laser) {
+    config.laser_options.fail("backend", "unknown laser backend '" + config.laser_backend +
+                                             "' (available: " + join(hal::laser_backends()) + ")");
+  }
+  config.laser_options.finish();
+
+  hal::CameraRequest request{&config.camera_options, &config.calibration, b.laser.get()};
+  b.camera = hal::make_camera(config.camera_backend, request);
+  if (!b.camera) {
+    config.camera_options.fail("backend", "unknown camera backend '" + config.camera_backend +
+                                              "' (available: " + join(hal::camera_backends()) +
+                                              ")");
+  }
+  config.camera_options.finish();
+
+  const hal::FrameFormat format = b.camera->format();
+  if (format.width != config.calibration.camera.width ||
+      format.height != config.calibration.camera.height) {
+    throw hal::ConfigError(config.source + ": calibration.camera: size " +
+                           std::to_string(config.calibration.camera.width) + "x" +
+                           std::to_string(config.calibration.camera.height) +
+                           " differs from the camera's " + std::to_string(format.width) + "x" +
+                           std::to_string(format.height));
+  }
+
+  b.detector = pipeline::make_detector(config.detector, config.detector_options);
+  return b;
+}
+
+}  // namespace laserline::daemon

@@ -1,0 +1,294 @@
+#include "daemon/frame_path.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include "hal/clock.hpp"
+#include "pipeline/image_view.hpp"
+
+namespace laserline::daemon {
+
+namespace {
+constexpr std::int64_t kMs = 1'000'000;
+}
+
+const char* to_string(CameraState state) {
+  switch (state) {
+    case CameraState::kStarting:
+      return "starting";
+    case CameraState::kStreaming:
+      return "streaming";
+    case CameraState::kTimeout:
+      return "timeout";
+    case CameraState::kError:
+      return "error";
+    case CameraState::kStopped:
+      return "stopped";
+  }
+  return "unknown";
+}
+
+FramePath::FramePath(const DaemonConfig& config, hal::Camera& camera, hal::Laser& laser,
+                     pipeline::Detector& detector, lcm::LCM& lcm)
+    : config_(config), camera_(camera), laser_(laser), detector_(detector), lcm_(lcm) {}
+
+FramePath::~FramePath() {
+  stop();
+}
+
+void FramePath::start() {
+  format_ = camera_.format();
+  detector_.reset(format_.width, format_.height);
+  const std::size_t max_points = detector_.max_points(format_.width, format_.height);
+
+  FrameSlot frame_prototype;
+  frame_prototype.pixels.assign(format_.bytes(), 0);
+  frames_ = std::make_unique<SpscRing<FrameSlot>>(config_.frame_slots, frame_prototype);
+  ProfileSlot profile_prototype{{}, format_.width, format_.height, pipeline::Profile(max_points)};
+  profiles_ = std::make_unique<SpscRing<ProfileSlot>>(config_.profile_slots, profile_prototype);
+  ImageSlot image_prototype{{}, format_, std::vector<std::uint8_t>(format_.bytes(), 0)};
+  images_ = std::make_unique<SpscRing<ImageSlot>>(config_.image_slots, image_prototype);
+  publisher_ = std::make_unique<LcmPublisher>(
+      lcm_,
+      PublisherChannels{config_.profile_channel, config_.image_channel, config_.status_channel},
+      config_.detector, max_points, format_);
+  publisher_->status().camera_backend = config_.camera_backend;
+  // Enough room for every frame of a status period at 4x the nominal rate.
+  const auto window = static_cast<std::size_t>(
+      std::ceil(config_.frame_rate_hz * config_.status_period_s * 4.0) + 64);
+  latency_ = std::make_unique<LatencyStats>(window);
+
+  start_mono_ns_ = hal::monotonic_ns();
+  counters_.last_frame_mono_ns.store(start_mono_ns_, std::memory_order_relaxed);
+  stopping_.store(false);
+  worker_done_.store(false);
+  running_.store(true);
+  publisher_thread_ = std::thread([this] { publisher_loop(); });
+  worker_thread_ = std::thread([this] { worker_loop(); });
+  camera_thread_ = std::thread([this] { camera_loop(); });
+}
+
+void FramePath::stop() {
+  if (!running_.exchange(false)) return;
+  stopping_.store(true);
+  camera_.stop();
+  if (camera_thread_.joinable()) camera_thread_.join();
+  switch_laser(false, 0);
+  frames_->wake();
+  if (worker_thread_.joinable()) worker_thread_.join();
+  profiles_->wake();
+  if (publisher_thread_.joinable()) publisher_thread_.join();
+}
+
+bool FramePath::desired_laser(std::uint64_t grab_index) const {
+  switch (config_.laser_mode) {
+    case LaserMode::kOn:
+      return true;
+    case LaserMode::kOff:
+      return false;
+    case LaserMode::kAlternate:
+      return grab_index % 2 == 0;
+  }
+  return false;
+}
+
+void FramePath::switch_laser(bool on, std::uint64_t for_frame) {
+  hal::LaserSwitch record;
+  if (laser_.set(on, for_frame, &record)) {
+    counters_.laser_switches.fetch_add(1, std::memory_order_relaxed);
+  } else {
+    counters_.laser_errors.fetch_add(1, std::memory_order_relaxed);
+  }
+}
+
+void FramePath::enforce_laser_safety() {
+  const std::int64_t age =
+      hal::monotonic_ns() - counters_.last_frame_mono_ns.load(std::memory_order_relaxed);
+  if (laser_.is_on() && age > config_.laser_frame_timeout_ms * kMs) {
+    switch_laser(false, 0);
+    counters_.laser_safety_offs.fetch_add(1, std::memory_order_relaxed);
+  }
+}
+
+void FramePath::camera_loop() {
+  // Where frames go when the worker is behind: the camera must still be drained.
+  std::vector<std::uint8_t> overflow(format_.bytes());
+  hal::FrameInfo overflow_info;
+  const std::chrono::milliseconds timeout(config_.grab_timeout_ms);
+  std::uint64_t grab_index = 0;
+  bool frames_flowing = true;  // until a grab fails; the laser stays off until frames return
+
+  while (!stopping_.load(std::memory_order_relaxed)) {
+    const bool want_laser = frames_flowing && desired_laser(grab_index);
+    if (want_laser != laser_.is_on()) switch_laser(want_laser, grab_index);
+
+    FrameSlot* slot = frames_->try_claim();
+    std::span<std::uint8_t> pixels =
+        slot != nullptr ? std::span<std::uint8_t>(slot->pixels) : std::span<std::uint8_t>(overflow);
+    hal::FrameInfo& info = slot != nullptr ? slot->info : overflow_info;
+    info.laser_on = want_laser;  // cameras that observe the laser themselves overwrite it
+    const hal::GrabStatus status = camera_.grab(pixels, info, timeout);
+    switch (status) {
+      case hal::GrabStatus::kOk:
+        ++grab_index;
+        frames_flowing = true;
+        counters_.frames_captured.fetch_add(1, std::memory_order_relaxed);
+        counters_.last_frame_mono_ns.store(info.arrival_mono_ns, std::memory_order_relaxed);
+        counters_.camera_state.store(CameraState::kStreaming, std::memory_order_relaxed);
+        if (slot != nullptr) {
+          frames_->publish();
+        } else {
+          counters_.frames_dropped.fetch_add(1, std::memory_order_relaxed);
+        }
+        break;
+      case hal::GrabStatus::kTimeout:
+        frames_flowing = false;
+        if (laser_.is_on()) switch_laser(false, grab_index);
+        counters_.grab_timeouts.fetch_add(1, std::memory_order_relaxed);
+        counters_.camera_state.store(CameraState::kTimeout, std::memory_order_relaxed);
+        break;
+      case hal::GrabStatus::kError:
+        frames_flowing = false;
+        if (laser_.is_on()) switch_laser(false, grab_index);
+        counters_.grab_errors.fetch_add(1, std::memory_order_relaxed);
+        counters_.camera_state.store(CameraState::kError, std::memory_order_relaxed);
+        break;
+      case hal::GrabStatus::kStopped:
+        stopping_.store(true, std::memory_order_relaxed);
+        break;
+    }
+  }
+  if (laser_.is_on()) switch_laser(false, grab_index);
+  counters_.camera_state.store(CameraState::kStopped, std::memory_order_relaxed);
+}
+
+void FramePath::worker_loop() {
+  std::int64_t processed = 0;
+  while (true) {
+    if (!frames_->wait(100 * kMs)) {
+      if (stopping_.load(std::memory_order_acquire)) break;
+      continue;
+    }
+    FrameSlot* frame = frames_->front();
+    const pipeline::ImageView view{frame->pixels.data(), format_.width, format_.height,
+                                   format_.stride};
+    if (config_.image_every_n > 0 && processed % config_.image_every_n == 0) {
+      if (ImageSlot* image = images_->try_claim()) {
+        image->info = frame->info;
+        image->format = format_;
+        std::memcpy(image->pixels.data(), frame->pixels.data(), format_.bytes());
+        images_->publish();
+      } else {
+        counters_.images_dropped.fetch_add(1, std::memory_order_relaxed);
+      }
+    }
+    if (ProfileSlot* out = profiles_->try_claim()) {
+      detector_.detect(view, out->profile);
+      out->info = frame->info;
+      out->width = format_.width;
+      out->height = format_.height;
+      profiles_->publish();
+    } else {
+      counters_.profiles_dropped.fetch_add(1, std::memory_order_relaxed);
+    }
+    ++processed;
+    counters_.frames_processed.fetch_add(1, std::memory_order_relaxed);
+    frames_->pop();
+  }
+  worker_done_.store(true, std::memory_order_release);
+  profiles_->wake();
+}
+
+void FramePath::fill_status(std::int64_t now_mono, std::int64_t period_ns) {
+  laserline::status_t& s = publisher_->status();
+  s.utime = hal::wall_ns() / 1000;
+  s.uptime_us = (now_mono - start_mono_ns_) / 1000;
+  s.camera_state = to_string(counters_.camera_state.load(std::memory_order_relaxed));
+  s.laser_on = laser_.is_on();
+  s.laser_switches = counters_.laser_switches.load(std::memory_order_relaxed);
+  s.frames_captured = counters_.frames_captured.load(std::memory_order_relaxed);
+  s.frames_processed = counters_.frames_processed.load(std::memory_order_relaxed);
+  s.frames_dropped = counters_.frames_dropped.load(std::memory_order_relaxed);
+  s.profiles_published = profiles_published_.load(std::memory_order_relaxed);
+  s.profiles_dropped = counters_.profiles_dropped.load(std::memory_order_relaxed);
+  s.images_published = images_published_.load(std::memory_order_relaxed);
+  s.images_dropped = counters_.images_dropped.load(std::memory_order_relaxed);
+  s.grab_timeouts = counters_.grab_timeouts.load(std::memory_order_relaxed);
+  s.grab_errors = counters_.grab_errors.load(std::memory_order_relaxed);
+  s.publish_errors = publish_errors_.load(std::memory_order_relaxed);
+  s.laser_safety_offs = counters_.laser_safety_offs.load(std::memory_order_relaxed);
+  const double seconds = static_cast<double>(std::max<std::int64_t>(period_ns, 1)) * 1e-9;
+  s.frame_rate_hz =
+      static_cast<float>(static_cast<double>(s.frames_processed - last_status_frames_) / seconds);
+  last_status_frames_ = s.frames_processed;
+  s.points_per_profile = profiles_in_period_ > 0 ? static_cast<float>(points_in_period_) /
+                                                       static_cast<float>(profiles_in_period_)
+                                                 : 0.0f;
+  points_in_period_ = 0;
+  profiles_in_period_ = 0;
+  const LatencySummary window = latency_->take_window();
+  s.latency_samples = static_cast<std::int32_t>(window.samples);
+  s.latency_p50_ms = static_cast<float>(window.p50_ms);
+  s.latency_p99_ms = static_cast<float>(window.p99_ms);
+  s.latency_max_ms = static_cast<float>(window.max_ms);
+}
+
+void FramePath::publisher_loop() {
+  const auto period_ns = static_cast<std::int64_t>(config_.status_period_s * 1e9);
+  std::int64_t last_status = hal::monotonic_ns();
+  std::int64_t next_status = last_status + period_ns;
+  while (true) {
+    const std::int64_t wait_ns =
+        std::clamp<std::int64_t>(next_status - hal::monotonic_ns(), 0, 100 * kMs);
+    profiles_->wait(wait_ns);
+    while (ImageSlot* image = images_->front()) {
+      if (publisher_->publish_image(*image)) {
+        images_published_.fetch_add(1, std::memory_order_relaxed);
+      } else {
+        publish_errors_.fetch_add(1, std::memory_order_relaxed);
+      }
+      images_->pop();
+    }
+    while (ProfileSlot* slot = profiles_->front()) {
+      if (publisher_->publish_profile(*slot)) {
+        latency_->add(hal::monotonic_ns() - slot->info.exposure_mono_ns);
+        profiles_published_.fetch_add(1, std::memory_order_relaxed);
+        points_in_period_ += static_cast<std::int64_t>(slot->profile.size());
+        ++profiles_in_period_;
+      } else {
+        publish_errors_.fetch_add(1, std::memory_order_relaxed);
+      }
+      profiles_->pop();
+    }
+    const std::int64_t now = hal::monotonic_ns();
+    const bool finished = worker_done_.load(std::memory_order_acquire) &&
+                          profiles_->front() == nullptr && images_->front() == nullptr;
+    if (now >= next_status || finished) {
+      fill_status(now, now - last_status);
+      if (!publisher_->publish_status()) publish_errors_.fetch_add(1, std::memory_order_relaxed);
+      last_status = now;
+      next_status = std::max(next_status + period_ns, now + period_ns / 2);
+    }
+    if (finished) break;
+  }
+  final_latency_ = latency_->total();
+}
+
+FramePathSummary FramePath::summary() const {
+  FramePathSummary s;
+  s.frames_captured = counters_.frames_captured.load();
+  s.frames_processed = counters_.frames_processed.load();
+  s.frames_dropped = counters_.frames_dropped.load();
+  s.profiles_published = profiles_published_.load();
+  s.profiles_dropped = counters_.profiles_dropped.load();
+  s.images_published = images_published_.load();
+  s.grab_timeouts = counters_.grab_timeouts.load();
+  s.grab_errors = counters_.grab_errors.load();
+  s.publish_errors = publish_errors_.load();
+  s.laser_safety_offs = counters_.laser_safety_offs.load();
+  s.latency = final_latency_;  // complete once stop() returned
+  return s;
+}
+
+}  // namespace laserline::daemon

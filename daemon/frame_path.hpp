@@ -1,0 +1,102 @@
+#pragma once
+
+#include <lcm/lcm-cpp.hpp>
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <thread>
+
+#include "daemon/config.hpp"
+#include "daemon/frame_slots.hpp"
+#include "daemon/latency.hpp"
+#include "daemon/lcm_publisher.hpp"
+#include "daemon/spsc_ring.hpp"
+#include "hal/camera.hpp"
+#include "hal/laser.hpp"
+#include "pipeline/detector.hpp"
+
+namespace laserline::daemon {
+
+// Totals of a run, for the log line at exit and for tests.
+struct FramePathSummary {
+  std::int64_t frames_captured = 0;
+  std::int64_t frames_processed = 0;
+  std::int64_t frames_dropped = 0;
+  std::int64_t profiles_published = 0;
+  std::int64_t profiles_dropped = 0;
+  std::int64_t images_published = 0;
+  std::int64_t grab_timeouts = 0;
+  std::int64_t grab_errors = 0;
+  std::int64_t publish_errors = 0;
+  std::int64_t laser_safety_offs = 0;
+  LatencySummary latency;  // exposure -> profile published
+};
+
+// The whole frame path, wired: camera thread -> SPSC ring -> worker (detector) -> SPSC rings ->
+// publisher thread -> LCM. Every buffer is allocated in start(); afterwards the camera and
+// worker threads neither allocate nor lock, and the publisher only calls into LCM.
+//
+// Laser safety: the camera thread switches the laser per frame (mode on/alternate/off), and
+// off when a grab times out or fails; it stays off until frames come back. The owner calls
+// enforce_laser_safety() periodically from another thread so that the laser goes off even when
+// the camera thread is stuck inside the driver. stop() and the destructor switch it off.
+//
+// Thread context: construct, start(), stop(), enforce_laser_safety() and summary() from the
+// owning (main) thread.
+class FramePath {
+ public:
+  FramePath(const DaemonConfig& config, hal::Camera& camera, hal::Laser& laser,
+            pipeline::Detector& detector, lcm::LCM& lcm);
+  ~FramePath();
+  FramePath(const FramePath&) = delete;
+  FramePath& operator=(const FramePath&) = delete;
+
+  void start();
+  void stop();
+  void enforce_laser_safety();
+  FramePathSummary summary() const;
+  const FramePathCounters& counters() const { return counters_; }
+
+ private:
+  void camera_loop();
+  void worker_loop();
+  void publisher_loop();
+  bool desired_laser(std::uint64_t grab_index) const;
+  void switch_laser(bool on, std::uint64_t for_frame);
+  void fill_status(std::int64_t now_mono, std::int64_t period_ns);
+
+  const DaemonConfig& config_;
+  hal::Camera& camera_;
+  hal::Laser& laser_;
+  pipeline::Detector& detector_;
+  lcm::LCM& lcm_;
+  hal::FrameFormat format_;
+
+  std::unique_ptr<SpscRing<FrameSlot>> frames_;
+  std::unique_ptr<SpscRing<ProfileSlot>> profiles_;
+  std::unique_ptr<SpscRing<ImageSlot>> images_;
+  std::unique_ptr<LcmPublisher> publisher_;
+  std::unique_ptr<LatencyStats> latency_;
+
+  FramePathCounters counters_;
+  std::atomic<std::int64_t> profiles_published_{0};
+  std::atomic<std::int64_t> images_published_{0};
+  std::atomic<std::int64_t> publish_errors_{0};
+  std::atomic<bool> running_{false};
+  std::atomic<bool> stopping_{false};
+  std::atomic<bool> worker_done_{false};
+  std::int64_t start_mono_ns_ = 0;
+
+  // Publisher-thread state for per-period figures.
+  std::int64_t last_status_frames_ = 0;
+  std::int64_t points_in_period_ = 0;
+  std::int64_t profiles_in_period_ = 0;
+  LatencySummary final_latency_;
+
+  std::thread camera_thread_;
+  std::thread worker_thread_;
+  std::thread publisher_thread_;
+};
+
+}  // namespace laserline::daemon

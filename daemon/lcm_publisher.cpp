@@ -1,0 +1,81 @@
+#include "daemon/lcm_publisher.hpp"
+
+#include <algorithm>
+#include <cstring>
+
+namespace laserline::daemon {
+
+std::int64_t frame_utime(const hal::FrameInfo& info) {
+  return info.exposure_wall_ns() / 1000;
+}
+
+LcmPublisher::LcmPublisher(lcm::LCM& lcm, PublisherChannels channels, const std::string& detector,
+                           std::size_t max_points, const hal::FrameFormat& format)
+    : lcm_(lcm), channels_(std::move(channels)) {
+  profile_.detector = detector;
+  profile_.points.resize(max_points);
+  profile_.num_points = static_cast<std::int32_t>(max_points);
+  image_.data.resize(format.bytes());
+  image_.size = static_cast<std::int32_t>(format.bytes());
+  status_.detector = detector;
+  status_.camera_state = "starting";
+  const std::size_t largest =
+      std::max({static_cast<std::size_t>(profile_.getEncodedSize()),
+                static_cast<std::size_t>(image_.getEncodedSize()), std::size_t{4096}});
+  // Room for longer status strings than the ones measured here.
+  buffer_.resize(largest + 1024);
+  profile_.points.clear();
+  profile_.num_points = 0;
+}
+
+template <typename Message>
+bool LcmPublisher::publish(const std::string& channel, const Message& message) {
+  const int size = message.getEncodedSize();
+  if (size < 0 || static_cast<std::size_t>(size) > buffer_.size()) return false;
+  if (message.encode(buffer_.data(), 0, size) != size) return false;
+  return lcm_.publish(channel, buffer_.data(), static_cast<unsigned>(size)) == 0;
+}
+
+bool LcmPublisher::publish_profile(const ProfileSlot& slot) {
+  profile_.utime = frame_utime(slot.info);
+  profile_.sequence = static_cast<std::int64_t>(slot.info.sequence);
+  profile_.camera_timestamp_ns = slot.info.camera_ns;
+  profile_.laser_on = slot.info.laser_on;
+  profile_.width = slot.width;
+  profile_.height = slot.height;
+  const auto& points = slot.profile.points();
+  profile_.points.resize(points.size());  // within the capacity reserved at construction
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const pipeline::ProfilePoint& p = points[i];
+    laserline::point_t& out = profile_.points[i];
+    out.u = static_cast<std::int16_t>(p.u);
+    out.v = p.v;
+    out.snr_db = p.snr_db;
+    out.segment = p.segment;
+    out.valid = p.valid;
+    std::copy(p.xyz.begin(), p.xyz.end(), out.xyz);
+  }
+  profile_.num_points = static_cast<std::int32_t>(points.size());
+  return publish(channels_.profile, profile_);
+}
+
+bool LcmPublisher::publish_image(const ImageSlot& slot) {
+  image_.utime = frame_utime(slot.info);
+  image_.sequence = static_cast<std::int64_t>(slot.info.sequence);
+  image_.width = slot.format.width;
+  image_.height = slot.format.height;
+  image_.row_stride = slot.format.stride;
+  image_.pixelformat = laserline::image_t::PIXEL_FORMAT_GRAY;
+  image_.compression = laserline::image_t::COMPRESSION_NONE;
+  const std::size_t bytes = std::min(slot.pixels.size(), slot.format.bytes());
+  image_.data.resize(bytes);
+  std::memcpy(image_.data.data(), slot.pixels.data(), bytes);
+  image_.size = static_cast<std::int32_t>(bytes);
+  return publish(channels_.image, image_);
+}
+
+bool LcmPublisher::publish_status() {
+  return publish(channels_.status, status_);
+}
+
+}  // namespace laserline::daemon

@@ -1,0 +1,54 @@
+#pragma once
+
+#include <laserline/image_t.hpp>
+#include <laserline/profile_t.hpp>
+#include <laserline/status_t.hpp>
+#include <lcm/lcm-cpp.hpp>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "daemon/frame_slots.hpp"
+#include "hal/frame.hpp"
+
+namespace laserline::daemon {
+
+struct PublisherChannels {
+  std::string profile = "LASERLINE_PROFILE";
+  std::string image = "LASERLINE_IMAGE";
+  std::string status = "LASERLINE_STATUS";
+};
+
+// Turns slots into LCM messages. Messages and the encode buffer are sized at construction for the
+// largest profile and frame, so publishing allocates nothing (LCM's typed publish() would
+// allocate a buffer per call; we encode ourselves and hand LCM the bytes).
+// Thread context: the publisher thread only (lcm_publish takes a lock and makes a syscall, which
+// is why it is kept off the real-time threads).
+class LcmPublisher {
+ public:
+  LcmPublisher(lcm::LCM& lcm, PublisherChannels channels, const std::string& detector,
+               std::size_t max_points, const hal::FrameFormat& format);
+
+  bool publish_profile(const ProfileSlot& slot);
+  bool publish_image(const ImageSlot& slot);
+  // The caller fills status() and then publishes it.
+  laserline::status_t& status() { return status_; }
+  bool publish_status();
+
+ private:
+  template <typename Message>
+  bool publish(const std::string& channel, const Message& message);
+
+  lcm::LCM& lcm_;
+  PublisherChannels channels_;
+  laserline::profile_t profile_;
+  laserline::image_t image_;
+  laserline::status_t status_;
+  std::vector<std::uint8_t> buffer_;
+};
+
+// Microseconds since the Unix epoch of a frame's exposure (LCM's utime convention).
+std::int64_t frame_utime(const hal::FrameInfo& info);
+
+}  // namespace laserline::daemon

@@ -1,0 +1,44 @@
+#pragma once
+
+#include <array>
+#include <optional>
+#include <string>
+
+#include "hal/yaml_reader.hpp"
+
+namespace laserline::hal {
+
+// Pinhole intrinsics, OpenCV convention (x right, y down, pixel centres at integers).
+struct CameraIntrinsics {
+  int width = 1280;
+  int height = 1024;
+  double fx = 1400, fy = 1400, cx = 639.5, cy = 511.5;
+  std::array<double, 5> distortion{};  // k1 k2 p1 p2 k3
+
+  bool has_distortion() const;
+};
+
+// Where the laser sheet is relative to the camera (the paper's d, beta, l_w). The projector sits
+// at baseline d along -y and the sheet contains the x direction: Y = -d + tan(90deg - beta) * Z.
+// A calibrated plane a*X + b*Y + c*Z + e = 0 (camera frame, metres) replaces that model when set.
+struct LaserMount {
+  double baseline_m = 0.25;
+  double angle_deg = 80.0;
+  double sheet_width_m = 0.003;
+  std::optional<std::array<double, 4>> plane;
+
+  // The sheet as a*X + b*Y + c*Z + e = 0, from `plane` or from baseline and angle.
+  std::array<double, 4> plane_coefficients() const;
+};
+
+struct Calibration {
+  CameraIntrinsics camera;
+  LaserMount laser;
+};
+
+// Reads `camera:` and `laser:` sections from a mapping (a calibration file, or the calibration
+// section of the daemon's configuration). Throws ConfigError naming the key.
+Calibration read_calibration(YamlMap& map);
+Calibration load_calibration_file(const std::string& path);
+
+}  // namespace laserline::hal

@@ -1,0 +1,40 @@
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <span>
+#include <string>
+
+#include "hal/frame.hpp"
+
+namespace laserline::hal {
+
+enum class GrabStatus : std::uint8_t {
+  kOk,       // a frame was written
+  kTimeout,  // no frame within the timeout; the camera may still come back
+  kError,    // the frame or the camera failed; counted, the caller carries on
+  kStopped,  // stop() was called
+};
+
+const char* to_string(GrabStatus status);
+
+// A source of frames. Backends (sim, aravis, v4l2, replay) implement it and register with
+// CameraRegistry. Thread context: open()/format() from the setup thread; grab() from the one
+// camera thread; stop() from any thread (it wakes a blocked grab()).
+class Camera {
+ public:
+  virtual ~Camera() = default;
+
+  // Opens the device and fixes the frame format. Returns false with a one-line reason in *error.
+  virtual bool open(std::string* error) = 0;
+  virtual FrameFormat format() const = 0;
+
+  // Waits up to `timeout` for the next frame and writes its pixels (format().bytes()) into `dst`.
+  // No allocation and no exception: the frame path calls it.
+  virtual GrabStatus grab(std::span<std::uint8_t> dst, FrameInfo& info,
+                          std::chrono::milliseconds timeout) = 0;
+
+  virtual void stop() = 0;
+};
+
+}  // namespace laserline::hal

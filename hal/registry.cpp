@@ -1,0 +1,102 @@
+#include "hal/registry.hpp"
+
+#include <functional>
+
+#include "hal/sim/sim_camera.hpp"
+#include "hal/sim/sim_laser.hpp"
+
+namespace laserline::hal {
+
+namespace {
+
+using CameraFactory = std::function<std::unique_ptr<Camera>(const CameraRequest&)>;
+using LaserFactory = std::function<std::unique_ptr<Laser>(YamlMap&)>;
+
+struct CameraEntry {
+  const char* name;
+  CameraFactory create;
+};
+struct LaserEntry {
+  const char* name;
+  LaserFactory create;
+};
+
+std::unique_ptr<Camera> create_sim_camera(const CameraRequest& request) {
+  const double rate = request.options->number("frame_rate_hz", 30.0, 0.1, 1000.0);
+  YamlMap sim = request.options->map("sim");
+  SimSceneOptions options = read_sim_options(sim, *request.calibration, rate);
+  sim.finish();
+  return std::make_unique<SimCamera>(options, request.laser);
+}
+
+const std::vector<CameraEntry>& camera_table() {
+  static const std::vector<CameraEntry> table = {
+      {"sim", create_sim_camera},
+  };
+  return table;
+}
+
+const std::vector<LaserEntry>& laser_table() {
+  static const std::vector<LaserEntry> table = {
+      {"sim", [](YamlMap&) -> std::unique_ptr<Laser> { return std::make_unique<SimLaser>(); }},
+  };
+  return table;
+}
+
+}  // namespace
+
+std::vector<std::string> camera_backends() {
+  std::vector<std::string> names;
+  for (const auto& e : camera_table())
+    names.emplace_back(e.name);
+  return names;
+}
+
+std::vector<std::string> laser_backends() {
+  std::vector<std::string> names;
+  for (const auto& e : laser_table())
+    names.emplace_back(e.name);
+  return names;
+}
+
+std::unique_ptr<Camera> make_camera(const std::string& backend, const CameraRequest& request) {
+  for (const auto& e : camera_table()) {
+    if (backend == e.name) return e.create(request);
+  }
+  return nullptr;
+}
+
+std::unique_ptr<Laser> make_laser(const std::string& backend, YamlMap& options) {
+  for (const auto& e : laser_table()) {
+    if (backend == e.name) return e.create(options);
+  }
+  return nullptr;
+}
+
+SimSceneOptions read_sim_options(YamlMap& sim, const Calibration& calibration,
+                                 double frame_rate_hz) {
+  SimSceneOptions o;
+  o.calibration = calibration;
+  if (calibration.camera.has_distortion()) {
+    sim.fail("", "the simulator renders an ideal pinhole camera; set calibration distortion to 0");
+  }
+  o.frame_rate_hz = frame_rate_hz;
+  o.seed = static_cast<std::uint64_t>(sim.integer("seed", 1, 0, INT64_MAX));
+  o.distance_m = sim.number("distance_m", o.distance_m, 0.1, 100.0);
+  o.tilt_x_deg = sim.number("tilt_x_deg", o.tilt_x_deg, -60.0, 60.0);
+  o.tilt_y_deg = sim.number("tilt_y_deg", o.tilt_y_deg, -60.0, 60.0);
+  o.texture_scale_m = sim.number("texture_scale_m", o.texture_scale_m, 1e-4, 10.0);
+  o.texture_contrast = sim.number("texture_contrast", o.texture_contrast, 0.0, 1.0);
+  o.ambient = sim.number("ambient", o.ambient, 0.0, 255.0);
+  o.laser_peak = sim.number("laser_peak", o.laser_peak, 0.0, 1000.0);
+  o.blur_px = sim.number("blur_px", o.blur_px, 0.0, 20.0);
+  o.noise_sigma = sim.number("noise_sigma", o.noise_sigma, 0.0, 50.0);
+  o.backscatter = sim.number("backscatter", o.backscatter, 0.0, 255.0);
+  o.attenuation_per_m = sim.number("attenuation_per_m", o.attenuation_per_m, 0.0, 10.0);
+  o.sway_m = sim.number("sway_m", o.sway_m, 0.0, 1.0);
+  o.sway_deg = sim.number("sway_deg", o.sway_deg, 0.0, 20.0);
+  o.sway_period_s = sim.number("sway_period_s", o.sway_period_s, 0.1, 3600.0);
+  return o;
+}
+
+}  // namespace laserline::hal

@@ -1,0 +1,77 @@
+#include "hal/sim/sim_camera.hpp"
+
+#include <time.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "hal/clock.hpp"
+
+namespace laserline::hal {
+
+namespace {
+
+// Sleeps until an absolute CLOCK_MONOTONIC time, in slices so that stop() is noticed quickly.
+bool sleep_until(std::int64_t deadline_ns, const std::atomic<bool>& stopped) {
+  constexpr std::int64_t kSlice = 20'000'000;
+  while (!stopped.load(std::memory_order_acquire)) {
+    const std::int64_t now = monotonic_ns();
+    if (now >= deadline_ns) return true;
+    const std::int64_t until = std::min(deadline_ns, now + kSlice);
+    timespec ts{static_cast<time_t>(until / 1'000'000'000),
+                static_cast<long>(until % 1'000'000'000)};
+    clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
+  }
+  return false;
+}
+
+}  // namespace
+
+SimCamera::SimCamera(const SimSceneOptions& options, const Laser* laser)
+    : scene_(options),
+      laser_(laser),
+      period_ns_(static_cast<std::int64_t>(std::llround(1e9 / options.frame_rate_hz))) {}
+
+bool SimCamera::open(std::string* /*error*/) {
+  start_mono_ns_ = monotonic_ns();
+  next_sequence_ = 0;
+  stopped_.store(false, std::memory_order_release);
+  return true;
+}
+
+GrabStatus SimCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
+                           std::chrono::milliseconds timeout) {
+  if (stopped_.load(std::memory_order_acquire)) return GrabStatus::kStopped;
+  if (dst.size() < scene_.format().bytes()) return GrabStatus::kError;
+  // A free-running sensor: frame n starts exposing at start + n * period. When the consumer is
+  // late the frames it missed are lost (sequence numbers jump), as with a real camera.
+  const std::int64_t now = monotonic_ns();
+  std::int64_t exposure = start_mono_ns_ + static_cast<std::int64_t>(next_sequence_) * period_ns_;
+  if (exposure < now - period_ns_) {
+    const auto missed = static_cast<std::uint64_t>((now - exposure) / period_ns_);
+    next_sequence_ += missed;
+    exposure += static_cast<std::int64_t>(missed) * period_ns_;
+  }
+  if (exposure > now + timeout.count() * 1'000'000) {
+    if (!sleep_until(now + timeout.count() * 1'000'000, stopped_)) return GrabStatus::kStopped;
+    return GrabStatus::kTimeout;
+  }
+  if (!sleep_until(exposure, stopped_)) return GrabStatus::kStopped;
+
+  const bool laser_on = laser_ != nullptr && laser_->is_on();
+  scene_.render(next_sequence_, laser_on, dst);
+  info.sequence = next_sequence_;
+  info.camera_ns = exposure - start_mono_ns_;
+  info.exposure_mono_ns = exposure;
+  info.arrival_mono_ns = monotonic_ns();
+  info.arrival_wall_ns = wall_ns();
+  info.laser_on = laser_on;
+  ++next_sequence_;
+  return GrabStatus::kOk;
+}
+
+void SimCamera::stop() {
+  stopped_.store(true, std::memory_order_release);
+}
+
+}  // namespace laserline::hal

@@ -1,0 +1,34 @@
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+
+#include "hal/camera.hpp"
+#include "hal/laser.hpp"
+#include "hal/sim/sim_scene.hpp"
+
+namespace laserline::hal {
+
+// The built-in simulated scanner as a camera: renders SimScene frames at the configured rate,
+// paced on CLOCK_MONOTONIC like a free-running sensor, lit by `laser` as it is at exposure time.
+// Frame n has sequence number n, so SimScene(options).ground_truth(n, ...) is its exact answer.
+class SimCamera final : public Camera {
+ public:
+  SimCamera(const SimSceneOptions& options, const Laser* laser);
+
+  bool open(std::string* error) override;
+  FrameFormat format() const override { return scene_.format(); }
+  GrabStatus grab(std::span<std::uint8_t> dst, FrameInfo& info,
+                  std::chrono::milliseconds timeout) override;
+  void stop() override;
+
+ private:
+  SimScene scene_;
+  const Laser* laser_;
+  std::int64_t period_ns_;
+  std::int64_t start_mono_ns_ = 0;
+  std::uint64_t next_sequence_ = 0;
+  std::atomic<bool> stopped_{false};
+};
+
+}  // namespace laserline::hal

@@ -1,0 +1,591 @@
+#include "hal/sim/sim_scene.hpp"
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <stdexcept>
+#include <string>
+
+namespace laserline::hal {
+
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+constexpr double kDeg = kPi / 180.0;
+constexpr int kMaxImageSide = 16384;
+constexpr int kTextureLog2 = 10;  // 1024 x 1024 texels, wrapping
+constexpr int kTextureSize = 1 << kTextureLog2;
+constexpr int kFinestSpacing = 4;  // lattice spacing (texels) of the finest noise octave
+constexpr std::size_t kNoiseTableSize = std::size_t{1} << 22;
+constexpr float kNoiseTableScale = 16.0f;  // table holds round(16 * N(0, 1)), clipped to int8
+constexpr double kFwhmToSigma = 2.3548200450309493;
+constexpr float kBandSigmas = 5.0f;  // the laser profile is evaluated within +-5 sigma
+constexpr float kEdgeRows = 1.5f;    // truth is NaN when the centre is within 2 px of the border
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+using Vec3 = std::array<double, 3>;
+using Mat3 = std::array<double, 9>;  // row-major
+
+std::uint64_t mix64(std::uint64_t x) {
+  x += 0x9e3779b97f4a7c15ULL;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+  return x ^ (x >> 31);
+}
+
+// xoshiro256**: our own generator so the frames are the same with every standard library.
+class Rng {
+ public:
+  explicit Rng(std::uint64_t seed) {
+    for (auto& s : s_) {
+      seed = mix64(seed);
+      s = seed;
+    }
+  }
+  std::uint64_t next() {
+    const std::uint64_t result = std::rotl(s_[1] * 5, 7) * 9;
+    const std::uint64_t t = s_[1] << 17;
+    s_[2] ^= s_[0];
+    s_[3] ^= s_[1];
+    s_[1] ^= s_[2];
+    s_[0] ^= s_[3];
+    s_[2] ^= t;
+    s_[3] = std::rotl(s_[3], 45);
+    return result;
+  }
+  // Uniform in (0, 1].
+  double uniform() { return static_cast<double>((next() >> 11) + 1) * 0x1.0p-53; }
+  double uniform(double lo, double hi) { return lo + (hi - lo) * uniform(); }
+
+ private:
+  std::array<std::uint64_t, 4> s_{};
+};
+
+Vec3 mul_transposed(const Mat3& m, const Vec3& v) {
+  return {m[0] * v[0] + m[3] * v[1] + m[6] * v[2], m[1] * v[0] + m[4] * v[1] + m[7] * v[2],
+          m[2] * v[0] + m[5] * v[1] + m[8] * v[2]};
+}
+
+Mat3 mul(const Mat3& a, const Mat3& b) {
+  Mat3 r{};
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      r[i * 3 + j] = a[i * 3] * b[j] + a[i * 3 + 1] * b[3 + j] + a[i * 3 + 2] * b[6 + j];
+    }
+  }
+  return r;
+}
+
+double dot(const Vec3& a, const Vec3& b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+Mat3 rot_x(double a) {
+  const double c = std::cos(a), s = std::sin(a);
+  return {1, 0, 0, 0, c, -s, 0, s, c};
+}
+Mat3 rot_y(double a) {
+  const double c = std::cos(a), s = std::sin(a);
+  return {c, 0, s, 0, 1, 0, -s, 0, c};
+}
+Mat3 rot_z(double a) {
+  const double c = std::cos(a), s = std::sin(a);
+  return {c, -s, 0, s, c, 0, 0, 0, 1};
+}
+
+// Everything render() and ground_truth() need about one frame, in the camera frame.
+struct FrameGeometry {
+  bool surface = false;  // the surface plane is in front of the camera
+  Vec3 n{};              // surface: n . X = d_surface, n pointing away from the camera
+  double d_surface = 0;
+  std::array<double, 9> h{};   // pixel (u, v, 1) -> (S, T, W); texel coordinates are S/W, T/W
+  std::array<double, 4> lp{};  // laser sheet a X + b Y + c Z + e = 0
+  double fx = 1, fy = 1, cx = 0, cy = 0;
+};
+
+struct ColumnLine {
+  bool hit = false;
+  double v = 0;  // row of the line centre
+  double z = 0;  // depth of the lit surface point
+};
+
+// Where the sheet meets the surface along column u, in closed form: with X = Z (xn, yn, 1) the
+// sheet gives Z (a xn + b yn + c) = -e and the surface Z (n . r) = D; eliminating Z is linear in
+// yn.
+ColumnLine solve_column(const FrameGeometry& g, double u) {
+  ColumnLine out;
+  if (!g.surface) return out;
+  const auto& [a, b, c, e] = g.lp;
+  const double xn = (u - g.cx) / g.fx;
+  const double den = g.d_surface * b + e * g.n[1];
+  if (std::abs(den) < 1e-12) return out;
+  const double yn = -(e * (g.n[0] * xn + g.n[2]) + g.d_surface * (a * xn + c)) / den;
+  const double nr = g.n[0] * xn + g.n[1] * yn + g.n[2];
+  if (!(nr > 0)) return out;
+  out.z = g.d_surface / nr;
+  out.v = g.cy + g.fy * yn;
+  out.hit = std::isfinite(out.v) && std::isfinite(out.z) && out.z > 0;
+  return out;
+}
+
+// Bilinear sample of the wrapping albedo tile at texel coordinates (s, t).
+inline float sample_tile(const float* tex, float s, float t) {
+  constexpr int kMask = kTextureSize - 1;
+  s = std::clamp(s, -1e7f, 1e7f);
+  t = std::clamp(t, -1e7f, 1e7f);
+  int is = static_cast<int>(s);
+  int it = static_cast<int>(t);
+  is -= s < static_cast<float>(is) ? 1 : 0;  // floor without a libm call
+  it -= t < static_cast<float>(it) ? 1 : 0;
+  const float fs = s - static_cast<float>(is);
+  const float ft = t - static_cast<float>(it);
+  const int x0 = is & kMask, x1 = (is + 1) & kMask;
+  const int y0 = (it & kMask) << kTextureLog2, y1 = ((it + 1) & kMask) << kTextureLog2;
+  const float p00 = tex[y0 + x0], p01 = tex[y0 + x1];
+  const float p10 = tex[y1 + x0], p11 = tex[y1 + x1];
+  const float top = p00 + fs * (p01 - p00);
+  const float bottom = p10 + fs * (p11 - p10);
+  return top + ft * (bottom - top);
+}
+
+// exp(x) for x <= 0 to about 2e-5 relative: the backscatter glow needs no more and must be cheap.
+inline float fast_exp_neg(float x) {
+  x = x > -80.0f ? x : -80.0f;  // also maps NaN to -80
+  x = x < 0.0f ? x : 0.0f;
+  const float y = x * 1.44269504f;
+  int i = static_cast<int>(y);
+  i -= y < static_cast<float>(i) ? 1 : 0;
+  const float f = y - static_cast<float>(i);
+  // 2^f, Taylor series in f ln2 to sixth order.
+  const float p =
+      1.0f + f * (0.693147181f +
+                  f * (0.240226507f +
+                       f * (0.0555041087f +
+                            f * (0.00961812911f + f * (0.00133335581f + f * 0.000154035304f)))));
+  return p * std::bit_cast<float>(static_cast<std::uint32_t>(i + 127) << 23);
+}
+
+// The row kernels below work in blocks of kBlock pixels with a constant trip count and restrict
+// pointers: that is what GCC's -O2 cost model needs to vectorise them.
+constexpr int kBlock = 16;
+
+// Ambient light on the textured surface for `count` pixels (a multiple of kBlock) of one row;
+// texel coordinates are (s0 + u su, t0 + u tu) / (w0 + u wu), one division per pixel.
+void ambient_row(const float* __restrict tex, float s0, float su, float t0, float tu, float w0,
+                 float wu, float ambient, int count, float* __restrict row) {
+  constexpr int kMask = kTextureSize - 1;
+  for (int u0 = 0; u0 < count; u0 += kBlock) {
+    alignas(64) std::int32_t i00[kBlock], i01[kBlock], i10[kBlock], i11[kBlock];
+    alignas(64) float fs[kBlock], ft[kBlock], gain[kBlock];
+    for (int k = 0; k < kBlock; ++k) {
+      const float fu = static_cast<float>(u0 + k);
+      const float w = w0 + fu * wu;
+      const bool seen = w > 0.0f;
+      const float inv = 1.0f / (seen ? w : 1.0f);
+      float s = (s0 + fu * su) * inv, t = (t0 + fu * tu) * inv;
+      s = std::min(std::max(s, -1e7f), 1e7f);
+      t = std::min(std::max(t, -1e7f), 1e7f);
+      std::int32_t is = static_cast<std::int32_t>(s), it = static_cast<std::int32_t>(t);
+      is -= s < static_cast<float>(is) ? 1 : 0;  // floor without a libm call
+      it -= t < static_cast<float>(it) ? 1 : 0;
+      fs[k] = s - static_cast<float>(is);
+      ft[k] = t - static_cast<float>(it);
+      const std::int32_t x0 = is & kMask, x1 = (is + 1) & kMask;
+      const std::int32_t y0 = (it & kMask) << kTextureLog2, y1 = ((it + 1) & kMask) << kTextureLog2;
+      i00[k] = y0 + x0;
+      i01[k] = y0 + x1;
+      i10[k] = y1 + x0;
+      i11[k] = y1 + x1;
+      gain[k] = seen ? ambient : 0.0f;  // rays that miss the surface see nothing
+    }
+    for (int k = 0; k < kBlock; ++k) {
+      const float p00 = tex[i00[k]], p01 = tex[i01[k]], p10 = tex[i10[k]], p11 = tex[i11[k]];
+      const float top = p00 + fs[k] * (p01 - p00);
+      const float bottom = p10 + fs[k] * (p11 - p10);
+      row[u0 + k] = gain[k] * (top + ft[k] * (bottom - top));
+    }
+  }
+}
+
+// Backscatter for `count` pixels (a multiple of kBlock) of one row: the ray of pixel u meets the
+// sheet at depth zs = -e / (lin0 + u linu); it glows where 0 < zs < Z of the lit surface point.
+void glow_row(float lin0, float linu, float e, float attenuation, float backscatter,
+              const float* __restrict inv_depth, int count, float* __restrict row) {
+  for (int u0 = 0; u0 < count; u0 += kBlock) {
+    for (int k = 0; k < kBlock; ++k) {
+      const float lin = lin0 + static_cast<float>(u0 + k) * linu;
+      const bool hit = lin != 0.0f;
+      const float zs = hit ? -e / (hit ? lin : 1.0f) : 0.0f;
+      const float q = zs * inv_depth[u0 + k];
+      const bool in_front = zs > 0.0f && q < 1.0f;
+      const float atten = fast_exp_neg(-attenuation * zs);
+      row[u0 + k] += in_front ? backscatter * atten * q * q : 0.0f;
+    }
+  }
+}
+
+// Adds sensor noise and quantises one row to 8 bit with rounding and clipping.
+void quantise_row(const float* __restrict row, const std::int8_t* __restrict noise, float scale,
+                  int width, std::uint8_t* __restrict out) {
+  auto pixel = [&](int u) {
+    float x = row[u] + scale * static_cast<float>(noise[u]);
+    x = std::min(std::max(x, 0.0f), 255.0f);
+    return static_cast<std::uint8_t>(static_cast<std::int32_t>(x + 0.5f));
+  };
+  int u0 = 0;
+  for (; u0 + kBlock <= width; u0 += kBlock) {
+    for (int k = 0; k < kBlock; ++k)
+      out[u0 + k] = pixel(u0 + k);
+  }
+  for (; u0 < width; ++u0)
+    out[u0] = pixel(u0);
+}
+
+void require(bool ok, const std::string& message) {
+  if (!ok) throw std::invalid_argument("SimScene: " + message);
+}
+
+bool finite_nonneg(double x) {
+  return std::isfinite(x) && x >= 0;
+}
+
+void validate(const SimSceneOptions& o) {
+  const CameraIntrinsics& cam = o.calibration.camera;
+  require(cam.width >= 8 && cam.width <= kMaxImageSide && cam.height >= 8 &&
+              cam.height <= kMaxImageSide,
+          "image size must be between 8 and " + std::to_string(kMaxImageSide) + " pixels");
+  require(std::isfinite(cam.fx) && cam.fx > 0 && std::isfinite(cam.fy) && cam.fy > 0,
+          "fx and fy must be positive");
+  require(std::isfinite(cam.cx) && std::isfinite(cam.cy), "cx and cy must be finite");
+  require(!cam.has_distortion(), "the simulated camera has no lens distortion");
+  const auto plane = o.calibration.laser.plane_coefficients();
+  for (double k : plane)
+    require(std::isfinite(k), "laser plane coefficients must be finite");
+  require(plane[0] * plane[0] + plane[1] * plane[1] + plane[2] * plane[2] > 1e-18,
+          "laser plane normal must not be zero");
+  require(finite_nonneg(o.calibration.laser.sheet_width_m), "sheet_width_m must be >= 0");
+  require(std::isfinite(o.frame_rate_hz) && o.frame_rate_hz > 0, "frame_rate_hz must be > 0");
+  require(std::isfinite(o.distance_m) && o.distance_m > 0, "distance_m must be > 0");
+  require(std::isfinite(o.tilt_x_deg) && std::abs(o.tilt_x_deg) < 89.0 &&
+              std::isfinite(o.tilt_y_deg) && std::abs(o.tilt_y_deg) < 89.0,
+          "tilt_x_deg and tilt_y_deg must be within (-89, 89)");
+  require(std::isfinite(o.texture_scale_m) && o.texture_scale_m > 0, "texture_scale_m must be > 0");
+  require(finite_nonneg(o.texture_contrast), "texture_contrast must be >= 0");
+  require(finite_nonneg(o.ambient) && finite_nonneg(o.laser_peak) && finite_nonneg(o.blur_px) &&
+              finite_nonneg(o.noise_sigma) && finite_nonneg(o.backscatter) &&
+              finite_nonneg(o.attenuation_per_m),
+          "ambient, laser_peak, blur_px, noise_sigma, backscatter, attenuation_per_m must be >= 0");
+  require(finite_nonneg(o.sway_m) && finite_nonneg(o.sway_deg), "sway_m and sway_deg must be >= 0");
+  require(std::isfinite(o.sway_period_s) && o.sway_period_s > 0, "sway_period_s must be > 0");
+}
+
+// Smooth value noise on a wrapping lattice of `spacing` texels, values in [-1, 1], added * amp.
+void add_value_noise(std::vector<float>& dst, int spacing, float amp, Rng& rng) {
+  const int n = kTextureSize;
+  const int cells = n / spacing;
+  std::vector<float> lattice(static_cast<std::size_t>(cells) * cells);
+  for (float& x : lattice)
+    x = static_cast<float>(rng.uniform(-1.0, 1.0));
+  std::vector<float> weight(spacing);
+  for (int i = 0; i < spacing; ++i) {
+    const float f = static_cast<float>(i) / static_cast<float>(spacing);
+    weight[i] = f * f * (3.0f - 2.0f * f);
+  }
+  for (int y = 0; y < n; ++y) {
+    const int cy0 = y / spacing, cy1 = (cy0 + 1) % cells;
+    const float wy = weight[y % spacing];
+    const float* r0 = &lattice[static_cast<std::size_t>(cy0) * cells];
+    const float* r1 = &lattice[static_cast<std::size_t>(cy1) * cells];
+    float* out = &dst[static_cast<std::size_t>(y) * n];
+    for (int x = 0; x < n; ++x) {
+      const int cx0 = x / spacing, cx1 = (cx0 + 1) % cells;
+      const float wx = weight[x % spacing];
+      const float top = r0[cx0] + wx * (r0[cx1] - r0[cx0]);
+      const float bottom = r1[cx0] + wx * (r1[cx1] - r1[cx0]);
+      out[x] += amp * (top + wy * (bottom - top));
+    }
+  }
+}
+
+// Surface texture: multi-octave value noise plus hard-edged rectangles and discs, so that a
+// corner detector finds features to track. Returns the albedo tile.
+std::vector<float> make_texture(std::uint64_t seed, double contrast) {
+  const int n = kTextureSize;
+  Rng rng(seed ^ 0x7465787475726531ULL);
+  std::vector<float> smooth(static_cast<std::size_t>(n) * n, 0.0f);
+  float amp = 1.0f;
+  for (int spacing = kFinestSpacing; spacing <= 128; spacing *= 2) {
+    add_value_noise(smooth, spacing, amp, rng);
+    amp *= 0.8f;
+  }
+  float peak = 1e-6f;
+  for (float x : smooth)
+    peak = std::max(peak, std::abs(x));
+
+  std::vector<float> blobs(static_cast<std::size_t>(n) * n, 0.0f);
+  const int count = 2000;
+  for (int k = 0; k < count; ++k) {
+    const int x0 = static_cast<int>(rng.uniform(0.0, n));
+    const int y0 = static_cast<int>(rng.uniform(0.0, n));
+    const double size_lo = kFinestSpacing, size_hi = 12.0 * kFinestSpacing;
+    const int w = static_cast<int>(size_lo * std::pow(size_hi / size_lo, rng.uniform()));
+    const int h = static_cast<int>(size_lo * std::pow(size_hi / size_lo, rng.uniform()));
+    const float value =
+        static_cast<float>((rng.uniform() < 0.5 ? -1.0 : 1.0) * rng.uniform(0.4, 1.0));
+    const bool disc = rng.uniform() < 0.4;
+    const int r2 = (w / 2) * (w / 2);
+    for (int dy = 0; dy < (disc ? w : h); ++dy) {
+      for (int dx = 0; dx < w; ++dx) {
+        if (disc) {
+          const int ox = dx - w / 2, oy = dy - w / 2;
+          if (ox * ox + oy * oy > r2) continue;
+        }
+        const int x = (x0 + dx) & (n - 1), y = (y0 + dy) & (n - 1);
+        blobs[static_cast<std::size_t>(y) * n + x] = value;
+      }
+    }
+  }
+
+  std::vector<float> albedo(static_cast<std::size_t>(n) * n);
+  for (std::size_t i = 0; i < albedo.size(); ++i) {
+    const float noise = std::clamp(0.6f * smooth[i] / peak + 0.6f * blobs[i], -1.0f, 1.0f);
+    albedo[i] = std::max(0.0f, 1.0f + static_cast<float>(contrast) * noise);
+  }
+  return albedo;
+}
+
+// round(16 * N(0, 1)) by Box-Muller over our own uniform generator (std::normal_distribution is
+// implementation-defined).
+std::vector<std::int8_t> make_noise_table(std::uint64_t seed) {
+  Rng rng(seed ^ 0x6e6f697365746162ULL);
+  std::vector<std::int8_t> table(kNoiseTableSize);
+  auto quantise = [](double z) {
+    return static_cast<std::int8_t>(std::clamp(std::lround(z * kNoiseTableScale), -127L, 127L));
+  };
+  for (std::size_t i = 0; i + 1 < table.size(); i += 2) {
+    const double r = std::sqrt(-2.0 * std::log(rng.uniform()));
+    const double phi = 2.0 * kPi * rng.uniform();
+    table[i] = quantise(r * std::cos(phi));
+    table[i + 1] = quantise(r * std::sin(phi));
+  }
+  return table;
+}
+
+}  // namespace
+
+struct SimScene::Pose {
+  Mat3 r{};  // camera to world: X_world = r X_cam + t
+  Vec3 t{};
+};
+
+namespace {
+
+FrameGeometry make_geometry(const SimSceneOptions& o, const Mat3& r, const Vec3& t) {
+  FrameGeometry g;
+  const CameraIntrinsics& cam = o.calibration.camera;
+  g.fx = cam.fx;
+  g.fy = cam.fy;
+  g.cx = cam.cx;
+  g.cy = cam.cy;
+  g.lp = o.calibration.laser.plane_coefficients();
+
+  // The surface in the world: through p0, normal n_w toward the camera, texture axes e1, e2.
+  const Mat3 basis = mul(rot_x(o.tilt_x_deg * kDeg), rot_y(o.tilt_y_deg * kDeg));
+  const Vec3 e1{basis[0], basis[3], basis[6]};
+  const Vec3 e2{basis[1], basis[4], basis[7]};
+  const Vec3 n_w{-basis[2], -basis[5], -basis[8]};
+  const Vec3 p0{0.0, 0.0, o.distance_m};
+
+  // In the camera frame: n_c . X = D with n_c = -R^T n_w, D = n_w . T - n_w . p0 (> 0 in front).
+  const Vec3 rn = mul_transposed(r, n_w);
+  g.n = {-rn[0], -rn[1], -rn[2]};
+  g.d_surface = dot(n_w, t) - dot(n_w, p0);
+  g.surface = g.d_surface > 0;
+  if (!g.surface) return g;
+
+  // Texture coordinate s = e1 . (X_w - p0) = Z (R^T e1) . r + e1 . (T - p0) with Z = D / (n_c . r),
+  // so s (n_c . r) is linear in the ray r: a homography, here in texels and pixel coordinates.
+  const double texel = o.texture_scale_m / kFinestSpacing;
+  const Vec3 tp{t[0] - p0[0], t[1] - p0[1], t[2] - p0[2]};
+  const Vec3 re1 = mul_transposed(r, e1), re2 = mul_transposed(r, e2);
+  const double c1 = dot(e1, tp), c2 = dot(e2, tp);
+  const std::array<Vec3, 3> rows{Vec3{(g.d_surface * re1[0] + c1 * g.n[0]) / texel,
+                                      (g.d_surface * re1[1] + c1 * g.n[1]) / texel,
+                                      (g.d_surface * re1[2] + c1 * g.n[2]) / texel},
+                                 Vec3{(g.d_surface * re2[0] + c2 * g.n[0]) / texel,
+                                      (g.d_surface * re2[1] + c2 * g.n[1]) / texel,
+                                      (g.d_surface * re2[2] + c2 * g.n[2]) / texel},
+                                 g.n};
+  for (int i = 0; i < 3; ++i) {
+    const Vec3& m = rows[i];
+    g.h[i * 3 + 0] = m[0] / g.fx;
+    g.h[i * 3 + 1] = m[1] / g.fy;
+    g.h[i * 3 + 2] = m[2] - m[0] * g.cx / g.fx - m[1] * g.cy / g.fy;
+  }
+  return g;
+}
+
+float albedo_at(const FrameGeometry& g, const float* tex, double u, double v) {
+  const double s = g.h[0] * u + g.h[1] * v + g.h[2];
+  const double t = g.h[3] * u + g.h[4] * v + g.h[5];
+  const double w = g.h[6] * u + g.h[7] * v + g.h[8];
+  if (!(w > 0)) return 0.0f;
+  return sample_tile(tex, static_cast<float>(s / w), static_cast<float>(t / w));
+}
+
+double line_sigma(const SimSceneOptions& o, double z) {
+  const double sheet =
+      o.calibration.camera.fy * o.calibration.laser.sheet_width_m / z / kFwhmToSigma;
+  return std::max(1e-3, std::sqrt(sheet * sheet + o.blur_px * o.blur_px));
+}
+
+}  // namespace
+
+SimScene::SimScene(const SimSceneOptions& options) : options_(options) {
+  validate(options_);
+  const auto width = static_cast<std::size_t>(options_.calibration.camera.width);
+  texture_size_ = kTextureSize;
+  texture_ = make_texture(options_.seed, options_.texture_contrast);
+  noise_ = make_noise_table(options_.seed);
+  // One image row, then the per-column 1 / Z of the lit point (for the backscatter glow), each
+  // padded to whole kernel blocks; the padding of 1 / Z stays 0 (no glow).
+  const std::size_t padded = (width + kBlock - 1) / kBlock * kBlock;
+  row_buffer_.assign(2 * padded, 0.0f);
+  scratch_truth_.row.assign(width, kNaN);
+  scratch_truth_.depth_m.assign(width, kNaN);
+  scratch_truth_.width_px.assign(width, kNaN);
+  line_gain_.assign(width, 0.0f);
+}
+
+FrameFormat SimScene::format() const {
+  const CameraIntrinsics& cam = options_.calibration.camera;
+  return FrameFormat{cam.width, cam.height, cam.width, PixelFormat::kMono8};
+}
+
+SimScene::Pose SimScene::pose_at(std::uint64_t sequence) const {
+  const double time = static_cast<double>(sequence) / options_.frame_rate_hz;
+  const double phase = 2.0 * kPi / options_.sway_period_s * time;
+  // Sinusoids shifted to start at zero, so that the world frame is the camera frame at t = 0.
+  auto wave = [](double x, double shift) { return std::sin(x + shift) - std::sin(shift); };
+  Pose pose;
+  pose.t = {options_.sway_m * wave(phase, 0.0), options_.sway_m * 0.6 * wave(1.3 * phase, 1.0),
+            options_.sway_m * 0.4 * wave(0.7 * phase, 2.0)};
+  const double amp = options_.sway_deg * kDeg;
+  const double ax = amp * wave(0.9 * phase, 0.5);
+  const double ay = amp * 0.7 * wave(1.1 * phase, 2.3);
+  const double az = amp * 0.5 * wave(0.8 * phase, 4.1);
+  pose.r = mul(rot_z(az), mul(rot_y(ay), rot_x(ax)));
+  return pose;
+}
+
+void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint8_t> dst) {
+  const FrameFormat fmt = format();
+  if (dst.size() < fmt.bytes()) throw std::invalid_argument("SimScene::render: buffer too small");
+  const int width = fmt.width, height = fmt.height;
+  const Pose pose = pose_at(sequence);
+  const FrameGeometry g = make_geometry(options_, pose.r, pose.t);
+  const float* tex = texture_.data();
+
+  // row_buffer_: one image row, then 1 / Z of the lit point per column, each padded to kBlock.
+  const int padded = (width + kBlock - 1) / kBlock * kBlock;
+  float* row = row_buffer_.data();
+  float* inv_depth = row_buffer_.data() + padded;
+  float* centre = scratch_truth_.row.data();
+  float* sigma = scratch_truth_.width_px.data();
+  float* depth = scratch_truth_.depth_m.data();
+  float* gain = line_gain_.data();
+
+  // Per column: the line centre, its width and brightness. Rows [band_lo, band_hi] hold all bands.
+  float band_lo = std::numeric_limits<float>::infinity();
+  float band_hi = -std::numeric_limits<float>::infinity();
+  const bool laser = laser_on && (options_.laser_peak > 0 || options_.backscatter > 0);
+  for (int u = 0; u < width; ++u) {
+    const ColumnLine line = laser ? solve_column(g, u) : ColumnLine{};
+    if (!line.hit) {
+      centre[u] = sigma[u] = depth[u] = kNaN;
+      gain[u] = 0.0f;
+      inv_depth[u] = 0.0f;
+      continue;
+    }
+    centre[u] = static_cast<float>(line.v);
+    sigma[u] = static_cast<float>(line_sigma(options_, line.z));
+    depth[u] = static_cast<float>(line.z);
+    inv_depth[u] = static_cast<float>(1.0 / line.z);
+    gain[u] = static_cast<float>(options_.laser_peak * albedo_at(g, tex, u, centre[u]) *
+                                 std::exp(-2.0 * options_.attenuation_per_m * line.z));
+    band_lo = std::min(band_lo, centre[u] - kBandSigmas * sigma[u]);
+    band_hi = std::max(band_hi, centre[u] + kBandSigmas * sigma[u]);
+  }
+
+  const std::uint64_t frame_hash = mix64(mix64(options_.seed) ^ mix64(sequence + 0x51ce5eedULL));
+  const std::uint64_t offsets = kNoiseTableSize - static_cast<std::size_t>(width) + 1;
+  const float noise_scale = static_cast<float>(options_.noise_sigma) / kNoiseTableScale;
+  const float ambient = static_cast<float>(options_.ambient);
+  const bool glow = laser && options_.backscatter > 0;
+  const float backscatter = static_cast<float>(options_.backscatter);
+  const float attenuation = static_cast<float>(options_.attenuation_per_m);
+  const auto& [la, lb, lc, le] = g.lp;
+
+  for (int v = 0; v < height; ++v) {
+    const double dv = v;
+    if (g.surface && ambient > 0) {
+      ambient_row(tex, static_cast<float>(g.h[1] * dv + g.h[2]), static_cast<float>(g.h[0]),
+                  static_cast<float>(g.h[4] * dv + g.h[5]), static_cast<float>(g.h[3]),
+                  static_cast<float>(g.h[7] * dv + g.h[8]), static_cast<float>(g.h[6]), ambient,
+                  padded, row);
+    } else {
+      std::fill(row, row + padded, 0.0f);
+    }
+
+    if (glow) {
+      glow_row(static_cast<float>(lb * (dv - g.cy) / g.fy + lc - la * g.cx / g.fx),
+               static_cast<float>(la / g.fx), static_cast<float>(le), attenuation, backscatter,
+               inv_depth, padded, row);
+    }
+
+    // The laser line: a Gaussian across the line, point-sampled at pixel centres.
+    const float fv = static_cast<float>(v);
+    if (laser && fv >= band_lo && fv <= band_hi) {
+      for (int u = 0; u < width; ++u) {
+        const float d = fv - centre[u];
+        const float reach = kBandSigmas * sigma[u];
+        if (d >= -reach && d <= reach) {
+          row[u] += gain[u] * std::exp(-d * d / (2.0f * sigma[u] * sigma[u]));
+        }
+      }
+    }
+
+    // Sensor noise from the table at a hashed offset per row.
+    const std::uint64_t offset = mix64(frame_hash + static_cast<std::uint64_t>(v)) % offsets;
+    quantise_row(row, noise_.data() + offset, noise_scale, width,
+                 dst.data() + static_cast<std::size_t>(v) * fmt.stride);
+  }
+}
+
+void SimScene::ground_truth(std::uint64_t sequence, bool laser_on, SimGroundTruth& truth) const {
+  const int width = options_.calibration.camera.width;
+  const float last_row = static_cast<float>(options_.calibration.camera.height - 1);
+  truth.row.resize(static_cast<std::size_t>(width));
+  truth.depth_m.resize(static_cast<std::size_t>(width));
+  truth.width_px.resize(static_cast<std::size_t>(width));
+  const Pose pose = pose_at(sequence);
+  const FrameGeometry g = make_geometry(options_, pose.r, pose.t);
+  const bool laser = laser_on && options_.laser_peak > 0;
+  for (int u = 0; u < width; ++u) {
+    const ColumnLine line = laser ? solve_column(g, u) : ColumnLine{};
+    // The same float the renderer centres the profile on.
+    const float v = static_cast<float>(line.v);
+    if (!line.hit || !(v >= kEdgeRows && v <= last_row - kEdgeRows)) {
+      truth.row[u] = truth.depth_m[u] = truth.width_px[u] = kNaN;
+      continue;
+    }
+    truth.row[u] = v;
+    truth.depth_m[u] = static_cast<float>(line.z);
+    truth.width_px[u] = static_cast<float>(line_sigma(options_, line.z));
+  }
+}
+
+}  // namespace laserline::hal

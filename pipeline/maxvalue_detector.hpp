@@ -1,0 +1,36 @@
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "pipeline/detector.hpp"
+
+namespace laserline::pipeline {
+
+// The paper's "Max Value" baseline: in every column the brightest pixel, if at least `threshold`,
+// is the laser, refined to sub-pixel by a 3-point Gaussian fit. A flat-topped (clipped) maximum
+// takes the centre of its run instead. SNR is the peak over the column's mean brightness.
+// Fails by design where ambient light outshines the laser; kept as the reference detector.
+class MaxValueDetector final : public Detector {
+ public:
+  explicit MaxValueDetector(int threshold);
+
+  const char* name() const override { return "maxvalue"; }
+  std::size_t max_points(int width, int /*height*/) const override {
+    return static_cast<std::size_t>(width);
+  }
+  void reset(int width, int height) override;
+  void detect(const ImageView& image, Profile& out) override;
+
+ private:
+  int threshold_;
+  std::array<float, 256> log_lut_{};
+  // Per-column running state of the row-major scan (row-major is what the cache likes).
+  std::vector<std::uint8_t> max_value_;
+  std::vector<std::uint16_t> first_row_;
+  std::vector<std::uint16_t> last_row_;
+  std::vector<std::uint32_t> sum_;
+};
+
+}  // namespace laserline::pipeline

@@ -1,0 +1,70 @@
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+namespace laserline::pipeline {
+
+// One laser point in original pixel coordinates (pixel centres at integers).
+struct ProfilePoint {
+  int u = 0;            // column: the epipolar line it lies on
+  float v = 0.0f;       // sub-pixel row
+  float snr_db = 0.0f;  // 20*log10 of the detector's signal-to-noise amplitude ratio
+  std::int32_t segment = -1;
+  bool valid = true;
+  std::array<float, 3> xyz{std::numeric_limits<float>::quiet_NaN(),
+                           std::numeric_limits<float>::quiet_NaN(),
+                           std::numeric_limits<float>::quiet_NaN()};
+};
+
+// The points of one frame. Its capacity is fixed at construction so that filling it on the frame
+// path never allocates; a detector that finds more points than fit stops adding and the profile
+// says it overflowed.
+class Profile {
+ public:
+  explicit Profile(std::size_t capacity = 0) { points_.reserve(capacity); }
+  // Copies keep the capacity (std::vector's copy would not): ring slots are made by copying a
+  // prototype and must be able to hold a full frame's points without allocating.
+  Profile(const Profile& other) : overflowed_(other.overflowed_) {
+    points_.reserve(other.capacity());
+    points_ = other.points_;
+  }
+  Profile& operator=(const Profile& other) {
+    if (this != &other) {
+      if (points_.capacity() < other.capacity()) points_.reserve(other.capacity());
+      points_.assign(other.points_.begin(), other.points_.end());
+      overflowed_ = other.overflowed_;
+    }
+    return *this;
+  }
+  Profile(Profile&&) noexcept = default;
+  Profile& operator=(Profile&&) noexcept = default;
+
+  void clear() {
+    points_.clear();
+    overflowed_ = false;
+  }
+  // Adds a point unless full; returns false (and marks the overflow) when full.
+  bool add(const ProfilePoint& point) {
+    if (points_.size() == points_.capacity()) {
+      overflowed_ = true;
+      return false;
+    }
+    points_.push_back(point);
+    return true;
+  }
+
+  const std::vector<ProfilePoint>& points() const { return points_; }
+  std::size_t size() const { return points_.size(); }
+  std::size_t capacity() const { return points_.capacity(); }
+  bool overflowed() const { return overflowed_; }
+
+ private:
+  std::vector<ProfilePoint> points_;
+  bool overflowed_ = false;
+};
+
+}  // namespace laserline::pipeline

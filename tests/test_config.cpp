@@ -1,0 +1,149 @@
+#include "daemon/config.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "daemon/backends.hpp"
+
+namespace laserline::daemon {
+namespace {
+
+// Parses `text` as if it were the file "test.yaml" and creates the backends (which validates
+// backend options too); returns the error line, or "" when valid.
+std::string error_of(const std::string& text) {
+  try {
+    DaemonConfig config = parse_config(hal::load_yaml_text(text, "test.yaml"), "test.yaml");
+    create_backends(config);
+  } catch (const hal::ConfigError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(Config, BuiltInDefaultIsValidAndRunsTheSimulator) {
+  DaemonConfig config = builtin_config();
+  EXPECT_EQ(config.camera_backend, "sim");
+  EXPECT_EQ(config.laser_backend, "sim");
+  EXPECT_EQ(config.detector, "maxvalue");
+  EXPECT_EQ(config.profile_channel, "LASERLINE_PROFILE");
+  EXPECT_EQ(config.image_channel, "LASERLINE_IMAGE");
+  EXPECT_EQ(config.status_channel, "LASERLINE_STATUS");
+  Backends backends = create_backends(config);
+  EXPECT_EQ(backends.camera->format().width, 1280);
+  EXPECT_EQ(backends.camera->format().height, 1024);
+  EXPECT_FALSE(backends.laser->is_on()) << "the laser is off until the frame path switches it";
+}
+
+TEST(Config, EmptyFileTakesDefaults) {
+  EXPECT_EQ(error_of(""), "");
+}
+
+TEST(Config, ShippedConfigFileEqualsTheBuiltIn) {
+  const DaemonConfig file = load_config_file(LASERLINE_SOURCE_DIR "/config/laserline.yaml");
+  const DaemonConfig builtin = builtin_config();
+  EXPECT_EQ(file.frame_rate_hz, builtin.frame_rate_hz);
+  EXPECT_EQ(file.lcm_url, builtin.lcm_url);
+  EXPECT_EQ(file.calibration.camera.fx, builtin.calibration.camera.fx);
+}
+
+TEST(Config, UnknownKeyNamesFileLineAndKey) {
+  EXPECT_EQ(error_of("camera:\n  backend: sim\n  frame_rte_hz: 30\n"),
+            "test.yaml:3: camera.frame_rte_hz: unknown key (expected one of: backend, "
+            "frame_rate_hz, sim, timeout_ms)");
+  EXPECT_EQ(error_of("lcm: {}\nbogus: 1\n").rfind("test.yaml:2: bogus: unknown key", 0), 0u);
+}
+
+TEST(Config, WrongTypeNamesTheKey) {
+  EXPECT_EQ(error_of("camera:\n  frame_rate_hz: fast\n"),
+            "test.yaml:2: camera.frame_rate_hz: must be a number, got 'fast'");
+  EXPECT_EQ(error_of("pipeline:\n  frame_slots: 2.5\n"),
+            "test.yaml:2: pipeline.frame_slots: must be a whole number, got '2.5'");
+  EXPECT_EQ(error_of("camera: 5\n"), "test.yaml:1: camera: must be a mapping of keys");
+  EXPECT_EQ(error_of("lcm:\n  url: [a, b]\n"),
+            "test.yaml:2: lcm.url: must be a single value, not a list or mapping");
+}
+
+TEST(Config, OutOfRangeNamesTheLimits) {
+  EXPECT_EQ(error_of("camera:\n  frame_rate_hz: 0\n"),
+            "test.yaml:2: camera.frame_rate_hz: must be between 0.1 and 1000, got 0");
+  EXPECT_EQ(error_of("pipeline:\n  frame_slots: 6\n"),
+            "test.yaml:2: pipeline.frame_slots: must be a power of two, got 6");
+  EXPECT_EQ(error_of("detector:\n  maxvalue: {threshold: 300}\n"),
+            "test.yaml:2: detector.maxvalue.threshold: must be between 1 and 255, got 300");
+  EXPECT_EQ(error_of("camera:\n  sim:\n    noise_sigma: -1\n"),
+            "test.yaml:3: camera.sim.noise_sigma: must be between 0 and 50, got -1");
+}
+
+TEST(Config, ChoicesListTheAlternatives) {
+  EXPECT_EQ(error_of("detector:\n  name: magic\n"),
+            "test.yaml:2: detector.name: must be one of maxvalue, got 'magic'");
+  EXPECT_EQ(error_of("laser:\n  mode: blink\n"),
+            "test.yaml:2: laser.mode: must be one of on, alternate, off, got 'blink'");
+  EXPECT_EQ(error_of("camera:\n  backend: gige\n"),
+            "test.yaml:2: camera.backend: unknown camera backend 'gige' (available: sim)");
+  EXPECT_EQ(error_of("laser:\n  backend: gpio\n"),
+            "test.yaml:2: laser.backend: unknown laser backend 'gpio' (available: sim)");
+}
+
+TEST(Config, CalibrationErrors) {
+  EXPECT_EQ(error_of("calibration:\n  camera: {fx: 0}\n"),
+            "test.yaml:2: calibration.camera.fx: must be between 1 and 1e+06, got 0");
+  EXPECT_EQ(error_of("calibration:\n  camera:\n    distortion: [1, 2]\n"),
+            "test.yaml:3: calibration.camera.distortion: must have 4 or 5 numbers, got 2");
+  EXPECT_EQ(error_of("calibration:\n  laser:\n    plane: [0, 0, 0, 1]\n"),
+            "test.yaml:3: calibration.laser.plane: the normal (a, b, c) must not be zero");
+  EXPECT_NE(error_of("calibration:\n  camera:\n    distortion: [0.1, 0, 0, 0, 0]\n")
+                .find("camera.sim: the simulator renders an ideal pinhole camera"),
+            std::string::npos);
+}
+
+TEST(Config, CalibrationFromAFileRelativeToTheConfig) {
+  const auto dir = std::filesystem::temp_directory_path() / "laserline_test_config";
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir / "calib.yaml") << "camera: {width: 640, height: 480, fx: 700, fy: 700}\n"
+                                       "laser: {baseline_m: 0.1, angle_deg: 75}\n";
+  std::ofstream(dir / "daemon.yaml") << "calibration: calib.yaml\n";
+  const DaemonConfig config = load_config_file((dir / "daemon.yaml").string());
+  EXPECT_EQ(config.calibration.camera.width, 640);
+  EXPECT_DOUBLE_EQ(config.calibration.camera.cx, 319.5);
+  EXPECT_DOUBLE_EQ(config.calibration.laser.baseline_m, 0.1);
+
+  std::ofstream(dir / "broken.yaml") << "calibration: missing.yaml\n";
+  try {
+    load_config_file((dir / "broken.yaml").string());
+    FAIL() << "a missing calibration file must be an error";
+  } catch (const hal::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("missing.yaml: cannot be opened"), std::string::npos)
+        << e.what();
+  }
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Config, UnreadableAndInvalidYaml) {
+  try {
+    load_config_file("/nonexistent/laserline.yaml");
+    FAIL();
+  } catch (const hal::ConfigError& e) {
+    EXPECT_STREQ(e.what(), "/nonexistent/laserline.yaml: cannot be opened for reading");
+  }
+  const std::string bad = error_of("camera: {backend: sim\nlcm: 1\n");
+  EXPECT_EQ(bad.rfind("test.yaml:", 0), 0u) << bad;
+  EXPECT_NE(bad.find("not valid YAML"), std::string::npos) << bad;
+  EXPECT_EQ(error_of("- a\n- b\n"), "test.yaml:1: the top level must be a mapping of keys");
+}
+
+TEST(Config, ErrorsAreOneLine) {
+  for (const char* text : {"camera:\n  frame_rte_hz: 30\n", "camera: {backend: sim\n",
+                           "calibration:\n  camera: {fx: 0}\n"}) {
+    const std::string e = error_of(text);
+    EXPECT_FALSE(e.empty());
+    EXPECT_EQ(e.find('\n'), std::string::npos) << e;
+  }
+}
+
+}  // namespace
+}  // namespace laserline::daemon

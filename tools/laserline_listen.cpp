@@ -1,0 +1,273 @@
+// laserline-listen: subscribes to a laserline daemon over LCM and reports what it received:
+// profiles, points per profile, latency, status, and an overlay PNG of the last raw frame with
+// the points of the same frame drawn on it.
+#include <signal.h>
+#include <time.h>
+#include <laserline/image_t.hpp>
+#include <laserline/profile_t.hpp>
+#include <laserline/status_t.hpp>
+#include <lcm/lcm-cpp.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <deque>
+#include <map>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace {
+
+constexpr const char* kUsage =
+    "usage: laserline-listen [--url URL] [--duration S] [--quiet S] [--overlay FILE.png]\n"
+    "                        [--profile-channel C] [--image-channel C] [--status-channel C]\n"
+    "  --url URL        LCM URL (default: LCM_DEFAULT_URL or udpm://239.255.76.67:7667?ttl=0)\n"
+    "  --duration S     stop after S seconds (default: run until --quiet or SIGINT)\n"
+    "  --quiet S        stop when nothing arrived for S seconds after the first message (default "
+    "2)\n"
+    "  --overlay FILE   write the last raw frame with its profile's points drawn on it\n";
+
+volatile sig_atomic_t g_stop = 0;
+void on_signal(int) {
+  g_stop = 1;
+}
+
+double now_s(clockid_t clock) {
+  timespec ts{};
+  clock_gettime(clock, &ts);
+  return static_cast<double>(ts.tv_sec) + static_cast<double>(ts.tv_nsec) * 1e-9;
+}
+
+double percentile(std::vector<double> values, double q) {
+  if (values.empty()) return NAN;
+  const auto k = static_cast<std::size_t>(q * static_cast<double>(values.size() - 1) + 0.5);
+  std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(k), values.end());
+  return values[k];
+}
+
+struct Listener {
+  std::int64_t profiles = 0;
+  std::int64_t first_sequence = -1, last_sequence = -1, sequence_gaps = 0, sequence_reversals = 0;
+  std::int64_t first_utime = 0, last_utime = 0, utime_reversals = 0;
+  std::vector<double> points_per_profile;
+  std::vector<double> receive_latency_ms;   // exposure (utime) -> received here, wall clocks
+  std::deque<laserline::profile_t> recent;  // to pair a raw frame with its profile
+  std::optional<laserline::image_t> last_image;
+  std::int64_t images = 0;
+  std::vector<laserline::status_t> statuses;
+  double last_message_s = 0;
+  std::int64_t decode_errors = 0;
+
+  void on_profile(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+    laserline::profile_t p;
+    if (p.decode(rbuf->data, 0, rbuf->data_size) < 0) {
+      ++decode_errors;
+      return;
+    }
+    last_message_s = now_s(CLOCK_MONOTONIC);
+    receive_latency_ms.push_back(static_cast<double>(rbuf->recv_utime - p.utime) / 1000.0);
+    if (profiles > 0) {
+      if (p.sequence <= last_sequence) ++sequence_reversals;
+      if (p.sequence > last_sequence + 1) sequence_gaps += p.sequence - last_sequence - 1;
+      if (p.utime <= last_utime) ++utime_reversals;
+    } else {
+      first_sequence = p.sequence;
+      first_utime = p.utime;
+    }
+    last_sequence = p.sequence;
+    last_utime = p.utime;
+    ++profiles;
+    points_per_profile.push_back(p.num_points);
+    recent.push_back(std::move(p));
+    if (recent.size() > 256) recent.pop_front();
+  }
+
+  void on_image(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+    laserline::image_t image;
+    if (image.decode(rbuf->data, 0, rbuf->data_size) < 0) {
+      ++decode_errors;
+      return;
+    }
+    last_message_s = now_s(CLOCK_MONOTONIC);
+    ++images;
+    last_image = std::move(image);
+  }
+
+  void on_status(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+    laserline::status_t s;
+    if (s.decode(rbuf->data, 0, rbuf->data_size) < 0) {
+      ++decode_errors;
+      return;
+    }
+    last_message_s = now_s(CLOCK_MONOTONIC);
+    statuses.push_back(std::move(s));
+  }
+};
+
+bool write_overlay(const Listener& l, const std::string& path) {
+  if (!l.last_image) {
+    std::printf("  overlay: not written, no raw frame received\n");
+    return false;
+  }
+  const laserline::image_t& img = *l.last_image;
+  if (img.pixelformat != laserline::image_t::PIXEL_FORMAT_GRAY ||
+      img.compression != laserline::image_t::COMPRESSION_NONE ||
+      static_cast<std::int64_t>(img.row_stride) * img.height > img.size) {
+    std::printf("  overlay: not written, the raw frame is not uncompressed 8-bit grey\n");
+    return false;
+  }
+  cv::Mat gray(img.height, img.width, CV_8UC1, const_cast<std::uint8_t*>(img.data.data()),
+               static_cast<std::size_t>(img.row_stride));
+  cv::Mat overlay;
+  cv::cvtColor(gray, overlay, cv::COLOR_GRAY2BGR);
+  const laserline::profile_t* match = nullptr;
+  for (const auto& p : l.recent) {
+    if (p.sequence == img.sequence) match = &p;
+  }
+  int drawn = 0;
+  if (match != nullptr) {
+    constexpr int kShift = 4;  // sub-pixel drawing: coordinates in 1/16 px
+    for (const auto& pt : match->points) {
+      const cv::Point centre(static_cast<int>(std::lround(pt.u * 16.0)),
+                             static_cast<int>(std::lround(pt.v * 16.0)));
+      const cv::Scalar colour = pt.valid ? cv::Scalar(0, 0, 255) : cv::Scalar(255, 128, 0);
+      cv::circle(overlay, centre, 1 << kShift, colour, cv::FILLED, cv::LINE_AA, kShift);
+      ++drawn;
+    }
+  }
+  if (!cv::imwrite(path, overlay)) {
+    std::printf("  overlay: could not write %s\n", path.c_str());
+    return false;
+  }
+  std::printf("  overlay: %s (frame %lld, %d points drawn in red)\n", path.c_str(),
+              static_cast<long long>(img.sequence), drawn);
+  return true;
+}
+
+void report(const Listener& l, const std::string& url) {
+  std::printf("laserline-listen: received on %s\n", url.c_str());
+  const double span_s = static_cast<double>(l.last_utime - l.first_utime) * 1e-6;
+  std::printf("  profiles: %lld (sequence %lld..%lld, %lld missing, %lld out of order), %.1f Hz\n",
+              static_cast<long long>(l.profiles), static_cast<long long>(l.first_sequence),
+              static_cast<long long>(l.last_sequence), static_cast<long long>(l.sequence_gaps),
+              static_cast<long long>(l.sequence_reversals),
+              span_s > 0 ? static_cast<double>(l.profiles - 1) / span_s : 0.0);
+  if (!l.points_per_profile.empty()) {
+    double sum = 0;
+    for (double n : l.points_per_profile)
+      sum += n;
+    std::printf("  points per profile: mean %.1f, min %.0f, max %.0f\n",
+                sum / static_cast<double>(l.points_per_profile.size()),
+                *std::min_element(l.points_per_profile.begin(), l.points_per_profile.end()),
+                *std::max_element(l.points_per_profile.begin(), l.points_per_profile.end()));
+    std::printf("  latency exposure -> received here: p50 %.2f ms, p99 %.2f ms, max %.2f ms\n",
+                percentile(l.receive_latency_ms, 0.5), percentile(l.receive_latency_ms, 0.99),
+                *std::max_element(l.receive_latency_ms.begin(), l.receive_latency_ms.end()));
+  }
+  if (!l.statuses.empty()) {
+    std::vector<double> p50, p99;
+    double worst = 0;
+    for (const auto& s : l.statuses) {
+      if (s.latency_samples == 0) continue;
+      p50.push_back(s.latency_p50_ms);
+      p99.push_back(s.latency_p99_ms);
+      worst = std::max(worst, static_cast<double>(s.latency_max_ms));
+    }
+    const auto& s = l.statuses.back();
+    std::printf(
+        "  latency exposure -> published (daemon status): p50 %.2f ms, p99 %.2f ms (worst second), "
+        "max %.2f ms\n",
+        percentile(p50, 0.5), p99.empty() ? NAN : *std::max_element(p99.begin(), p99.end()), worst);
+    std::printf(
+        "  status: %zu messages; last: camera %s, %lld frames captured, %lld processed, %lld "
+        "dropped, %lld grab timeouts, laser %s\n",
+        l.statuses.size(), s.camera_state.c_str(), static_cast<long long>(s.frames_captured),
+        static_cast<long long>(s.frames_processed), static_cast<long long>(s.frames_dropped),
+        static_cast<long long>(s.grab_timeouts), s.laser_on ? "on" : "off");
+  } else {
+    std::printf("  status: none received\n");
+  }
+  std::printf("  raw frames: %lld\n", static_cast<long long>(l.images));
+  if (l.decode_errors > 0) {
+    std::printf("  undecodable messages: %lld\n", static_cast<long long>(l.decode_errors));
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const char* env_url = std::getenv("LCM_DEFAULT_URL");
+  std::string url = env_url != nullptr ? env_url : "udpm://239.255.76.67:7667?ttl=0";
+  double duration_s = 0, quiet_s = 2.0;
+  std::string overlay, profile_channel = "LASERLINE_PROFILE", image_channel = "LASERLINE_IMAGE",
+                       status_channel = "LASERLINE_STATUS";
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "laserline-listen: %s: missing value\n%s", arg.c_str(), kUsage);
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    auto seconds = [&]() {
+      const std::string text = value();
+      char* end = nullptr;
+      const double s = std::strtod(text.c_str(), &end);
+      if (end == text.c_str() || *end != '\0' || !(s > 0) || !std::isfinite(s)) {
+        std::fprintf(stderr, "laserline-listen: %s: expected seconds > 0, got '%s'\n", arg.c_str(),
+                     text.c_str());
+        std::exit(2);
+      }
+      return s;
+    };
+    if (arg == "--url") {
+      url = value();
+    } else if (arg == "--duration") {
+      duration_s = seconds();
+    } else if (arg == "--quiet") {
+      quiet_s = seconds();
+    } else if (arg == "--overlay") {
+      overlay = value();
+    } else if (arg == "--profile-channel") {
+      profile_channel = value();
+    } else if (arg == "--image-channel") {
+      image_channel = value();
+    } else if (arg == "--status-channel") {
+      status_channel = value();
+    } else if (arg == "--help" || arg == "-h") {
+      std::fputs(kUsage, stdout);
+      return 0;
+    } else {
+      std::fprintf(stderr, "laserline-listen: unknown argument '%s'\n%s", arg.c_str(), kUsage);
+      return 2;
+    }
+  }
+  signal(SIGINT, on_signal);
+  signal(SIGTERM, on_signal);
+
+  lcm::LCM lcm(url);
+  if (!lcm.good()) {
+    std::fprintf(stderr, "laserline-listen: --url: cannot open LCM '%s'\n", url.c_str());
+    return 1;
+  }
+  Listener listener;
+  lcm.subscribe(profile_channel, &Listener::on_profile, &listener);
+  lcm.subscribe(image_channel, &Listener::on_image, &listener);
+  lcm.subscribe(status_channel, &Listener::on_status, &listener);
+
+  const double start = now_s(CLOCK_MONOTONIC);
+  while (g_stop == 0) {
+    if (lcm.handleTimeout(100) < 0) break;
+    const double now = now_s(CLOCK_MONOTONIC);
+    if (duration_s > 0 && now - start >= duration_s) break;
+    if (listener.last_message_s > 0 && now - listener.last_message_s >= quiet_s) break;
+  }
+  report(listener, url);
+  if (!overlay.empty()) write_overlay(listener, overlay);
+  return listener.profiles > 0 ? 0 : 1;
+}
