@@ -25,8 +25,11 @@ std::unique_ptr<Camera> create_sim_camera(const CameraRequest& request) {
   const double rate = request.options->number("frame_rate_hz", 30.0, 0.1, 1000.0);
   YamlMap sim = request.options->map("sim");
   SimSceneOptions options = read_sim_options(sim, *request.calibration, rate);
+  SimCameraStall stall;
+  stall.after_s = sim.number("stall_after_s", 0.0, 0.0, 1e6);
+  stall.for_s = sim.number("stall_for_s", 0.0, 0.0, 1e6);
   sim.finish();
-  return std::make_unique<SimCamera>(options, request.laser);
+  return std::make_unique<SimCamera>(options, request.laser, stall);
 }
 
 const std::vector<CameraEntry>& camera_table() {

@@ -27,9 +27,10 @@ bool sleep_until(std::int64_t deadline_ns, const std::atomic<bool>& stopped) {
 
 }  // namespace
 
-SimCamera::SimCamera(const SimSceneOptions& options, const Laser* laser)
+SimCamera::SimCamera(const SimSceneOptions& options, const Laser* laser, SimCameraStall stall)
     : scene_(options),
       laser_(laser),
+      stall_(stall),
       period_ns_(static_cast<std::int64_t>(std::llround(1e9 / options.frame_rate_hz))) {}
 
 bool SimCamera::open(std::string* /*error*/) {
@@ -51,6 +52,18 @@ GrabStatus SimCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
     const auto missed = static_cast<std::uint64_t>((now - exposure) / period_ns_);
     next_sequence_ += missed;
     exposure += static_cast<std::int64_t>(missed) * period_ns_;
+  }
+  if (stall_.after_s > 0) {
+    // Frames due inside the stall window never come; the ones after it do.
+    const std::int64_t stall_begin =
+        start_mono_ns_ + static_cast<std::int64_t>(stall_.after_s * 1e9);
+    const std::int64_t stall_end = stall_begin + static_cast<std::int64_t>(stall_.for_s * 1e9);
+    if (exposure >= stall_begin && exposure < stall_end) {
+      const auto skipped =
+          static_cast<std::uint64_t>((stall_end - exposure + period_ns_ - 1) / period_ns_);
+      next_sequence_ += skipped;
+      exposure += static_cast<std::int64_t>(skipped) * period_ns_;
+    }
   }
   if (exposure > now + timeout.count() * 1'000'000) {
     if (!sleep_until(now + timeout.count() * 1'000'000, stopped_)) return GrabStatus::kStopped;

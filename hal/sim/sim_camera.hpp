@@ -12,9 +12,16 @@ namespace laserline::hal {
 // The built-in simulated scanner as a camera: renders SimScene frames at the configured rate,
 // paced on CLOCK_MONOTONIC like a free-running sensor, lit by `laser` as it is at exposure time.
 // Frame n has sequence number n, so SimScene(options).ground_truth(n, ...) is its exact answer.
+// A stall (no frames for a while, as when a cable is pulled) can be injected to test what the
+// rest of the system does when frames stop.
+struct SimCameraStall {
+  double after_s = 0;  // seconds after open(); 0 = never
+  double for_s = 0;
+};
+
 class SimCamera final : public Camera {
  public:
-  SimCamera(const SimSceneOptions& options, const Laser* laser);
+  SimCamera(const SimSceneOptions& options, const Laser* laser, SimCameraStall stall = {});
 
   bool open(std::string* error) override;
   FrameFormat format() const override { return scene_.format(); }
@@ -25,6 +32,7 @@ class SimCamera final : public Camera {
  private:
   SimScene scene_;
   const Laser* laser_;
+  SimCameraStall stall_;
   std::int64_t period_ns_;
   std::int64_t start_mono_ns_ = 0;
   std::uint64_t next_sequence_ = 0;

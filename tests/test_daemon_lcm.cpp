@@ -1,0 +1,275 @@
+// End-to-end: the real laserlined process on the simulated scanner, received over real UDP
+// multicast LCM on loopback inside a private network namespace made by this test binary.
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <sched.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <laserline/profile_t.hpp>
+#include <laserline/status_t.hpp>
+#include <lcm/lcm-cpp.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "daemon/config.hpp"
+#include "hal/clock.hpp"
+#include "hal/registry.hpp"
+#include "hal/sim/sim_scene.hpp"
+#include "private_network.hpp"
+
+extern char** environ;
+
+namespace {
+
+std::string g_namespace_problem;  // empty when the private namespace is up
+
+constexpr const char* kUrl = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304";
+
+std::string test_config(const std::string& extra_laser = "mode: on") {
+  return std::string(R"(camera:
+  backend: sim
+  frame_rate_hz: 50
+  sim: {seed: 7, distance_m: 1.0, tilt_y_deg: 10, texture_contrast: 0.4, ambient: 25,
+        laser_peak: 190, noise_sigma: 1.5, sway_m: 0.02, sway_deg: 0.5}
+calibration:
+  camera: {width: 640, height: 480, fx: 700, fy: 700, cx: 319.5, cy: 239.5}
+  laser: {baseline_m: 0.2, angle_deg: 80, sheet_width_m: 0.003}
+laser: {)") +
+         extra_laser + R"(}
+detector: {name: maxvalue, maxvalue: {threshold: 60}}
+lcm: {url: ")" +
+         kUrl + R"(", image_every_n: 10, status_period_s: 1.0}
+)";
+}
+
+struct Received {
+  std::vector<laserline::profile_t> profiles;
+  std::vector<std::int64_t> profile_recv_utime;
+  std::vector<laserline::status_t> statuses;
+  void on_profile(const lcm::ReceiveBuffer* rbuf, const std::string&,
+                  const laserline::profile_t* p) {
+    profiles.push_back(*p);
+    profile_recv_utime.push_back(rbuf->recv_utime);
+  }
+  void on_status(const lcm::ReceiveBuffer*, const std::string&, const laserline::status_t* s) {
+    statuses.push_back(*s);
+  }
+};
+
+class DaemonOverLcm : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!g_namespace_problem.empty()) {
+      GTEST_SKIP() << "no private network namespace: " << g_namespace_problem;
+    }
+    dir_ = std::filesystem::temp_directory_path() /
+           ("laserline_it_" + std::to_string(getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::create_directories(dir_);
+  }
+  void TearDown() override {
+    if (pid_ > 0) {
+      kill(pid_, SIGKILL);
+      waitpid(pid_, nullptr, 0);
+    }
+    if (!dir_.empty()) std::filesystem::remove_all(dir_);
+  }
+
+  std::string write_config(const std::string& text) {
+    const auto path = (dir_ / "laserline.yaml").string();
+    std::ofstream(path) << text;
+    return path;
+  }
+
+  void start_daemon(const std::string& config_path) {
+    std::vector<std::string> args = {LASERLINED_PATH, "--config", config_path};
+    std::vector<char*> argv;
+    for (auto& a : args)
+      argv.push_back(a.data());
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    const std::string log = (dir_ / "daemon.log").string();
+    posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_adddup2(&actions, 1, 2);
+    ASSERT_EQ(posix_spawn(&pid_, argv[0], &actions, nullptr, argv.data(), environ), 0);
+    posix_spawn_file_actions_destroy(&actions);
+  }
+
+  // Sends `sig` and returns the seconds until the daemon exited; *status gets its wait status.
+  double stop_daemon(int sig, int* status) {
+    const std::int64_t t0 = laserline::hal::monotonic_ns();
+    kill(pid_, sig);
+    int st = 0;
+    while (waitpid(pid_, &st, WNOHANG) == 0) {
+      if (laserline::hal::monotonic_ns() - t0 > 10'000'000'000) {
+        kill(pid_, SIGKILL);
+        waitpid(pid_, &st, 0);
+        break;
+      }
+      usleep(2000);
+    }
+    pid_ = -1;
+    *status = st;
+    return static_cast<double>(laserline::hal::monotonic_ns() - t0) * 1e-9;
+  }
+
+  std::string daemon_log() const {
+    std::ifstream in(dir_ / "daemon.log");
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  }
+
+  void receive_for(lcm::LCM& lcm, double seconds) {
+    const std::int64_t end =
+        laserline::hal::monotonic_ns() + static_cast<std::int64_t>(seconds * 1e9);
+    while (laserline::hal::monotonic_ns() < end)
+      lcm.handleTimeout(50);
+  }
+
+  std::filesystem::path dir_;
+  pid_t pid_ = -1;
+};
+
+TEST_F(DaemonOverLcm, ProfilesMatchTheSimulatorGroundTruth) {
+  const std::string config_text = test_config();
+  const std::string config_path = write_config(config_text);
+  lcm::LCM lcm(kUrl);
+  ASSERT_TRUE(lcm.good());
+  Received rx;
+  lcm.subscribe("LASERLINE_PROFILE", &Received::on_profile, &rx);
+  lcm.subscribe("LASERLINE_STATUS", &Received::on_status, &rx);
+
+  start_daemon(config_path);
+  receive_for(lcm, 3.5);
+  const std::int64_t now_utime = laserline::hal::wall_ns() / 1000;
+  int status = 0;
+  const double stop_s = stop_daemon(SIGTERM, &status);
+  receive_for(lcm, 0.3);  // the final status
+
+  EXPECT_LT(stop_s, 1.0) << "SIGTERM must stop the daemon within one second";
+  ASSERT_TRUE(WIFEXITED(status)) << daemon_log();
+  EXPECT_EQ(WEXITSTATUS(status), 0) << daemon_log();
+
+  // 50 Hz for ~3.5 s, minus start-up.
+  ASSERT_GE(rx.profiles.size(), 100u) << daemon_log();
+
+  // Sequence numbers and timestamps.
+  std::int64_t missing = 0;
+  for (std::size_t i = 1; i < rx.profiles.size(); ++i) {
+    const auto& a = rx.profiles[i - 1];
+    const auto& b = rx.profiles[i];
+    ASSERT_GT(b.sequence, a.sequence) << "sequence numbers must increase";
+    missing += b.sequence - a.sequence - 1;
+    const double dt_ms = static_cast<double>(b.utime - a.utime) / 1000.0;
+    EXPECT_NEAR(dt_ms, 20.0 * static_cast<double>(b.sequence - a.sequence), 2.0)
+        << "utime must follow the frame period, sequence " << b.sequence;
+    EXPECT_GT(b.camera_timestamp_ns, a.camera_timestamp_ns);
+  }
+  EXPECT_LE(missing, 2) << "no frames should be lost on an idle machine";
+  for (std::size_t i = 0; i < rx.profiles.size(); ++i) {
+    const auto& p = rx.profiles[i];
+    EXPECT_LT(std::llabs(now_utime - p.utime), 5'000'000)
+        << "utime is microseconds since the epoch";
+    EXPECT_GT(rx.profile_recv_utime[i], p.utime) << "received after the exposure";
+    EXPECT_TRUE(p.laser_on);
+    EXPECT_EQ(p.width, 640);
+    EXPECT_EQ(p.height, 480);
+    EXPECT_EQ(p.detector, "maxvalue");
+  }
+
+  // Points against the exact ground truth of the same scene, rebuilt from the same file.
+  laserline::daemon::DaemonConfig config = laserline::daemon::load_config_file(config_path);
+  laserline::hal::YamlMap sim = config.camera_options.map("sim");
+  laserline::hal::SimScene scene(
+      laserline::hal::read_sim_options(sim, config.calibration, config.frame_rate_hz));
+  laserline::hal::SimGroundTruth truth;
+  std::int64_t points = 0, far = 0, truth_columns = 0;
+  double worst = 0;
+  for (const auto& p : rx.profiles) {
+    scene.ground_truth(static_cast<std::uint64_t>(p.sequence), true, truth);
+    for (float row : truth.row)
+      truth_columns += std::isfinite(row) ? 1 : 0;
+    for (const auto& pt : p.points) {
+      ASSERT_GE(pt.u, 0);
+      ASSERT_LT(pt.u, 640);
+      const float expected = truth.row[static_cast<std::size_t>(pt.u)];
+      ++points;
+      const double err = std::isfinite(expected) ? std::abs(pt.v - expected) : 1e9;
+      if (err > 0.5) ++far;
+      if (std::isfinite(expected)) worst = std::max(worst, err);
+    }
+  }
+  EXPECT_EQ(far, 0) << "of " << points << " points, worst error " << worst << " px";
+  EXPECT_GE(static_cast<double>(points), 0.95 * static_cast<double>(truth_columns))
+      << "the line should be found in nearly every column where it is visible";
+  RecordProperty("worst_error_px", std::to_string(worst));
+
+  // Status at 1 Hz, and a final one saying the camera stopped with the laser off.
+  ASSERT_GE(rx.statuses.size(), 3u);
+  for (std::size_t i = 1; i + 1 < rx.statuses.size(); ++i) {
+    const double dt = static_cast<double>(rx.statuses[i].utime - rx.statuses[i - 1].utime) * 1e-6;
+    EXPECT_NEAR(dt, 1.0, 0.25);
+  }
+  const auto& last = rx.statuses.back();
+  EXPECT_EQ(last.camera_state, "stopped");
+  EXPECT_FALSE(last.laser_on);
+  EXPECT_EQ(last.frames_dropped, 0);
+  EXPECT_GE(last.profiles_published, static_cast<std::int64_t>(rx.profiles.size()));
+  EXPECT_GT(rx.statuses[1].latency_samples, 0);
+  EXPECT_GT(rx.statuses[1].latency_p99_ms, 0.0f);
+}
+
+TEST_F(DaemonOverLcm, AlternatingLaserSwitchesPerFrameAndSigintStops) {
+  const std::string config_path = write_config(test_config("mode: alternate"));
+  lcm::LCM lcm(kUrl);
+  ASSERT_TRUE(lcm.good());
+  Received rx;
+  lcm.subscribe("LASERLINE_PROFILE", &Received::on_profile, &rx);
+  lcm.subscribe("LASERLINE_STATUS", &Received::on_status, &rx);
+  start_daemon(config_path);
+  receive_for(lcm, 2.0);
+  int status = 0;
+  const double stop_s = stop_daemon(SIGINT, &status);
+  receive_for(lcm, 0.3);
+  EXPECT_LT(stop_s, 1.0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+  ASSERT_GE(rx.profiles.size(), 40u);
+  int on = 0, off = 0;
+  for (std::size_t i = 1; i < rx.profiles.size(); ++i) {
+    const auto& a = rx.profiles[i - 1];
+    const auto& b = rx.profiles[i];
+    if (b.sequence == a.sequence + 1) {
+      EXPECT_NE(a.laser_on, b.laser_on) << b.sequence;
+    }
+  }
+  for (const auto& p : rx.profiles) {
+    if (p.laser_on) {
+      ++on;
+      EXPECT_GT(p.num_points, 500) << "laser-on frame " << p.sequence;
+    } else {
+      ++off;
+      EXPECT_LT(p.num_points, 20) << "laser-off frame " << p.sequence << " has no line";
+    }
+  }
+  EXPECT_GT(on, 15);
+  EXPECT_GT(off, 15);
+  ASSERT_FALSE(rx.statuses.empty());
+  EXPECT_FALSE(rx.statuses.back().laser_on);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  // Before any thread exists: unshare(CLONE_NEWUSER) requires a single-threaded process.
+  g_namespace_problem = laserline::test::enter_private_network();
+  ::testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}

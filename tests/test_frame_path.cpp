@@ -1,0 +1,181 @@
+// The daemon's frame path in-process: no allocation once running (counted over a steady-state
+// run), and the laser goes off when frames stop.
+#include "daemon/frame_path.hpp"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdlib>
+#include <thread>
+
+#include "daemon/backends.hpp"
+#include "hal/clock.hpp"
+#include "private_network.hpp"
+
+// ---- Allocation counting over every thread of the process --------------------------------------
+namespace {
+std::atomic<bool> g_counting{false};
+std::atomic<long> g_allocations{0};
+std::atomic<long> g_allocated_bytes{0};
+void count_allocation(std::size_t bytes) {
+  if (g_counting.load(std::memory_order_relaxed)) {
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
+    g_allocated_bytes.fetch_add(static_cast<long>(bytes), std::memory_order_relaxed);
+  }
+}
+}  // namespace
+
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+#include <sanitizer/allocator_interface.h>
+// Sanitizers own malloc; they report every allocation to this hook instead.
+extern "C" void laserline_malloc_hook(const volatile void*, std::size_t size) {
+  count_allocation(size);
+}
+extern "C" void laserline_free_hook(const volatile void*) {}
+static const int kHooksInstalled =
+    __sanitizer_install_malloc_and_free_hooks(laserline_malloc_hook, laserline_free_hook);
+#else
+// glibc: interpose the C allocator, which operator new, LCM and glib all end up in.
+extern "C" {
+void* __libc_malloc(std::size_t);
+void* __libc_calloc(std::size_t, std::size_t);
+void* __libc_realloc(void*, std::size_t);
+void* __libc_memalign(std::size_t, std::size_t);
+void* malloc(std::size_t size) {
+  count_allocation(size);
+  return __libc_malloc(size);
+}
+void* calloc(std::size_t n, std::size_t size) {
+  count_allocation(n * size);
+  return __libc_calloc(n, size);
+}
+void* realloc(void* p, std::size_t size) {
+  count_allocation(size);
+  return __libc_realloc(p, size);
+}
+void* memalign(std::size_t alignment, std::size_t size) {
+  count_allocation(size);
+  return __libc_memalign(alignment, size);
+}
+int posix_memalign(void** out, std::size_t alignment, std::size_t size) {
+  count_allocation(size);
+  *out = __libc_memalign(alignment, size);
+  return *out != nullptr ? 0 : ENOMEM;
+}
+void* aligned_alloc(std::size_t alignment, std::size_t size) {
+  count_allocation(size);
+  return __libc_memalign(alignment, size);
+}
+}
+#endif
+
+namespace laserline::daemon {
+namespace {
+
+std::string g_namespace_problem = "not tried";
+
+DaemonConfig make_config(const std::string& text) {
+  return parse_config(hal::load_yaml_text(text, "test.yaml"), "test.yaml");
+}
+
+TEST(FramePath, SteadyStateAllocatesNothingOnAnyThread) {
+  if (!g_namespace_problem.empty()) {
+    GTEST_SKIP() << "no private network namespace for LCM over UDP: " << g_namespace_problem;
+  }
+  // High frame rate, raw frames and status often, so every publishing path runs in the window.
+  DaemonConfig config = make_config(R"(
+camera: {frame_rate_hz: 200, sim: {tilt_y_deg: 8}}
+calibration:
+  camera: {width: 640, height: 480, fx: 700, fy: 700}
+laser: {mode: alternate}
+lcm: {url: "udpm://239.255.76.67:7667?ttl=0", image_every_n: 5, status_period_s: 0.2}
+)");
+  Backends backends = create_backends(config);
+  std::string error;
+  ASSERT_TRUE(backends.laser->open(&error));
+  ASSERT_TRUE(backends.camera->open(&error));
+  lcm::LCM lcm(config.lcm_url);
+  ASSERT_TRUE(lcm.good());
+  FramePath path(config, *backends.camera, *backends.laser, *backends.detector, lcm);
+  // The counter must see allocations, or a zero below would prove nothing.
+  g_counting = true;
+  {
+    auto* probe = new std::vector<int>(100);
+    void* c_probe = std::malloc(64);
+    std::free(c_probe);
+    delete probe;
+  }
+  g_counting = false;
+  ASSERT_GE(g_allocations.exchange(0), 2) << "allocation counting does not work";
+  g_allocated_bytes = 0;
+
+  path.start();
+  std::this_thread::sleep_for(std::chrono::seconds(1));  // warm-up: first status, first image
+  const auto processed_before = path.counters().frames_processed.load();
+  g_counting = true;
+  std::this_thread::sleep_for(std::chrono::seconds(2));
+  g_counting = false;
+  const auto processed = path.counters().frames_processed.load() - processed_before;
+  const long allocations = g_allocations.load();
+  const long bytes = g_allocated_bytes.load();
+  path.stop();
+  const FramePathSummary s = path.summary();
+  EXPECT_GT(processed, 100) << "the frame path must have been busy while counting";
+  EXPECT_GT(s.images_published, 10);
+  EXPECT_EQ(s.publish_errors, 0);
+  EXPECT_EQ(allocations, 0) << bytes << " bytes allocated over " << processed << " frames";
+}
+
+TEST(FramePath, LaserGoesOffWhenFramesStopAndBackOnWhenTheyReturn) {
+  DaemonConfig config = make_config(R"(
+camera: {frame_rate_hz: 50, timeout_ms: 1000, sim: {stall_after_s: 0.6, stall_for_s: 1.5}}
+calibration:
+  camera: {width: 320, height: 240, fx: 350, fy: 350}
+laser: {mode: on, frame_timeout_ms: 150}
+lcm: {url: "memq://", image_every_n: 0}
+)");
+  Backends backends = create_backends(config);
+  std::string error;
+  ASSERT_TRUE(backends.laser->open(&error));
+  EXPECT_FALSE(backends.laser->is_on()) << "off at start";
+  ASSERT_TRUE(backends.camera->open(&error));
+  lcm::LCM lcm(config.lcm_url);
+  FramePath path(config, *backends.camera, *backends.laser, *backends.detector, lcm);
+  path.start();
+
+  // Play the main thread's role: enforce safety every 10 ms and watch the laser.
+  std::int64_t worst_on_without_frames_ns = 0;
+  bool was_off_in_stall = false, back_on_after = false;
+  const std::int64_t t0 = hal::monotonic_ns();
+  while (hal::monotonic_ns() - t0 < 3'000'000'000) {
+    path.enforce_laser_safety();
+    const std::int64_t now = hal::monotonic_ns();
+    const std::int64_t since_frame = now - path.counters().last_frame_mono_ns.load();
+    const bool on = backends.laser->is_on();
+    if (on) worst_on_without_frames_ns = std::max(worst_on_without_frames_ns, since_frame);
+    const double t = static_cast<double>(now - t0) * 1e-9;
+    if (t > 1.0 && t < 2.0 && !on) was_off_in_stall = true;
+    if (t > 2.5 && on) back_on_after = true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  path.stop();
+  EXPECT_FALSE(backends.laser->is_on()) << "off after stop";
+  EXPECT_TRUE(was_off_in_stall);
+  EXPECT_TRUE(back_on_after) << "frames came back, so the laser must too";
+  // Off within the frame timeout (150 ms) plus this loop's 10 ms tick and scheduling slack.
+  EXPECT_LT(worst_on_without_frames_ns, 250'000'000);
+  const FramePathSummary s = path.summary();
+  EXPECT_GE(s.grab_timeouts, 1);
+  EXPECT_GE(path.counters().laser_safety_offs.load() + s.grab_timeouts, 1);
+  EXPECT_GT(s.profiles_published, 50);
+}
+
+}  // namespace
+}  // namespace laserline::daemon
+
+int main(int argc, char** argv) {
+  laserline::daemon::g_namespace_problem = laserline::test::enter_private_network();
+  ::testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}
