@@ -74,6 +74,11 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
   hal::YamlMap lcm = root.map("lcm");
   c.lcm_url = lcm.string("url", c.lcm_url);
   if (c.lcm_url.empty()) lcm.fail("url", "must not be empty");
+  const std::string provider = c.lcm_url.substr(0, c.lcm_url.find("://"));
+  if (c.lcm_url.find("://") == std::string::npos ||
+      (provider != "udpm" && provider != "memq" && provider != "file" && provider != "tcpq")) {
+    lcm.fail("url", "must be udpm://, memq://, file:// or tcpq://, got '" + c.lcm_url + "'");
+  }
   c.profile_channel = lcm.string("profile_channel", c.profile_channel);
   c.image_channel = lcm.string("image_channel", c.image_channel);
   c.status_channel = lcm.string("status_channel", c.status_channel);

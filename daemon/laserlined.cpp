@@ -120,6 +120,13 @@ int main(int argc, char** argv) {
     return 0;
   }
 
+  lcm::LCM lcm(config.lcm_url);
+  if (!lcm.good()) {
+    std::fprintf(stderr, "laserlined: %s: lcm.url: cannot open '%s'\n", config.source.c_str(),
+                 config.lcm_url.c_str());
+    return 2;
+  }
+
   g_laser = backends.laser.get();
   for (int sig : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT})
     signal(sig, fatal_signal_handler);
@@ -135,13 +142,6 @@ int main(int argc, char** argv) {
                  error.c_str());
     return 1;
   }
-  lcm::LCM lcm(config.lcm_url);
-  if (!lcm.good()) {
-    std::fprintf(stderr, "laserlined: %s: lcm.url: cannot open '%s'\n", config.source.c_str(),
-                 config.lcm_url.c_str());
-    return 1;
-  }
-
   laserline::daemon::FramePath path(config, *backends.camera, *backends.laser, *backends.detector,
                                     lcm);
   const auto format = backends.camera->format();
