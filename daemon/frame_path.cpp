@@ -1,5 +1,8 @@
 #include "daemon/frame_path.hpp"
 
+#include <pthread.h>
+#include <time.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -64,9 +67,13 @@ void FramePath::start() {
   stopping_.store(false);
   worker_done_.store(false);
   running_.store(true);
+  // Names show in top -H, ps -L and gdb.
   publisher_thread_ = std::thread([this] { publisher_loop(); });
+  pthread_setname_np(publisher_thread_.native_handle(), "ll-publisher");
   worker_thread_ = std::thread([this] { worker_loop(); });
+  pthread_setname_np(worker_thread_.native_handle(), "ll-worker");
   camera_thread_ = std::thread([this] { camera_loop(); });
+  pthread_setname_np(camera_thread_.native_handle(), "ll-camera");
 }
 
 void FramePath::stop() {
@@ -153,6 +160,11 @@ void FramePath::camera_loop() {
         if (laser_.is_on()) switch_laser(false, grab_index);
         counters_.grab_errors.fetch_add(1, std::memory_order_relaxed);
         counters_.camera_state.store(CameraState::kError, std::memory_order_relaxed);
+        {
+          // A camera that fails at once must not turn this thread into a busy loop.
+          const timespec backoff{0, 10'000'000};
+          nanosleep(&backoff, nullptr);
+        }
         break;
       case hal::GrabStatus::kStopped:
         stopping_.store(true, std::memory_order_relaxed);

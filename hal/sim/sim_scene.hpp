@@ -25,8 +25,9 @@ struct SimSceneOptions {
   double texture_contrast = 0.5;  // albedo = 1 + contrast * noise, noise in [-1, 1], floored at 0
 
   // Light, in grey levels of the 8-bit image.
-  double ambient = 40.0;     // ambient light on a surface of albedo 1
-  double laser_peak = 180.0; // peak of the laser line on a surface of albedo 1 (before attenuation)
+  double ambient = 40.0;  // ambient light on a surface of albedo 1
+  double laser_peak =
+      180.0;                 // peak of the laser line on a surface of albedo 1 (before attenuation)
   double blur_px = 0.7;      // optical blur (Gaussian sigma) added to the projected sheet width
   double noise_sigma = 2.0;  // additive Gaussian sensor noise
   double backscatter = 0.0;  // glow of the sheet in the water just in front of the surface
@@ -40,9 +41,9 @@ struct SimSceneOptions {
 
 // The exact answer for one frame.
 struct SimGroundTruth {
-  std::vector<float> row;      // per column: sub-pixel row of the laser centre, NaN where none
-  std::vector<float> depth_m;  // per column: Z of the lit surface point, NaN where none
-  std::vector<float> width_px; // per column: Gaussian sigma of the rendered line profile
+  std::vector<float> row;       // per column: sub-pixel row of the laser centre, NaN where none
+  std::vector<float> depth_m;   // per column: Z of the lit surface point, NaN where none
+  std::vector<float> width_px;  // per column: Gaussian sigma of the rendered line profile
 };
 
 // Renders the simulated scanner's frames. Construction allocates (texture, noise table, scratch);
@@ -66,7 +67,7 @@ class SimScene {
   Pose pose_at(std::uint64_t sequence) const;
 
   SimSceneOptions options_;
-  std::vector<float> texture_;      // tile of surface albedo noise, texture_size_ x texture_size_
+  std::vector<float> texture_;  // tile of surface albedo noise, texture_size_ x texture_size_
   int texture_size_ = 0;
   std::vector<std::int8_t> noise_;  // table of Gaussian sensor noise samples (scaled)
   std::vector<float> row_buffer_;   // scratch for one image row
