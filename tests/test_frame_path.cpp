@@ -27,8 +27,11 @@ void count_allocation(std::size_t bytes) {
 }  // namespace
 
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-#include <sanitizer/allocator_interface.h>
-// Sanitizers own malloc; they report every allocation to this hook instead.
+// Sanitizers own malloc; they report every allocation to this hook instead. (Declared here: GCC
+// does not install the sanitizer interface headers.)
+extern "C" int __sanitizer_install_malloc_and_free_hooks(void (*malloc_hook)(const volatile void*,
+                                                                             std::size_t),
+                                                         void (*free_hook)(const volatile void*));
 extern "C" void laserline_malloc_hook(const volatile void*, std::size_t size) {
   count_allocation(size);
 }

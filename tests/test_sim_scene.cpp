@@ -11,11 +11,13 @@
 #include <new>
 #include <numbers>
 #include <stdexcept>
+#include <utility>
 #include <vector>
 
 // Every allocation through the global operator new is counted, so that a test can check that a
-// section of code allocates nothing. The array and nothrow forms forward to this one. Not inlined,
-// or GCC sees malloc paired with operator delete and free with operator new and warns.
+// section of code allocates nothing (also under ASan, which intercepts the malloc underneath). The
+// array and nothrow forms forward to this one. Not inlined, or GCC sees malloc paired with operator
+// delete and free with operator new and warns.
 namespace {
 std::atomic<std::size_t> g_allocations{0};
 }  // namespace
@@ -35,10 +37,12 @@ std::atomic<std::size_t> g_allocations{0};
 namespace laserline::hal {
 namespace {
 
-#if defined(__SANITIZE_ADDRESS__)
+// Timings mean nothing under a sanitizer.
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
 constexpr bool kSanitized = true;
 #elif defined(__has_feature)
-#if __has_feature(address_sanitizer) || __has_feature(memory_sanitizer)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer) || \
+    __has_feature(memory_sanitizer)
 constexpr bool kSanitized = true;
 #else
 constexpr bool kSanitized = false;
@@ -99,6 +103,20 @@ double gaussian_peak(const Image& img, int u) {
   if (a <= 0 || c <= 0) return std::nan("");
   const double la = std::log(a), lb = std::log(b), lc = std::log(c);
   return best + 0.5 * (la - lc) / (la - 2 * lb + lc);
+}
+
+// How far rounding to 8 bit can move the 3-point fit of column u (first order in the rounding
+// errors of +-0.5 on each of the three samples): the only error the fit has on noiseless data.
+double rounding_bound(const Image& img, int u, double sigma) {
+  int best = 0;
+  for (int v = 1; v < img.height; ++v) {
+    if (img.at(u, v) > img.at(u, best)) best = v;
+  }
+  if (best == 0 || best == img.height - 1) return 0.0;  // no fit: let the caller's check fail
+  const double a = img.at(u, best - 1), b = img.at(u, best), c = img.at(u, best + 1);
+  const double s2 = sigma * sigma;
+  // delta = (la - lc) / (2 (la - 2 lb + lc)) with la - 2 lb + lc = -1 / sigma^2 and |delta| <= 0.5.
+  return s2 / 2 * (0.5 / a + 0.5 / c) + 0.5 * s2 * (0.5 / a + 1.0 / b + 0.5 / c) + 1e-3;
 }
 
 double mean_abs_diff(const Image& a, const Image& b) {
@@ -233,37 +251,106 @@ TEST(SimScene, GroundTruthIsExactWithTiltAndSway) {
   const std::uint64_t seq = 37;  // 1.2 s in: the camera has moved and turned
   const SimGroundTruth truth = truth_of(scene, seq, true);
   const SimGroundTruth at_start = truth_of(scene, 0, true);
-  EXPECT_GT(std::abs(truth.row[160] - at_start.row[160]), 2.0f);
+  float moved = 0;
+  for (std::size_t u = 0; u < truth.row.size(); ++u) {
+    if (std::isfinite(truth.row[u]) && std::isfinite(at_start.row[u]))
+      moved = std::max(moved, std::abs(truth.row[u] - at_start.row[u]));
+  }
+  EXPECT_GT(moved, 2.0f);
   EXPECT_GT(expect_fit_matches_truth(render(scene, seq, true), truth, 0.02), 200);
 
-  // With a strongly textured surface the line brightness varies but the fit does not care.
+  // With a strongly textured surface the line brightness varies from column to column; the fit
+  // stays within what rounding to 8 bit allows for that brightness.
   o.texture_contrast = 0.8;
-  o.laser_peak = 250;
+  o.laser_peak = 130;
   SimScene textured(o);
   int used = 0;
   const SimGroundTruth t2 = truth_of(textured, seq, true);
   const Image img = render(textured, seq, true);
   for (int u = 0; u < img.width; ++u) {
-    // Dark surface points give too few grey levels for 0.02 px; skip them.
-    if (!std::isfinite(t2.row[u]) || img.at(u, static_cast<int>(std::lround(t2.row[u]))) < 100)
-      continue;
-    EXPECT_NEAR(gaussian_peak(img, u), t2.row[u], 0.03) << "column " << u;
+    if (!std::isfinite(t2.row[u])) continue;
+    const int v = static_cast<int>(std::lround(t2.row[u]));
+    if (img.at(u, v) < 30 || img.at(u, v) == 255) continue;  // too dark to fit, or clipped
+    EXPECT_NEAR(gaussian_peak(img, u), t2.row[u], rounding_bound(img, u, t2.width_px[u]))
+        << "column " << u;
     ++used;
   }
-  EXPECT_GT(used, 100);
+  EXPECT_GT(used, 200);
+}
+
+TEST(SimScene, LineBrightnessFollowsTheSurfaceAlbedo) {
+  // The line's peak is laser_peak times the albedo at the lit point, which the ambient image
+  // shows at the same place: the two agree column by column.
+  SimSceneOptions o = laser_only(small_options());
+  o.texture_contrast = 0.6;
+  o.laser_peak = 150;
+  SimScene lit(o);
+  o.laser_peak = 0;
+  o.ambient = 150;
+  SimScene ambient(o);
+  const std::uint64_t seq = 21;
+  const SimGroundTruth truth = truth_of(lit, seq, true);
+  const Image line = render(lit, seq, true), surface = render(ambient, seq, false);
+  std::vector<double> a, b;
+  for (int u = 0; u < line.width; ++u) {
+    const double v = truth.row[u];
+    const int v0 = static_cast<int>(std::floor(v));
+    const double f = v - v0;
+    // The ambient albedo interpolated to the line centre; the line's peak from the fitted
+    // Gaussian: ln peak = ln B + delta^2 / (2 sigma^2) at the brightest pixel.
+    b.push_back((1 - f) * surface.at(u, v0) + f * surface.at(u, v0 + 1));
+    int best = v0;
+    if (line.at(u, v0 + 1) > line.at(u, best)) best = v0 + 1;
+    const double d = best - v;
+    a.push_back(line.at(u, best) * std::exp(d * d / (2 * truth.width_px[u] * truth.width_px[u])));
+  }
+  double ma = 0, mb = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    ma += a[i] / a.size();
+    mb += b[i] / b.size();
+  }
+  double sab = 0, saa = 0, sbb = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    sab += (a[i] - ma) * (b[i] - mb);
+    saa += (a[i] - ma) * (a[i] - ma);
+    sbb += (b[i] - mb) * (b[i] - mb);
+  }
+  const double correlation = sab / std::sqrt(saa * sbb);
+  std::printf("  correlation of line peak and surface albedo: %.3f\n", correlation);
+  EXPECT_GT(correlation, 0.95);
+  EXPECT_NEAR(ma, mb, 0.05 * mb);
 }
 
 TEST(SimScene, TruthIsNaNNearTheTopAndBottomBorder) {
   SimSceneOptions o = laser_only(small_options());
-  o.tilt_x_deg = 60;  // strongly tilted: the line crosses rows quickly as the plane moves
-  o.tilt_y_deg = 45;
-  SimScene scene(o);
-  const SimGroundTruth truth = truth_of(scene, 0, true);
-  for (float v : truth.row) {
-    if (std::isfinite(v)) {
-      EXPECT_GE(v, 1.5f);
-      EXPECT_LE(v, 256 - 2.5f);
-    }
+  o.sway_m = 0;
+  o.sway_deg = 0;
+  o.calibration.laser.angle_deg = 60;  // steep enough to reach the bottom rows
+  const double t =
+      std::tan(std::numbers::pi / 2 - o.calibration.laser.angle_deg * std::numbers::pi / 180);
+  const double fy = o.calibration.camera.fy, cy = o.calibration.camera.cy;
+  const int height = o.calibration.camera.height;
+  // Places the line at `row` by choosing the distance: row = cy + fy (t - d / Z).
+  auto truth_with_line_at = [&](double row) {
+    SimSceneOptions placed = o;
+    placed.distance_m = o.calibration.laser.baseline_m / (t - (row - cy) / fy);
+    SimScene scene(placed);
+    SimGroundTruth truth = truth_of(scene, 0, true);
+    return std::pair{truth, render(scene, 0, true)};
+  };
+  for (double row : {0.2, 1.0, 1.4, height - 2.4, height - 1.3}) {
+    const auto [truth, img] = truth_with_line_at(row);
+    EXPECT_EQ(finite_count(truth.row), 0) << "line at row " << row;
+    EXPECT_EQ(finite_count(truth.depth_m), 0);
+    // The line is still drawn.
+    const int nearest = static_cast<int>(std::lround(row));
+    EXPECT_GT(img.at(10, nearest), 100) << "line at row " << row;
+  }
+  for (double row : {1.6, 2.5, height - 2.6}) {
+    const auto [truth, img] = truth_with_line_at(row);
+    EXPECT_EQ(finite_count(truth.row), o.calibration.camera.width) << "line at row " << row;
+    EXPECT_NEAR(truth.row[10], row, 1e-3);
+    EXPECT_NEAR(gaussian_peak(img, 10), truth.row[10], 0.02);
   }
 }
 
@@ -320,8 +407,10 @@ TEST(SimScene, TextureMovesWithTheSurface) {
   o.noise_sigma = 0;
   {
     SimScene swaying(o);
+    // Consecutive frames differ (the camera moves by about 1 mm), frames 1/3 s apart a lot.
     const Image a = render(swaying, 10, false), b = render(swaying, 11, false);
-    EXPECT_GT(mean_abs_diff(a, b), 1.0);
+    EXPECT_GT(mean_abs_diff(a, b), 0.1);
+    EXPECT_GT(mean_abs_diff(a, render(swaying, 20, false)), 1.0);
   }
   o.sway_m = 0;
   o.sway_deg = 0;
@@ -427,12 +516,19 @@ TEST(SimScene, SaturatesAt255) {
   EXPECT_EQ(saturated, img.width);
 }
 
-double render_ms(SimScene& scene, std::vector<std::uint8_t>& buffer, int frames) {
-  const auto t0 = std::chrono::steady_clock::now();
-  for (int i = 0; i < frames; ++i)
+// Best and mean time of one render() over `frames` frames, in milliseconds.
+std::pair<double, double> render_ms(SimScene& scene, std::vector<std::uint8_t>& buffer,
+                                    int frames) {
+  double best = 1e300, total = 0;
+  for (int i = 0; i < frames; ++i) {
+    const auto t0 = std::chrono::steady_clock::now();
     scene.render(static_cast<std::uint64_t>(i), i % 2 == 0, buffer);
-  const auto t1 = std::chrono::steady_clock::now();
-  return std::chrono::duration<double, std::milli>(t1 - t0).count() / frames;
+    const auto t1 = std::chrono::steady_clock::now();
+    const double ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
+    best = std::min(best, ms);
+    total += ms;
+  }
+  return {best, total / frames};
 }
 
 TEST(SimScene, LargeFramesRenderWithoutHeapAllocation) {
@@ -455,13 +551,9 @@ TEST(SimScene, LargeFramesRenderWithoutHeapAllocation) {
   scene.render(1000, true, buffer);
   scene.ground_truth(1000, true, truth);
   const std::size_t after = g_allocations.load();
-  if (kSanitized) {
-    std::printf("  (allocation count not checked under sanitizers)\n");
-  } else {
-    EXPECT_EQ(after - before, 0u) << "render() or ground_truth() allocated";
-  }
+  EXPECT_EQ(after - before, 0u) << "render() or ground_truth() allocated";
 
-  // The frame is sane: a line where the truth says, texture around it.
+  // The frame is sane: a bright line where the truth says.
   const int u = 1024;
   ASSERT_TRUE(std::isfinite(truth.row[u]));
   const int v = static_cast<int>(std::lround(truth.row[u]));
@@ -470,17 +562,18 @@ TEST(SimScene, LargeFramesRenderWithoutHeapAllocation) {
   EXPECT_GT(buffer[static_cast<std::size_t>(v) * 2048 + u], 120);
 
   if (!kSanitized) {
-    std::printf("  2048x1536 render: %.1f ms/frame\n", render_ms(scene, buffer, 10));
+    const auto [best, mean] = render_ms(scene, buffer, 10);
+    std::printf("  2048x1536 render: best %.1f ms, mean %.1f ms\n", best, mean);
     SimSceneOptions vga = o;
     vga.calibration = Calibration{};
     SimScene small(vga);
     std::vector<std::uint8_t> small_buffer(small.format().bytes());
-    std::printf("  1280x1024 render: %.1f ms/frame\n", render_ms(small, small_buffer, 10));
+    const auto [small_best, small_mean] = render_ms(small, small_buffer, 10);
+    std::printf("  1280x1024 render: best %.1f ms, mean %.1f ms\n", small_best, small_mean);
   }
 }
 
 TEST(SimScene, AllocationCounterWorks) {
-  if (kSanitized) GTEST_SKIP() << "operator new replacement is not checked under sanitizers";
   // Guards the test above against a counter that never counts.
   const std::size_t before = g_allocations.load();
   void* volatile p = ::operator new(64);

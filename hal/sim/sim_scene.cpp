@@ -18,6 +18,9 @@ constexpr double kDeg = kPi / 180.0;
 constexpr int kMaxImageSide = 16384;
 constexpr int kTextureLog2 = 10;  // 1024 x 1024 texels, wrapping
 constexpr int kTextureSize = 1 << kTextureLog2;
+// Stored with a copy of the first row and column after the last, so that the four texels of a
+// bilinear sample are at i, i + 1, i + kTextureStride and i + kTextureStride + 1.
+constexpr int kTextureStride = kTextureSize + 1;
 constexpr int kFinestSpacing = 4;  // lattice spacing (texels) of the finest noise octave
 constexpr std::size_t kNoiseTableSize = std::size_t{1} << 22;
 constexpr float kNoiseTableScale = 16.0f;  // table holds round(16 * N(0, 1)), clipped to int8
@@ -25,6 +28,7 @@ constexpr double kFwhmToSigma = 2.3548200450309493;
 constexpr float kBandSigmas = 5.0f;  // the laser profile is evaluated within +-5 sigma
 constexpr float kEdgeRows = 1.5f;    // truth is NaN when the centre is within 2 px of the border
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+constexpr float kNoGlow = 1e30f;  // inverse depth floor of the glow in columns without a line
 
 using Vec3 = std::array<double, 3>;
 using Mat3 = std::array<double, 9>;  // row-major
@@ -131,33 +135,35 @@ ColumnLine solve_column(const FrameGeometry& g, double u) {
   return out;
 }
 
-// Bilinear sample of the wrapping albedo tile at texel coordinates (s, t).
+// Bilinear sample of the wrapping albedo tile at texel coordinates (s, t), |s|, |t| < 2^31.
 inline float sample_tile(const float* tex, float s, float t) {
   constexpr int kMask = kTextureSize - 1;
-  s = std::clamp(s, -1e7f, 1e7f);
-  t = std::clamp(t, -1e7f, 1e7f);
   int is = static_cast<int>(s);
   int it = static_cast<int>(t);
   is -= s < static_cast<float>(is) ? 1 : 0;  // floor without a libm call
   it -= t < static_cast<float>(it) ? 1 : 0;
   const float fs = s - static_cast<float>(is);
   const float ft = t - static_cast<float>(it);
-  const int x0 = is & kMask, x1 = (is + 1) & kMask;
-  const int y0 = (it & kMask) << kTextureLog2, y1 = ((it + 1) & kMask) << kTextureLog2;
-  const float p00 = tex[y0 + x0], p01 = tex[y0 + x1];
-  const float p10 = tex[y1 + x0], p11 = tex[y1 + x1];
+  const float* p = tex + (it & kMask) * kTextureStride + (is & kMask);
+  const float p00 = p[0], p01 = p[1], p10 = p[kTextureStride], p11 = p[kTextureStride + 1];
   const float top = p00 + fs * (p01 - p00);
   const float bottom = p10 + fs * (p11 - p10);
   return top + ft * (bottom - top);
 }
 
+// min and max without branches: GCC does not if-convert a select that feeds a float-to-int
+// conversion (it might trap), which would stop the row kernels from vectorising. Exact enough
+// where the two arguments are of similar magnitude or one is far smaller than the other.
+inline float branchless_max(float a, float b) {
+  return 0.5f * (a + b + std::abs(a - b));
+}
+
 // exp(x) for x <= 0 to about 2e-5 relative: the backscatter glow needs no more and must be cheap.
 inline float fast_exp_neg(float x) {
-  x = x > -80.0f ? x : -80.0f;  // also maps NaN to -80
-  x = x < 0.0f ? x : 0.0f;
+  x = branchless_max(x, -80.0f);
   const float y = x * 1.44269504f;
-  int i = static_cast<int>(y);
-  i -= y < static_cast<float>(i) ? 1 : 0;
+  std::int32_t i = static_cast<std::int32_t>(y);
+  i -= y < static_cast<float>(i) ? 1 : 0;  // floor
   const float f = y - static_cast<float>(i);
   // 2^f, Taylor series in f ln2 to sixth order.
   const float p =
@@ -173,36 +179,31 @@ inline float fast_exp_neg(float x) {
 constexpr int kBlock = 16;
 
 // Ambient light on the textured surface for `count` pixels (a multiple of kBlock) of one row;
-// texel coordinates are (s0 + u su, t0 + u tu) / (w0 + u wu), one division per pixel.
+// texel coordinates are (s0 + u su, t0 + u tu) / (w0 + u wu), one division per pixel. Rays with
+// w <= w_min miss the surface (or nearly so); w_min keeps |s|, |t| below 2^31 for the int
+// conversion.
 void ambient_row(const float* __restrict tex, float s0, float su, float t0, float tu, float w0,
-                 float wu, float ambient, int count, float* __restrict row) {
+                 float wu, float w_min, float ambient, int count, float* __restrict row) {
   constexpr int kMask = kTextureSize - 1;
   for (int u0 = 0; u0 < count; u0 += kBlock) {
-    alignas(64) std::int32_t i00[kBlock], i01[kBlock], i10[kBlock], i11[kBlock];
+    alignas(64) std::int32_t index[kBlock];
     alignas(64) float fs[kBlock], ft[kBlock], gain[kBlock];
     for (int k = 0; k < kBlock; ++k) {
       const float fu = static_cast<float>(u0 + k);
       const float w = w0 + fu * wu;
-      const bool seen = w > 0.0f;
-      const float inv = 1.0f / (seen ? w : 1.0f);
-      float s = (s0 + fu * su) * inv, t = (t0 + fu * tu) * inv;
-      s = std::min(std::max(s, -1e7f), 1e7f);
-      t = std::min(std::max(t, -1e7f), 1e7f);
+      const float inv = 1.0f / branchless_max(w, w_min);
+      const float s = (s0 + fu * su) * inv, t = (t0 + fu * tu) * inv;
       std::int32_t is = static_cast<std::int32_t>(s), it = static_cast<std::int32_t>(t);
       is -= s < static_cast<float>(is) ? 1 : 0;  // floor without a libm call
       it -= t < static_cast<float>(it) ? 1 : 0;
       fs[k] = s - static_cast<float>(is);
       ft[k] = t - static_cast<float>(it);
-      const std::int32_t x0 = is & kMask, x1 = (is + 1) & kMask;
-      const std::int32_t y0 = (it & kMask) << kTextureLog2, y1 = ((it + 1) & kMask) << kTextureLog2;
-      i00[k] = y0 + x0;
-      i01[k] = y0 + x1;
-      i10[k] = y1 + x0;
-      i11[k] = y1 + x1;
-      gain[k] = seen ? ambient : 0.0f;  // rays that miss the surface see nothing
+      index[k] = (it & kMask) * kTextureStride + (is & kMask);
+      gain[k] = w > w_min ? ambient : 0.0f;
     }
     for (int k = 0; k < kBlock; ++k) {
-      const float p00 = tex[i00[k]], p01 = tex[i01[k]], p10 = tex[i10[k]], p11 = tex[i11[k]];
+      const float* p = tex + index[k];
+      const float p00 = p[0], p01 = p[1], p10 = p[kTextureStride], p11 = p[kTextureStride + 1];
       const float top = p00 + fs[k] * (p01 - p00);
       const float bottom = p10 + fs[k] * (p11 - p10);
       row[u0 + k] = gain[k] * (top + ft[k] * (bottom - top));
@@ -210,38 +211,42 @@ void ambient_row(const float* __restrict tex, float s0, float su, float t0, floa
   }
 }
 
-// Backscatter for `count` pixels (a multiple of kBlock) of one row: the ray of pixel u meets the
-// sheet at depth zs = -e / (lin0 + u linu); it glows where 0 < zs < Z of the lit surface point.
-void glow_row(float lin0, float linu, float e, float attenuation, float backscatter,
-              const float* __restrict inv_depth, int count, float* __restrict row) {
+// Backscatter for `count` pixels (a multiple of kBlock) of one row. The ray of pixel u meets the
+// sheet at inverse depth p = p0 + u pu; it glows where the sheet is in front of the lit surface
+// point, 0 < 1/p < Z, i.e. p > glow_floor[u] = 1/Z (a huge value in columns without a line).
+void glow_row(float p0, float pu, float attenuation, float backscatter,
+              const float* __restrict glow_floor, int count, float* __restrict row) {
   for (int u0 = 0; u0 < count; u0 += kBlock) {
     for (int k = 0; k < kBlock; ++k) {
-      const float lin = lin0 + static_cast<float>(u0 + k) * linu;
-      const bool hit = lin != 0.0f;
-      const float zs = hit ? -e / (hit ? lin : 1.0f) : 0.0f;
-      const float q = zs * inv_depth[u0 + k];
-      const bool in_front = zs > 0.0f && q < 1.0f;
-      const float atten = fast_exp_neg(-attenuation * zs);
-      row[u0 + k] += in_front ? backscatter * atten * q * q : 0.0f;
+      const float p = p0 + static_cast<float>(u0 + k) * pu;
+      const float lowest = glow_floor[u0 + k];
+      const float inv = 1.0f / branchless_max(p, lowest);  // finite: lowest > 0
+      const float q = lowest * inv;                        // Z_sheet / Z_surface, in (0, 1]
+      // A select between invariants (not of the product) keeps the loop free of branches.
+      const float strength = p > lowest ? backscatter : 0.0f;
+      row[u0 + k] += strength * (fast_exp_neg(-attenuation * inv) * q * q);
     }
   }
 }
 
-// Adds sensor noise and quantises one row to 8 bit with rounding and clipping.
+// Adds sensor noise and quantises one row to 8 bit with rounding and clipping. Option limits keep
+// |x| far below 2^31, so the conversion comes before the clipping (which then vectorises).
 void quantise_row(const float* __restrict row, const std::int8_t* __restrict noise, float scale,
                   int width, std::uint8_t* __restrict out) {
-  auto pixel = [&](int u) {
-    float x = row[u] + scale * static_cast<float>(noise[u]);
-    x = std::min(std::max(x, 0.0f), 255.0f);
-    return static_cast<std::uint8_t>(static_cast<std::int32_t>(x + 0.5f));
-  };
-  int u0 = 0;
-  for (; u0 + kBlock <= width; u0 += kBlock) {
-    for (int k = 0; k < kBlock; ++k)
-      out[u0 + k] = pixel(u0 + k);
+  // (Not a lambda: GCC loses the restrict qualifiers through the closure.)
+  int u = 0;
+  for (; u + kBlock <= width; u += kBlock) {
+    for (int k = 0; k < kBlock; ++k) {
+      const float x = row[u + k] + scale * static_cast<float>(noise[u + k]);
+      const auto level = static_cast<std::int32_t>(x + 0.5f);  // round half up (x < 0 -> <= 0)
+      out[u + k] = static_cast<std::uint8_t>(std::min(std::max(level, 0), 255));
+    }
   }
-  for (; u0 < width; ++u0)
-    out[u0] = pixel(u0);
+  for (; u < width; ++u) {
+    const float x = row[u] + scale * static_cast<float>(noise[u]);
+    const auto level = static_cast<std::int32_t>(x + 0.5f);
+    out[u] = static_cast<std::uint8_t>(std::min(std::max(level, 0), 255));
+  }
 }
 
 void require(bool ok, const std::string& message) {
@@ -273,11 +278,16 @@ void validate(const SimSceneOptions& o) {
               std::isfinite(o.tilt_y_deg) && std::abs(o.tilt_y_deg) < 89.0,
           "tilt_x_deg and tilt_y_deg must be within (-89, 89)");
   require(std::isfinite(o.texture_scale_m) && o.texture_scale_m > 0, "texture_scale_m must be > 0");
-  require(finite_nonneg(o.texture_contrast), "texture_contrast must be >= 0");
+  require(finite_nonneg(o.texture_contrast) && o.texture_contrast <= 100,
+          "texture_contrast must be within [0, 100]");
   require(finite_nonneg(o.ambient) && finite_nonneg(o.laser_peak) && finite_nonneg(o.blur_px) &&
               finite_nonneg(o.noise_sigma) && finite_nonneg(o.backscatter) &&
               finite_nonneg(o.attenuation_per_m),
           "ambient, laser_peak, blur_px, noise_sigma, backscatter, attenuation_per_m must be >= 0");
+  // Grey levels far beyond 8 bit make no sense, and the limits keep the float-to-int conversion
+  // of a pixel in range.
+  require(o.ambient <= 1e4 && o.laser_peak <= 1e4 && o.backscatter <= 1e4 && o.noise_sigma <= 1e3,
+          "ambient, laser_peak and backscatter must be <= 1e4, noise_sigma <= 1e3");
   require(finite_nonneg(o.sway_m) && finite_nonneg(o.sway_deg), "sway_m and sway_deg must be >= 0");
   require(std::isfinite(o.sway_period_s) && o.sway_period_s > 0, "sway_period_s must be > 0");
 }
@@ -326,7 +336,7 @@ std::vector<float> make_texture(std::uint64_t seed, double contrast) {
     peak = std::max(peak, std::abs(x));
 
   std::vector<float> blobs(static_cast<std::size_t>(n) * n, 0.0f);
-  const int count = 2000;
+  const int count = 3500;
   for (int k = 0; k < count; ++k) {
     const int x0 = static_cast<int>(rng.uniform(0.0, n));
     const int y0 = static_cast<int>(rng.uniform(0.0, n));
@@ -334,7 +344,7 @@ std::vector<float> make_texture(std::uint64_t seed, double contrast) {
     const int w = static_cast<int>(size_lo * std::pow(size_hi / size_lo, rng.uniform()));
     const int h = static_cast<int>(size_lo * std::pow(size_hi / size_lo, rng.uniform()));
     const float value =
-        static_cast<float>((rng.uniform() < 0.5 ? -1.0 : 1.0) * rng.uniform(0.4, 1.0));
+        static_cast<float>((rng.uniform() < 0.5 ? -1.0 : 1.0) * rng.uniform(0.6, 1.0));
     const bool disc = rng.uniform() < 0.4;
     const int r2 = (w / 2) * (w / 2);
     for (int dy = 0; dy < (disc ? w : h); ++dy) {
@@ -349,10 +359,14 @@ std::vector<float> make_texture(std::uint64_t seed, double contrast) {
     }
   }
 
-  std::vector<float> albedo(static_cast<std::size_t>(n) * n);
-  for (std::size_t i = 0; i < albedo.size(); ++i) {
-    const float noise = std::clamp(0.6f * smooth[i] / peak + 0.6f * blobs[i], -1.0f, 1.0f);
-    albedo[i] = std::max(0.0f, 1.0f + static_cast<float>(contrast) * noise);
+  std::vector<float> albedo(static_cast<std::size_t>(kTextureStride) * kTextureStride);
+  for (int y = 0; y < kTextureStride; ++y) {
+    for (int x = 0; x < kTextureStride; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y & (n - 1)) * n + (x & (n - 1));
+      const float noise = std::clamp(0.4f * smooth[i] / peak + blobs[i], -1.0f, 1.0f);
+      albedo[static_cast<std::size_t>(y) * kTextureStride + x] =
+          std::max(0.0f, 1.0f + static_cast<float>(contrast) * noise);
+    }
   }
   return albedo;
 }
@@ -433,7 +447,8 @@ float albedo_at(const FrameGeometry& g, const float* tex, double u, double v) {
   const double t = g.h[3] * u + g.h[4] * v + g.h[5];
   const double w = g.h[6] * u + g.h[7] * v + g.h[8];
   if (!(w > 0)) return 0.0f;
-  return sample_tile(tex, static_cast<float>(s / w), static_cast<float>(t / w));
+  return sample_tile(tex, static_cast<float>(std::clamp(s / w, -1e7, 1e7)),
+                     static_cast<float>(std::clamp(t / w, -1e7, 1e7)));
 }
 
 double line_sigma(const SimSceneOptions& o, double z) {
@@ -451,9 +466,9 @@ SimScene::SimScene(const SimSceneOptions& options) : options_(options) {
   texture_ = make_texture(options_.seed, options_.texture_contrast);
   noise_ = make_noise_table(options_.seed);
   // One image row, then the per-column 1 / Z of the lit point (for the backscatter glow), each
-  // padded to whole kernel blocks; the padding of 1 / Z stays 0 (no glow).
+  // padded to whole kernel blocks; the padding never glows.
   const std::size_t padded = (width + kBlock - 1) / kBlock * kBlock;
-  row_buffer_.assign(2 * padded, 0.0f);
+  row_buffer_.assign(2 * padded, kNoGlow);
   scratch_truth_.row.assign(width, kNaN);
   scratch_truth_.depth_m.assign(width, kNaN);
   scratch_truth_.width_px.assign(width, kNaN);
@@ -489,10 +504,11 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
   const FrameGeometry g = make_geometry(options_, pose.r, pose.t);
   const float* tex = texture_.data();
 
-  // row_buffer_: one image row, then 1 / Z of the lit point per column, each padded to kBlock.
+  // row_buffer_: one image row, then 1 / Z of the lit point per column (the glow floor), each
+  // padded to whole kernel blocks.
   const int padded = (width + kBlock - 1) / kBlock * kBlock;
   float* row = row_buffer_.data();
-  float* inv_depth = row_buffer_.data() + padded;
+  float* glow_floor = row_buffer_.data() + padded;
   float* centre = scratch_truth_.row.data();
   float* sigma = scratch_truth_.width_px.data();
   float* depth = scratch_truth_.depth_m.data();
@@ -501,49 +517,58 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
   // Per column: the line centre, its width and brightness. Rows [band_lo, band_hi] hold all bands.
   float band_lo = std::numeric_limits<float>::infinity();
   float band_hi = -std::numeric_limits<float>::infinity();
+  float min_floor = kNoGlow;
   const bool laser = laser_on && (options_.laser_peak > 0 || options_.backscatter > 0);
   for (int u = 0; u < width; ++u) {
     const ColumnLine line = laser ? solve_column(g, u) : ColumnLine{};
     if (!line.hit) {
       centre[u] = sigma[u] = depth[u] = kNaN;
       gain[u] = 0.0f;
-      inv_depth[u] = 0.0f;
+      glow_floor[u] = kNoGlow;
       continue;
     }
     centre[u] = static_cast<float>(line.v);
     sigma[u] = static_cast<float>(line_sigma(options_, line.z));
     depth[u] = static_cast<float>(line.z);
-    inv_depth[u] = static_cast<float>(1.0 / line.z);
+    glow_floor[u] = static_cast<float>(1.0 / line.z);
     gain[u] = static_cast<float>(options_.laser_peak * albedo_at(g, tex, u, centre[u]) *
                                  std::exp(-2.0 * options_.attenuation_per_m * line.z));
     band_lo = std::min(band_lo, centre[u] - kBandSigmas * sigma[u]);
     band_hi = std::max(band_hi, centre[u] + kBandSigmas * sigma[u]);
+    min_floor = std::min(min_floor, glow_floor[u]);
   }
 
   const std::uint64_t frame_hash = mix64(mix64(options_.seed) ^ mix64(sequence + 0x51ce5eedULL));
   const std::uint64_t offsets = kNoiseTableSize - static_cast<std::size_t>(width) + 1;
   const float noise_scale = static_cast<float>(options_.noise_sigma) / kNoiseTableScale;
   const float ambient = static_cast<float>(options_.ambient);
-  const bool glow = laser && options_.backscatter > 0;
+  const auto& [la, lb, lc, le] = g.lp;
+  const bool glow = laser && options_.backscatter > 0 && le != 0.0;
   const float backscatter = static_cast<float>(options_.backscatter);
   const float attenuation = static_cast<float>(options_.attenuation_per_m);
-  const auto& [la, lb, lc, le] = g.lp;
 
   for (int v = 0; v < height; ++v) {
     const double dv = v;
     if (g.surface && ambient > 0) {
-      ambient_row(tex, static_cast<float>(g.h[1] * dv + g.h[2]), static_cast<float>(g.h[0]),
-                  static_cast<float>(g.h[4] * dv + g.h[5]), static_cast<float>(g.h[3]),
-                  static_cast<float>(g.h[7] * dv + g.h[8]), static_cast<float>(g.h[6]), ambient,
-                  padded, row);
+      const double s_row = g.h[1] * dv + g.h[2], t_row = g.h[4] * dv + g.h[5];
+      // Texel coordinates stay below 1e7 in magnitude (|numerator| / w_min at either end).
+      const double reach = std::max({std::abs(s_row), std::abs(s_row + g.h[0] * padded),
+                                     std::abs(t_row), std::abs(t_row + g.h[3] * padded)});
+      const float w_min = static_cast<float>(std::max(reach * 1e-7, 1e-30));
+      ambient_row(tex, static_cast<float>(s_row), static_cast<float>(g.h[0]),
+                  static_cast<float>(t_row), static_cast<float>(g.h[3]),
+                  static_cast<float>(g.h[7] * dv + g.h[8]), static_cast<float>(g.h[6]), w_min,
+                  ambient, padded, row);
     } else {
       std::fill(row, row + padded, 0.0f);
     }
 
-    if (glow) {
-      glow_row(static_cast<float>(lb * (dv - g.cy) / g.fy + lc - la * g.cx / g.fx),
-               static_cast<float>(la / g.fx), static_cast<float>(le), attenuation, backscatter,
-               inv_depth, padded, row);
+    // Inverse depth where the ray of (u, v) meets the sheet: -(a xn + b yn + c) / e. Rows where
+    // it nowhere exceeds the glow floor have no glow.
+    const double p_row = glow ? -(lb * (dv - g.cy) / g.fy + lc - la * g.cx / g.fx) / le : 0.0;
+    if (glow && p_row + std::max(0.0, -la / g.fx / le * padded) > min_floor) {
+      glow_row(static_cast<float>(p_row), static_cast<float>(-la / g.fx / le), attenuation,
+               backscatter, glow_floor, padded, row);
     }
 
     // The laser line: a Gaussian across the line, point-sampled at pixel centres.
