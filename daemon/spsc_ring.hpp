@@ -72,7 +72,8 @@ class SpscRing {
   void pop() { read_.store(read_.load(std::memory_order_relaxed) + 1, std::memory_order_release); }
 
   // Consumer: sleeps until a slot is published, wake() is called, or `timeout_ns` passes.
-  // Returns true when the ring is non-empty.
+  // Returns true when the ring is non-empty. It may return false early (a wake meant for an
+  // earlier publish), so callers wait in a loop.
   bool wait(std::int64_t timeout_ns) {
     if (front() != nullptr) return true;
     const std::uint32_t seen = signal_.load(std::memory_order_acquire);

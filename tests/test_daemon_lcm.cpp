@@ -49,17 +49,25 @@ lcm: {url: ")" +
 )";
 }
 
+// Subscribed with plain functions (subscribeFunction): GCC 12's UBSan misreports LCM's
+// member-function-pointer dispatch as a misaligned access.
 struct Received {
   std::vector<laserline::profile_t> profiles;
   std::vector<std::int64_t> profile_recv_utime;
   std::vector<laserline::status_t> statuses;
-  void on_profile(const lcm::ReceiveBuffer* rbuf, const std::string&,
-                  const laserline::profile_t* p) {
-    profiles.push_back(*p);
-    profile_recv_utime.push_back(rbuf->recv_utime);
+
+  static void on_profile(const lcm::ReceiveBuffer* rbuf, const std::string&,
+                         const laserline::profile_t* p, Received* self) {
+    self->profiles.push_back(*p);
+    self->profile_recv_utime.push_back(rbuf->recv_utime);
   }
-  void on_status(const lcm::ReceiveBuffer*, const std::string&, const laserline::status_t* s) {
-    statuses.push_back(*s);
+  static void on_status(const lcm::ReceiveBuffer*, const std::string&, const laserline::status_t* s,
+                        Received* self) {
+    self->statuses.push_back(*s);
+  }
+  void subscribe(lcm::LCM& lcm) {
+    lcm.subscribeFunction("LASERLINE_PROFILE", &Received::on_profile, this);
+    lcm.subscribeFunction("LASERLINE_STATUS", &Received::on_status, this);
   }
 };
 
@@ -143,8 +151,7 @@ TEST_F(DaemonOverLcm, ProfilesMatchTheSimulatorGroundTruth) {
   lcm::LCM lcm(kUrl);
   ASSERT_TRUE(lcm.good());
   Received rx;
-  lcm.subscribe("LASERLINE_PROFILE", &Received::on_profile, &rx);
-  lcm.subscribe("LASERLINE_STATUS", &Received::on_status, &rx);
+  rx.subscribe(lcm);
 
   start_daemon(config_path);
   receive_for(lcm, 3.5);
@@ -231,8 +238,7 @@ TEST_F(DaemonOverLcm, AlternatingLaserSwitchesPerFrameAndSigintStops) {
   lcm::LCM lcm(kUrl);
   ASSERT_TRUE(lcm.good());
   Received rx;
-  lcm.subscribe("LASERLINE_PROFILE", &Received::on_profile, &rx);
-  lcm.subscribe("LASERLINE_STATUS", &Received::on_status, &rx);
+  rx.subscribe(lcm);
   start_daemon(config_path);
   receive_for(lcm, 2.0);
   int status = 0;

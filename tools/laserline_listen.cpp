@@ -62,7 +62,10 @@ struct Listener {
   double last_message_s = 0;
   std::int64_t decode_errors = 0;
 
-  void on_profile(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+  static void on_profile(const lcm::ReceiveBuffer* rbuf, const std::string&, Listener* self) {
+    self->handle_profile(rbuf);
+  }
+  void handle_profile(const lcm::ReceiveBuffer* rbuf) {
     laserline::profile_t p;
     if (p.decode(rbuf->data, 0, rbuf->data_size) < 0) {
       ++decode_errors;
@@ -86,7 +89,10 @@ struct Listener {
     if (recent.size() > 256) recent.pop_front();
   }
 
-  void on_image(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+  static void on_image(const lcm::ReceiveBuffer* rbuf, const std::string&, Listener* self) {
+    self->handle_image(rbuf);
+  }
+  void handle_image(const lcm::ReceiveBuffer* rbuf) {
     laserline::image_t image;
     if (image.decode(rbuf->data, 0, rbuf->data_size) < 0) {
       ++decode_errors;
@@ -97,7 +103,10 @@ struct Listener {
     last_image = std::move(image);
   }
 
-  void on_status(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+  static void on_status(const lcm::ReceiveBuffer* rbuf, const std::string&, Listener* self) {
+    self->handle_status(rbuf);
+  }
+  void handle_status(const lcm::ReceiveBuffer* rbuf) {
     laserline::status_t s;
     if (s.decode(rbuf->data, 0, rbuf->data_size) < 0) {
       ++decode_errors;
@@ -135,7 +144,8 @@ bool write_overlay(const Listener& l, const std::string& path) {
       const cv::Point centre(static_cast<int>(std::lround(pt.u * 16.0)),
                              static_cast<int>(std::lround(pt.v * 16.0)));
       const cv::Scalar colour = pt.valid ? cv::Scalar(0, 0, 255) : cv::Scalar(255, 128, 0);
-      cv::circle(overlay, centre, 1 << kShift, colour, cv::FILLED, cv::LINE_AA, kShift);
+      // Half a pixel: the point marks the centre and leaves the line's flanks visible.
+      cv::circle(overlay, centre, 1 << (kShift - 1), colour, cv::FILLED, cv::LINE_AA, kShift);
       ++drawn;
     }
   }
@@ -256,9 +266,10 @@ int main(int argc, char** argv) {
     return 1;
   }
   Listener listener;
-  lcm.subscribe(profile_channel, &Listener::on_profile, &listener);
-  lcm.subscribe(image_channel, &Listener::on_image, &listener);
-  lcm.subscribe(status_channel, &Listener::on_status, &listener);
+  // Plain-function handlers: GCC's UBSan misreports LCM's member-function-pointer dispatch.
+  lcm.subscribeFunction(profile_channel, &Listener::on_profile, &listener);
+  lcm.subscribeFunction(image_channel, &Listener::on_image, &listener);
+  lcm.subscribeFunction(status_channel, &Listener::on_status, &listener);
 
   const double start = now_s(CLOCK_MONOTONIC);
   while (g_stop == 0) {
