@@ -30,6 +30,12 @@ namespace {
 
 std::string g_namespace_problem;  // empty when the private namespace is up
 
+#ifdef LASERLINE_SANITIZED
+constexpr int kSlowdown = 5;  // sanitized code is this much slower: fewer frames get through
+#else
+constexpr int kSlowdown = 1;
+#endif
+
 constexpr const char* kUrl = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304";
 
 std::string test_config(const std::string& extra_laser = "mode: on") {
@@ -165,7 +171,7 @@ TEST_F(DaemonOverLcm, ProfilesMatchTheSimulatorGroundTruth) {
   EXPECT_EQ(WEXITSTATUS(status), 0) << daemon_log();
 
   // 50 Hz for ~3.5 s, minus start-up.
-  ASSERT_GE(rx.profiles.size(), 100u) << daemon_log();
+  ASSERT_GE(rx.profiles.size(), 100u / kSlowdown) << daemon_log();
 
   // Sequence numbers and timestamps.
   std::int64_t missing = 0;
@@ -179,7 +185,11 @@ TEST_F(DaemonOverLcm, ProfilesMatchTheSimulatorGroundTruth) {
         << "utime must follow the frame period, sequence " << b.sequence;
     EXPECT_GT(b.camera_timestamp_ns, a.camera_timestamp_ns);
   }
+#ifndef LASERLINE_SANITIZED
+  // Sanitized builds cannot render and process 50 frames a second; the simulated camera then
+  // skips frames as a real one would, which the sequence numbers show.
   EXPECT_LE(missing, 2) << "no frames should be lost on an idle machine";
+#endif
   for (std::size_t i = 0; i < rx.profiles.size(); ++i) {
     const auto& p = rx.profiles[i];
     EXPECT_LT(std::llabs(now_utime - p.utime), 5'000'000)
@@ -247,7 +257,7 @@ TEST_F(DaemonOverLcm, AlternatingLaserSwitchesPerFrameAndSigintStops) {
   EXPECT_LT(stop_s, 1.0);
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 0);
-  ASSERT_GE(rx.profiles.size(), 40u);
+  ASSERT_GE(rx.profiles.size(), 40u / kSlowdown);
   int on = 0, off = 0;
   for (std::size_t i = 1; i < rx.profiles.size(); ++i) {
     const auto& a = rx.profiles[i - 1];
@@ -265,8 +275,8 @@ TEST_F(DaemonOverLcm, AlternatingLaserSwitchesPerFrameAndSigintStops) {
       EXPECT_LT(p.num_points, 20) << "laser-off frame " << p.sequence << " has no line";
     }
   }
-  EXPECT_GT(on, 15);
-  EXPECT_GT(off, 15);
+  EXPECT_GT(on, 15 / kSlowdown);
+  EXPECT_GT(off, 15 / kSlowdown);
   ASSERT_FALSE(rx.statuses.empty());
   EXPECT_FALSE(rx.statuses.back().laser_on);
 }

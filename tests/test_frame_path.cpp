@@ -124,7 +124,12 @@ lcm: {url: "udpm://239.255.76.67:7667?ttl=0", image_every_n: 5, status_period_s:
   const long bytes = g_allocated_bytes.load();
   path.stop();
   const FramePathSummary s = path.summary();
-  EXPECT_GT(processed, 100) << "the frame path must have been busy while counting";
+#ifdef LASERLINE_SANITIZED
+  constexpr int kMinFrames = 20;  // sanitized code cannot keep 200 Hz
+#else
+  constexpr int kMinFrames = 100;
+#endif
+  EXPECT_GT(processed, kMinFrames) << "the frame path must have been busy while counting";
   EXPECT_GT(s.images_published, 10);
   EXPECT_EQ(s.publish_errors, 0);
   EXPECT_EQ(allocations, 0) << bytes << " bytes allocated over " << processed << " frames";
