@@ -61,6 +61,7 @@ void FramePath::start() {
   const auto window = static_cast<std::size_t>(
       std::ceil(config_.frame_rate_hz * config_.status_period_s * 4.0) + 64);
   latency_ = std::make_unique<LatencyStats>(window);
+  pipeline_ = std::make_unique<LatencyStats>(window);
 
   start_mono_ns_ = hal::monotonic_ns();
   counters_.last_frame_mono_ns.store(start_mono_ns_, std::memory_order_relaxed);
@@ -244,6 +245,10 @@ void FramePath::fill_status(std::int64_t now_mono, std::int64_t period_ns) {
   s.latency_p50_ms = static_cast<float>(window.p50_ms);
   s.latency_p99_ms = static_cast<float>(window.p99_ms);
   s.latency_max_ms = static_cast<float>(window.max_ms);
+  const LatencySummary pipeline = pipeline_->take_window();
+  s.pipeline_p50_ms = static_cast<float>(pipeline.p50_ms);
+  s.pipeline_p99_ms = static_cast<float>(pipeline.p99_ms);
+  s.pipeline_max_ms = static_cast<float>(pipeline.max_ms);
 }
 
 void FramePath::publisher_loop() {
@@ -264,7 +269,9 @@ void FramePath::publisher_loop() {
     }
     while (ProfileSlot* slot = profiles_->front()) {
       if (publisher_->publish_profile(*slot)) {
-        latency_->add(hal::monotonic_ns() - slot->info.exposure_mono_ns);
+        const std::int64_t published = hal::monotonic_ns();
+        latency_->add(published - slot->info.exposure_mono_ns);
+        pipeline_->add(published - slot->info.arrival_mono_ns);
         profiles_published_.fetch_add(1, std::memory_order_relaxed);
         points_in_period_ += static_cast<std::int64_t>(slot->profile.size());
         ++profiles_in_period_;
@@ -285,6 +292,7 @@ void FramePath::publisher_loop() {
     if (finished) break;
   }
   final_latency_ = latency_->total();
+  final_pipeline_ = pipeline_->total();
 }
 
 FramePathSummary FramePath::summary() const {
@@ -300,6 +308,7 @@ FramePathSummary FramePath::summary() const {
   s.publish_errors = publish_errors_.load();
   s.laser_safety_offs = counters_.laser_safety_offs.load();
   s.latency = final_latency_;  // complete once stop() returned
+  s.pipeline = final_pipeline_;
   return s;
 }
 

@@ -30,7 +30,8 @@ struct FramePathSummary {
   std::int64_t grab_errors = 0;
   std::int64_t publish_errors = 0;
   std::int64_t laser_safety_offs = 0;
-  LatencySummary latency;  // exposure -> profile published
+  LatencySummary latency;   // exposure -> profile published
+  LatencySummary pipeline;  // frame arrival -> profile published
 };
 
 // The whole frame path, wired: camera thread -> SPSC ring -> worker (detector) -> SPSC rings ->
@@ -77,7 +78,8 @@ class FramePath {
   std::unique_ptr<SpscRing<ProfileSlot>> profiles_;
   std::unique_ptr<SpscRing<ImageSlot>> images_;
   std::unique_ptr<LcmPublisher> publisher_;
-  std::unique_ptr<LatencyStats> latency_;
+  std::unique_ptr<LatencyStats> latency_;   // exposure -> published
+  std::unique_ptr<LatencyStats> pipeline_;  // arrival -> published
 
   FramePathCounters counters_;
   std::atomic<std::int64_t> profiles_published_{0};
@@ -93,6 +95,7 @@ class FramePath {
   std::int64_t points_in_period_ = 0;
   std::int64_t profiles_in_period_ = 0;
   LatencySummary final_latency_;
+  LatencySummary final_pipeline_;
 
   std::thread camera_thread_;
   std::thread worker_thread_;

@@ -169,13 +169,15 @@ int main(int argc, char** argv) {
   const auto s = path.summary();
   std::printf(
       "laserlined: stopped (%s) after %.1f s: %lld frames captured, %lld processed, %lld dropped, "
-      "%lld profiles published, %lld raw frames published, latency p50 %.2f ms p99 %.2f ms max "
-      "%.2f ms over %lld frames\n",
+      "%lld profiles published, %lld raw frames published; latency exposure->published p50 %.2f "
+      "ms p99 %.2f ms max %.2f ms, arrival->published p50 %.2f ms p99 %.2f ms max %.2f ms, over "
+      "%lld frames\n",
       reason, static_cast<double>(laserline::hal::monotonic_ns() - start) * 1e-9,
       static_cast<long long>(s.frames_captured), static_cast<long long>(s.frames_processed),
       static_cast<long long>(s.frames_dropped), static_cast<long long>(s.profiles_published),
       static_cast<long long>(s.images_published), s.latency.p50_ms, s.latency.p99_ms,
-      s.latency.max_ms, static_cast<long long>(s.latency.samples));
+      s.latency.max_ms, s.pipeline.p50_ms, s.pipeline.p99_ms, s.pipeline.max_ms,
+      static_cast<long long>(s.latency.samples));
   g_laser = nullptr;
   return 0;
 }

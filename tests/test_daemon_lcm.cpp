@@ -241,6 +241,9 @@ TEST_F(DaemonOverLcm, ProfilesMatchTheSimulatorGroundTruth) {
   EXPECT_GE(last.profiles_published, static_cast<std::int64_t>(rx.profiles.size()));
   EXPECT_GT(rx.statuses[1].latency_samples, 0);
   EXPECT_GT(rx.statuses[1].latency_p99_ms, 0.0f);
+  EXPECT_GT(rx.statuses[1].pipeline_p50_ms, 0.0f);
+  EXPECT_LE(rx.statuses[1].pipeline_p50_ms, rx.statuses[1].latency_p50_ms)
+      << "arrival comes after exposure";
 }
 
 TEST_F(DaemonOverLcm, AlternatingLaserSwitchesPerFrameAndSigintStops) {
