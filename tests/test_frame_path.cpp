@@ -78,6 +78,15 @@ namespace {
 
 std::string g_namespace_problem = "not tried";
 
+// Frames the path must at least get through in the measured windows below.
+#ifdef LASERLINE_SANITIZED
+constexpr int kMinFrames = 20;    // sanitized code runs several times slower...
+constexpr int kCountSeconds = 5;  // ...so it is watched for longer
+#else
+constexpr int kMinFrames = 100;
+constexpr int kCountSeconds = 2;
+#endif
+
 DaemonConfig make_config(const std::string& text) {
   return parse_config(hal::load_yaml_text(text, "test.yaml"), "test.yaml");
 }
@@ -117,20 +126,15 @@ lcm: {url: "udpm://239.255.76.67:7667?ttl=0", image_every_n: 5, status_period_s:
   std::this_thread::sleep_for(std::chrono::seconds(1));  // warm-up: first status, first image
   const auto processed_before = path.counters().frames_processed.load();
   g_counting = true;
-  std::this_thread::sleep_for(std::chrono::seconds(2));
+  std::this_thread::sleep_for(std::chrono::seconds(kCountSeconds));
   g_counting = false;
   const auto processed = path.counters().frames_processed.load() - processed_before;
   const long allocations = g_allocations.load();
   const long bytes = g_allocated_bytes.load();
   path.stop();
   const FramePathSummary s = path.summary();
-#ifdef LASERLINE_SANITIZED
-  constexpr int kMinFrames = 20;  // sanitized code cannot keep 200 Hz
-#else
-  constexpr int kMinFrames = 100;
-#endif
   EXPECT_GT(processed, kMinFrames) << "the frame path must have been busy while counting";
-  EXPECT_GT(s.images_published, 10);
+  EXPECT_GT(s.images_published, kMinFrames / 10) << "every 5th frame is published raw";
   EXPECT_EQ(s.publish_errors, 0);
   EXPECT_EQ(allocations, 0) << bytes << " bytes allocated over " << processed << " frames";
 }
@@ -176,7 +180,7 @@ lcm: {url: "memq://", image_every_n: 0}
   const FramePathSummary s = path.summary();
   EXPECT_GE(s.grab_timeouts, 1);
   EXPECT_GE(path.counters().laser_safety_offs.load() + s.grab_timeouts, 1);
-  EXPECT_GT(s.profiles_published, 50);
+  EXPECT_GT(s.profiles_published, kMinFrames / 5) << "frames flowed before and after the stall";
 }
 
 }  // namespace
