@@ -79,13 +79,12 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
       (provider != "udpm" && provider != "memq" && provider != "file" && provider != "tcpq")) {
     lcm.fail("url", "must be udpm://, memq://, file:// or tcpq://, got '" + c.lcm_url + "'");
   }
-  c.profile_channel = lcm.string("profile_channel", c.profile_channel);
-  c.image_channel = lcm.string("image_channel", c.image_channel);
-  c.status_channel = lcm.string("status_channel", c.status_channel);
-  for (const char* key : {"profile_channel", "image_channel", "status_channel"}) {
-    const std::string channel = lcm.string(key, "x");
-    // LCM channel names travel in the packet header, which caps them at 63 bytes.
-    if (channel.empty() || channel.size() > 63) lcm.fail(key, "must be 1 to 63 characters");
+  for (auto [key, channel] : {std::pair{"profile_channel", &c.profile_channel},
+                              std::pair{"image_channel", &c.image_channel},
+                              std::pair{"status_channel", &c.status_channel}}) {
+    *channel = lcm.string(key, *channel);
+    // LCM carries channel names in the packet header, which caps them at 63 bytes.
+    if (channel->empty() || channel->size() > 63) lcm.fail(key, "must be 1 to 63 characters");
   }
   c.image_every_n = static_cast<int>(lcm.integer("image_every_n", c.image_every_n, 0, 1000000));
   c.status_period_s = lcm.number("status_period_s", c.status_period_s, 0.05, 3600.0);

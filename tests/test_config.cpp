@@ -89,6 +89,20 @@ TEST(Config, ChoicesListTheAlternatives) {
             "test.yaml:2: laser.backend: unknown laser backend 'gpio' (available: sim)");
 }
 
+TEST(Config, LcmChannelsAndUrl) {
+  EXPECT_EQ(error_of("lcm:\n  status_channel: ''\n"),
+            "test.yaml:2: lcm.status_channel: must be 1 to 63 characters");
+  EXPECT_EQ(error_of("lcm:\n  image_channel: " + std::string(64, 'X') + "\n"),
+            "test.yaml:2: lcm.image_channel: must be 1 to 63 characters");
+  EXPECT_EQ(error_of("lcm:\n  url: 239.255.76.67\n"),
+            "test.yaml:2: lcm.url: must be udpm://, memq://, file:// or tcpq://, got "
+            "'239.255.76.67'");
+  DaemonConfig config = parse_config(
+      hal::load_yaml_text("lcm: {profile_channel: SCAN_A, url: 'memq://'}\n", "t"), "t");
+  EXPECT_EQ(config.profile_channel, "SCAN_A");
+  EXPECT_EQ(config.status_channel, "LASERLINE_STATUS");
+}
+
 TEST(Config, CalibrationErrors) {
   EXPECT_EQ(error_of("calibration:\n  camera: {fx: 0}\n"),
             "test.yaml:2: calibration.camera.fx: must be between 1 and 1e+06, got 0");
