@@ -4,7 +4,7 @@
 #include <gtest/gtest.h>
 #include <sched.h>
 #include <signal.h>
-#include <spawn.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 #include <laserline/profile_t.hpp>
@@ -23,8 +23,6 @@
 #include "hal/registry.hpp"
 #include "hal/sim/sim_scene.hpp"
 #include "private_network.hpp"
-
-extern char** environ;
 
 namespace {
 
@@ -108,13 +106,23 @@ class DaemonOverLcm : public ::testing::Test {
     for (auto& a : args)
       argv.push_back(a.data());
     argv.push_back(nullptr);
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
     const std::string log = (dir_ / "daemon.log").string();
-    posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_adddup2(&actions, 1, 2);
-    ASSERT_EQ(posix_spawn(&pid_, argv[0], &actions, nullptr, argv.data(), environ), 0);
-    posix_spawn_file_actions_destroy(&actions);
+    const pid_t parent = getpid();
+    pid_ = fork();
+    ASSERT_GE(pid_, 0);
+    if (pid_ == 0) {
+      // The daemon must not outlive this test, even when the test dies (a sanitizer abort
+      // skips TearDown): the kernel kills it when its parent goes.
+      prctl(PR_SET_PDEATHSIG, SIGKILL);
+      if (getppid() != parent) _exit(127);
+      const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      if (fd >= 0) {
+        dup2(fd, 1);
+        dup2(fd, 2);
+      }
+      execv(argv[0], argv.data());
+      _exit(127);
+    }
   }
 
   // Sends `sig` and returns the seconds until the daemon exited; *status gets its wait status.
