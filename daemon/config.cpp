@@ -65,6 +65,16 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
   maxvalue.finish();
   detector.finish();
 
+  hal::YamlMap realtime = root.map("realtime");
+  c.realtime = realtime.boolean("enabled", c.realtime);
+  for (double cpu : realtime.numbers("cpus", {1, 2, 3, 4, 5, 6, 7, 8})) {
+    if (cpu != static_cast<int>(cpu) || cpu < 0 || cpu > 1023) {
+      realtime.fail("cpus", "must list CPU numbers 0..1023");
+    }
+    c.cpus.push_back(static_cast<int>(cpu));
+  }
+  realtime.finish();
+
   hal::YamlMap pipe = root.map("pipeline");
   c.frame_slots = power_of_two(pipe, "frame_slots", c.frame_slots);
   c.profile_slots = power_of_two(pipe, "profile_slots", c.profile_slots);

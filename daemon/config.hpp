@@ -2,6 +2,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "hal/calibration.hpp"
 #include "hal/yaml_reader.hpp"
@@ -29,6 +30,9 @@ struct DaemonConfig {
 
   std::string detector = "maxvalue";
   pipeline::DetectorOptions detector_options;
+
+  bool realtime = false;  // SCHED_FIFO per daemon/thread_priorities.hpp, memory locked
+  std::vector<int> cpus;  // CPU affinity of the frame-path threads; empty = any
 
   int frame_slots = 8;
   int profile_slots = 16;

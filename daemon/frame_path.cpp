@@ -7,14 +7,42 @@
 #include <cmath>
 #include <cstring>
 
+#include "daemon/thread_priorities.hpp"
 #include "hal/clock.hpp"
 #include "pipeline/image_view.hpp"
 
 namespace laserline::daemon {
 
 namespace {
+
 constexpr std::int64_t kMs = 1'000'000;
+
+// Names the thread and, when asked, gives it its real-time priority and CPUs. Returns "" or why
+// the system refused.
+std::string configure_thread(std::thread& thread, const ThreadSpec& spec, bool realtime,
+                             const std::vector<int>& cpus) {
+  pthread_setname_np(thread.native_handle(), spec.name);
+  if (!realtime || spec.fifo_priority == 0) return "";
+  if (!cpus.empty()) {
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    for (int cpu : cpus)
+      CPU_SET(cpu, &set);
+    if (const int e = pthread_setaffinity_np(thread.native_handle(), sizeof(set), &set); e != 0) {
+      return std::string("realtime.cpus: cannot pin ") + spec.name + ": " + std::strerror(e);
+    }
+  }
+  sched_param param{};
+  param.sched_priority = spec.fifo_priority;
+  if (const int e = pthread_setschedparam(thread.native_handle(), SCHED_FIFO, &param); e != 0) {
+    return std::string("realtime.enabled: cannot give ") + spec.name + " SCHED_FIFO priority " +
+           std::to_string(spec.fifo_priority) + ": " + std::strerror(e) +
+           " (needs CAP_SYS_NICE or LimitRTPRIO)";
+  }
+  return "";
 }
+
+}  // namespace
 
 const char* to_string(CameraState state) {
   switch (state) {
@@ -40,7 +68,7 @@ FramePath::~FramePath() {
   stop();
 }
 
-void FramePath::start() {
+bool FramePath::start(std::string* error) {
   format_ = camera_.format();
   detector_.reset(format_.width, format_.height);
   const std::size_t max_points = detector_.max_points(format_.width, format_.height);
@@ -68,13 +96,21 @@ void FramePath::start() {
   stopping_.store(false);
   worker_done_.store(false);
   running_.store(true);
-  // Names show in top -H, ps -L and gdb.
+  // Consumers first, so that nothing is produced before someone can take it.
   publisher_thread_ = std::thread([this] { publisher_loop(); });
-  pthread_setname_np(publisher_thread_.native_handle(), "ll-publisher");
   worker_thread_ = std::thread([this] { worker_loop(); });
-  pthread_setname_np(worker_thread_.native_handle(), "ll-worker");
   camera_thread_ = std::thread([this] { camera_loop(); });
-  pthread_setname_np(camera_thread_.native_handle(), "ll-camera");
+  for (auto [thread, spec] :
+       {std::pair{&publisher_thread_, kPublisherThread}, std::pair{&worker_thread_, kWorkerThread},
+        std::pair{&camera_thread_, kCameraThread}}) {
+    const std::string problem = configure_thread(*thread, spec, config_.realtime, config_.cpus);
+    if (!problem.empty()) {
+      stop();
+      if (error != nullptr) *error = problem;
+      return false;
+    }
+  }
+  return true;
 }
 
 void FramePath::stop() {

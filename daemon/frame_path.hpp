@@ -53,7 +53,10 @@ class FramePath {
   FramePath(const FramePath&) = delete;
   FramePath& operator=(const FramePath&) = delete;
 
-  void start();
+  // Allocates everything and starts the threads. With config.realtime, also gives them their
+  // SCHED_FIFO priorities (thread_priorities.hpp); returns false with the reason in *error when
+  // that is refused (everything is stopped again).
+  bool start(std::string* error);
   void stop();
   void enforce_laser_safety();
   FramePathSummary summary() const;

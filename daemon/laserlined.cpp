@@ -1,6 +1,9 @@
 // laserlined: the laser line scanner daemon. Grabs frames, switches the laser, extracts the
 // laser line and publishes profiles, raw frames and status over LCM until SIGINT/SIGTERM.
+#include <pthread.h>
+#include <sched.h>
 #include <signal.h>
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -14,6 +17,7 @@
 #include "daemon/backends.hpp"
 #include "daemon/config.hpp"
 #include "daemon/frame_path.hpp"
+#include "daemon/thread_priorities.hpp"
 #include "hal/clock.hpp"
 
 namespace {
@@ -127,6 +131,30 @@ int main(int argc, char** argv) {
     return 2;
   }
 
+  if (config.realtime && mlockall(MCL_CURRENT | MCL_FUTURE) != 0) {
+    // Page faults on the frame path would defeat the priorities.
+    std::fprintf(stderr,
+                 "laserlined: %s: realtime.enabled: cannot lock memory: %s (needs "
+                 "LimitMEMLOCK=infinity or CAP_IPC_LOCK)\n",
+                 config.source.c_str(), std::strerror(errno));
+    return 1;
+  }
+  if (config.realtime) {
+    // Ask for the highest priority of the table once, here, so that a refusal stops us before
+    // any hardware is opened; the main thread then returns to normal scheduling.
+    sched_param rt{};
+    rt.sched_priority = laserline::daemon::kCameraThread.fifo_priority;
+    if (const int e = pthread_setschedparam(pthread_self(), SCHED_FIFO, &rt); e != 0) {
+      std::fprintf(stderr,
+                   "laserlined: %s: realtime.enabled: SCHED_FIFO priority %d refused: %s (needs "
+                   "CAP_SYS_NICE or LimitRTPRIO)\n",
+                   config.source.c_str(), rt.sched_priority, std::strerror(e));
+      return 1;
+    }
+    const sched_param normal{};
+    pthread_setschedparam(pthread_self(), SCHED_OTHER, &normal);
+  }
+
   g_laser = backends.laser.get();
   for (int sig : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT})
     signal(sig, fatal_signal_handler);
@@ -144,11 +172,14 @@ int main(int argc, char** argv) {
   }
   laserline::daemon::FramePath path(config, *backends.camera, *backends.laser, *backends.detector,
                                     lcm);
+  if (!path.start(&error)) {
+    std::fprintf(stderr, "laserlined: %s: %s\n", config.source.c_str(), error.c_str());
+    return 1;
+  }
   const auto format = backends.camera->format();
   std::printf("laserlined: running %s camera %dx%d at %.1f Hz, detector %s, laser %s, LCM %s\n",
               config.camera_backend.c_str(), format.width, format.height, config.frame_rate_hz,
               config.detector.c_str(), config.laser_backend.c_str(), config.lcm_url.c_str());
-  path.start();
 
   const std::int64_t start = laserline::hal::monotonic_ns();
   const auto duration_ns = static_cast<std::int64_t>(options.duration_s * 1e9);

@@ -103,6 +103,18 @@ TEST(Config, LcmChannelsAndUrl) {
   EXPECT_EQ(config.status_channel, "LASERLINE_STATUS");
 }
 
+TEST(Config, Realtime) {
+  EXPECT_EQ(error_of("realtime: {enabled: sure}\n"),
+            "test.yaml:1: realtime.enabled: must be true or false, got 'sure'");
+  EXPECT_EQ(error_of("realtime:\n  cpus: [1.5]\n"),
+            "test.yaml:2: realtime.cpus: must list CPU numbers 0..1023");
+  const DaemonConfig c =
+      parse_config(hal::load_yaml_text("realtime: {enabled: true, cpus: [0, 1]}\n", "t"), "t");
+  EXPECT_TRUE(c.realtime);
+  EXPECT_EQ(c.cpus, (std::vector<int>{0, 1}));
+  EXPECT_FALSE(builtin_config().realtime) << "off by default: it needs privileges";
+}
+
 TEST(Config, CalibrationErrors) {
   EXPECT_EQ(error_of("calibration:\n  camera: {fx: 0}\n"),
             "test.yaml:2: calibration.camera.fx: must be between 1 and 1e+06, got 0");

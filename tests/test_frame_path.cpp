@@ -122,7 +122,7 @@ lcm: {url: "udpm://239.255.76.67:7667?ttl=0", image_every_n: 5, status_period_s:
   ASSERT_GE(g_allocations.exchange(0), 2) << "allocation counting does not work";
   g_allocated_bytes = 0;
 
-  path.start();
+  ASSERT_TRUE(path.start(&error)) << error;
   std::this_thread::sleep_for(std::chrono::seconds(1));  // warm-up: first status, first image
   const auto processed_before = path.counters().frames_processed.load();
   g_counting = true;
@@ -154,7 +154,7 @@ lcm: {url: "memq://", image_every_n: 0}
   ASSERT_TRUE(backends.camera->open(&error));
   lcm::LCM lcm(config.lcm_url);
   FramePath path(config, *backends.camera, *backends.laser, *backends.detector, lcm);
-  path.start();
+  ASSERT_TRUE(path.start(&error)) << error;
 
   // Play the main thread's role: enforce safety every 10 ms and watch the laser.
   std::int64_t worst_on_without_frames_ns = 0;

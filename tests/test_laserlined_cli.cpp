@@ -15,9 +15,10 @@ struct CliResult {
   std::string out;  // stdout and stderr together
 };
 
-CliResult run(const std::string& args) {
+// Runs laserlined with `args`, behind `prefix` (a command that wraps it, or "").
+CliResult run_prefixed(const std::string& prefix, const std::string& args) {
   CliResult r;
-  const std::string command = std::string(LASERLINED_PATH) + " " + args + " 2>&1";
+  const std::string command = prefix + " " + std::string(LASERLINED_PATH) + " " + args + " 2>&1";
   FILE* pipe = popen(command.c_str(), "r");
   if (pipe == nullptr) return r;
   std::array<char, 4096> buffer{};
@@ -26,6 +27,10 @@ CliResult run(const std::string& args) {
   const int status = pclose(pipe);
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   return r;
+}
+
+CliResult run(const std::string& args) {
+  return run_prefixed("", args);
 }
 
 std::size_t lines(const std::string& text) {
@@ -122,6 +127,39 @@ TEST_F(LaserlinedCli, BadLcmUrlFailsBeforeAnythingStarts) {
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.out.find("lcm.url: cannot open 'udpm://999.1.1.1:7667'"), std::string::npos) << r.out;
   EXPECT_EQ(r.out.find("running"), std::string::npos) << r.out;
+}
+
+// Real-time scheduling is granted or refused by the system; refused must be one clear line and
+// a non-zero exit before the camera starts. setpriv (util-linux) takes every capability away, so
+// this runs the refusal even as root.
+TEST_F(LaserlinedCli, RealtimeRefusedIsOneClearLine) {
+  if (std::system("setpriv --help >/dev/null 2>&1") != 0) GTEST_SKIP() << "no setpriv";
+  const std::string config = file("rt.yaml", "realtime: {enabled: true}\nlcm: {url: 'memq://'}\n");
+  const std::string no_caps = "--duration 1 --config " + config;
+  // Memory locking refused: no CAP_IPC_LOCK and RLIMIT_MEMLOCK lowered to 64 KiB.
+  CliResult r = run_prefixed(
+      "prlimit --memlock=65536:65536 setpriv --inh-caps=-all --bounding-set=-all --", no_caps);
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_EQ(lines(r.out), 1u) << r.out;
+  EXPECT_NE(r.out.find("realtime.enabled: cannot lock memory"), std::string::npos) << r.out;
+  // Memory may be locked (root keeps CAP_IPC_LOCK) but SCHED_FIFO is refused: no CAP_SYS_NICE
+  // and RLIMIT_RTPRIO 0.
+  if (geteuid() != 0) GTEST_SKIP() << "the SCHED_FIFO refusal case needs root's CAP_IPC_LOCK";
+  r = run_prefixed("prlimit --rtprio=0 setpriv --bounding-set=-sys_nice --", no_caps);
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_EQ(lines(r.out), 1u) << r.out;
+  EXPECT_NE(r.out.find("realtime.enabled: SCHED_FIFO priority 60 refused"), std::string::npos)
+      << r.out;
+  EXPECT_EQ(r.out.find("running"), std::string::npos) << "must stop before the camera starts";
+}
+
+TEST_F(LaserlinedCli, RealtimeGrantedRuns) {
+  if (geteuid() != 0) GTEST_SKIP() << "only root is sure to be granted SCHED_FIFO here";
+  const CliResult r = run("--duration 0.5 --config " + file("rt.yaml",
+                                                            "realtime: {enabled: true, cpus: [0]}\n"
+                                                            "lcm: {url: 'memq://'}\n"));
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("running"), std::string::npos) << r.out;
 }
 
 }  // namespace

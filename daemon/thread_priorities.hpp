@@ -1,0 +1,19 @@
+#pragma once
+
+namespace laserline::daemon {
+
+// Every thread of laserlined and its real-time priority, in one table (PX4's habit), so that
+// the order is visible at a glance: the camera must never wait for the worker, the worker never
+// for the publisher. SCHED_FIFO 1..99; 0 = normal scheduling. Applied only when the
+// configuration says `realtime: {enabled: true}` (the service unit grants LimitRTPRIO).
+struct ThreadSpec {
+  const char* name;   // as shown by top -H / ps -L (at most 15 characters)
+  int fifo_priority;  // SCHED_FIFO priority, 0 = SCHED_OTHER
+};
+
+inline constexpr ThreadSpec kCameraThread{"ll-camera", 60};
+inline constexpr ThreadSpec kWorkerThread{"ll-worker", 50};
+// LCM's publish takes a lock and makes a syscall: this one stays a normal thread.
+inline constexpr ThreadSpec kPublisherThread{"ll-publisher", 0};
+
+}  // namespace laserline::daemon
