@@ -174,9 +174,14 @@ void report(const Listener& l, const std::string& url) {
                 sum / static_cast<double>(l.points_per_profile.size()),
                 *std::min_element(l.points_per_profile.begin(), l.points_per_profile.end()),
                 *std::max_element(l.points_per_profile.begin(), l.points_per_profile.end()));
-    std::printf("  latency exposure -> received here: p50 %.2f ms, p99 %.2f ms, max %.2f ms\n",
-                percentile(l.receive_latency_ms, 0.5), percentile(l.receive_latency_ms, 0.99),
-                *std::max_element(l.receive_latency_ms.begin(), l.receive_latency_ms.end()));
+    if (url.rfind("file://", 0) == 0) {
+      // Read from a log: receive times are the reading's, not the vehicle's.
+      std::printf("  latency exposure -> received here: not meaningful when reading a log\n");
+    } else {
+      std::printf("  latency exposure -> received here: p50 %.2f ms, p99 %.2f ms, max %.2f ms\n",
+                  percentile(l.receive_latency_ms, 0.5), percentile(l.receive_latency_ms, 0.99),
+                  *std::max_element(l.receive_latency_ms.begin(), l.receive_latency_ms.end()));
+    }
   }
   if (!l.statuses.empty()) {
     std::vector<double> p50, p99, pipe50, pipe99;
