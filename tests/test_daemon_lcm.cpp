@@ -229,7 +229,8 @@ TEST_F(DaemonOverLcm, ProfilesMatchTheSimulatorGroundTruth) {
       laserline::hal::read_sim_options(sim, config.calibration, config.frame_rate_hz));
   laserline::hal::SimGroundTruth truth;
   std::int64_t points = 0, far = 0, truth_columns = 0;
-  double worst = 0;
+  double worst = 0, sum_sq = 0;
+  std::int64_t matched = 0;
   for (const auto& p : rx.profiles) {
     scene.ground_truth(static_cast<std::uint64_t>(p.sequence), true, truth);
     for (float row : truth.row)
@@ -241,13 +242,21 @@ TEST_F(DaemonOverLcm, ProfilesMatchTheSimulatorGroundTruth) {
       ++points;
       const double err = std::isfinite(expected) ? std::abs(pt.v - expected) : 1e9;
       if (err > 0.5) ++far;
-      if (std::isfinite(expected)) worst = std::max(worst, err);
+      if (std::isfinite(expected)) {
+        worst = std::max(worst, err);
+        sum_sq += err * err;
+        ++matched;
+      }
     }
   }
   EXPECT_EQ(far, 0) << "of " << points << " points, worst error " << worst << " px";
   EXPECT_GE(static_cast<double>(points), 0.95 * static_cast<double>(truth_columns))
       << "the line should be found in nearly every column where it is visible";
   RecordProperty("worst_error_px", std::to_string(worst));
+  RecordProperty(
+      "rms_error_px",
+      std::to_string(std::sqrt(sum_sq / static_cast<double>(std::max<std::int64_t>(matched, 1)))));
+  RecordProperty("points", std::to_string(points));
 
   // Status at 1 Hz, and a final one saying the camera stopped with the laser off.
   ASSERT_GE(rx.statuses.size(), 3u);
