@@ -138,8 +138,8 @@ bool FramePath::desired_laser(std::uint64_t grab_index) const {
 }
 
 void FramePath::switch_laser(bool on, std::uint64_t for_frame) {
-  hal::LaserSwitch record;
-  if (laser_.set(on, for_frame, &record)) {
+  // The switch record (time, frame) has no consumer yet; the hardware backends will publish it.
+  if (laser_.set(on, for_frame, nullptr)) {
     counters_.laser_switches.fetch_add(1, std::memory_order_relaxed);
   } else {
     counters_.laser_errors.fetch_add(1, std::memory_order_relaxed);
@@ -267,6 +267,7 @@ void FramePath::fill_status(std::int64_t now_mono, std::int64_t period_ns) {
   s.grab_errors = counters_.grab_errors.load(std::memory_order_relaxed);
   s.publish_errors = publish_errors_.load(std::memory_order_relaxed);
   s.laser_safety_offs = counters_.laser_safety_offs.load(std::memory_order_relaxed);
+  s.laser_errors = counters_.laser_errors.load(std::memory_order_relaxed);
   const double seconds = static_cast<double>(std::max<std::int64_t>(period_ns, 1)) * 1e-9;
   s.frame_rate_hz =
       static_cast<float>(static_cast<double>(s.frames_processed - last_status_frames_) / seconds);

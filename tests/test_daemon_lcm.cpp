@@ -268,6 +268,8 @@ TEST_F(DaemonOverLcm, ProfilesMatchTheSimulatorGroundTruth) {
   EXPECT_EQ(last.camera_state, "stopped");
   EXPECT_FALSE(last.laser_on);
   EXPECT_EQ(last.frames_dropped, 0);
+  EXPECT_EQ(last.laser_errors, 0);
+  EXPECT_GE(last.laser_switches, 2) << "on at start, off at stop";
   EXPECT_GE(last.profiles_published, static_cast<std::int64_t>(rx.profiles.size()));
   EXPECT_GT(rx.statuses[1].latency_samples, 0);
   EXPECT_GT(rx.statuses[1].latency_p99_ms, 0.0f);
