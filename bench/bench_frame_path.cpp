@@ -107,7 +107,7 @@ void BM_maxvalue_detector(benchmark::State& state) {
   laserline::pipeline::Profile profile(detector.max_points(width, height));
   const laserline::pipeline::ImageView view{pixels.data(), width, height, width};
   for (auto _ : state) {
-    detector.detect(view, profile);
+    detector.detect(view, {}, profile);
     benchmark::DoNotOptimize(profile.points().data());
   }
   state.counters["points"] = static_cast<double>(profile.size());

@@ -33,6 +33,61 @@ hal::Calibration read_calibration_section(hal::YamlMap& root, const std::string&
 
 }  // namespace
 
+void read_detector_options(hal::YamlMap& detector, pipeline::DetectorOptions& options) {
+  hal::YamlMap maxvalue = detector.map("maxvalue");
+  options.maxvalue_threshold =
+      static_cast<int>(maxvalue.integer("threshold", options.maxvalue_threshold, 1, 255));
+  maxvalue.finish();
+
+  pipeline::FrontendOptions& f = options.frontend;
+  hal::YamlMap frontend = detector.map("frontend");
+  f.min_depth_m = frontend.number("min_depth_m", f.min_depth_m, 0.01, 1000.0);
+  f.max_depth_m = frontend.number("max_depth_m", f.max_depth_m, 0.01, 1000.0);
+  if (f.max_depth_m <= f.min_depth_m) frontend.fail("max_depth_m", "must be above min_depth_m");
+  f.normalised_width_px = frontend.number("normalised_width_px", f.normalised_width_px, 1.0, 32.0);
+  f.passband_ratio = frontend.number("passband_ratio", f.passband_ratio, 1.5, 16.0);
+  f.noise_rows = static_cast<int>(frontend.integer("noise_rows", f.noise_rows, 3, 1001));
+  f.noise_columns = static_cast<int>(frontend.integer("noise_columns", f.noise_columns, 1, 101));
+  f.snr_threshold_db = frontend.number("snr_threshold_db", f.snr_threshold_db, 0.0, 60.0);
+  f.max_candidates_per_column = static_cast<int>(
+      frontend.integer("max_candidates_per_column", f.max_candidates_per_column, 1, 64));
+  f.saturation_level =
+      static_cast<int>(frontend.integer("saturation_level", f.saturation_level, 1, 255));
+  frontend.finish();
+
+  pipeline::MotionOptions& m = options.motion;
+  hal::YamlMap motion = detector.map("motion");
+  m.grid_columns = static_cast<int>(motion.integer("grid_columns", m.grid_columns, 1, 64));
+  m.grid_rows = static_cast<int>(motion.integer("grid_rows", m.grid_rows, 1, 64));
+  m.detect_level = static_cast<int>(motion.integer("detect_level", m.detect_level, 0, 4));
+  m.pyramid_levels = static_cast<int>(motion.integer("pyramid_levels", m.pyramid_levels, 1, 6));
+  if (m.detect_level >= m.pyramid_levels) {
+    motion.fail("detect_level", "must be below pyramid_levels");
+  }
+  m.window_radius = static_cast<int>(motion.integer("window_radius", m.window_radius, 1, 15));
+  m.max_iterations = static_cast<int>(motion.integer("max_iterations", m.max_iterations, 1, 50));
+  m.ransac_iterations =
+      static_cast<int>(motion.integer("ransac_iterations", m.ransac_iterations, 1, 10000));
+  m.inlier_px = motion.number("inlier_px", m.inlier_px, 0.05, 50.0);
+  m.min_inliers = static_cast<int>(motion.integer("min_inliers", m.min_inliers, 4, 4096));
+  m.laser_filter_ratio = motion.number("laser_filter_ratio", m.laser_filter_ratio, 1.0, 1000.0);
+  motion.finish();
+}
+
+pipeline::ScannerGeometry scanner_geometry(const hal::Calibration& calibration) {
+  pipeline::ScannerGeometry g;
+  g.width = calibration.camera.width;
+  g.height = calibration.camera.height;
+  g.fx = calibration.camera.fx;
+  g.fy = calibration.camera.fy;
+  g.cx = calibration.camera.cx;
+  g.cy = calibration.camera.cy;
+  g.distortion = calibration.camera.distortion;
+  g.laser_plane = calibration.laser.plane_coefficients();
+  g.sheet_width_m = calibration.laser.sheet_width_m;
+  return g;
+}
+
 DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source) {
   DaemonConfig c;
   c.source = source;
@@ -59,11 +114,9 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
 
   hal::YamlMap detector = root.map("detector");
   c.detector = detector.choice("name", c.detector, pipeline::detector_names());
-  hal::YamlMap maxvalue = detector.map("maxvalue");
-  c.detector_options.maxvalue_threshold = static_cast<int>(
-      maxvalue.integer("threshold", c.detector_options.maxvalue_threshold, 1, 255));
-  maxvalue.finish();
+  read_detector_options(detector, c.detector_options);
   detector.finish();
+  c.detector_options.geometry = scanner_geometry(c.calibration);
 
   hal::YamlMap realtime = root.map("realtime");
   c.realtime = realtime.boolean("enabled", c.realtime);

@@ -46,6 +46,11 @@ struct DaemonConfig {
   double status_period_s = 1.0;
 };
 
+// Reads the options of every detector from the `detector:` section (all keys but `name`).
+void read_detector_options(hal::YamlMap& detector, pipeline::DetectorOptions& options);
+// The pipeline's view of a calibration.
+pipeline::ScannerGeometry scanner_geometry(const hal::Calibration& calibration);
+
 // The configuration compiled into the daemon (config/laserline.yaml).
 const char* builtin_config_text();
 

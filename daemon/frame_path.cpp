@@ -78,6 +78,8 @@ bool FramePath::start(std::string* error) {
   frames_ = std::make_unique<SpscRing<FrameSlot>>(config_.frame_slots, frame_prototype);
   ProfileSlot profile_prototype{{}, format_.width, format_.height, pipeline::Profile(max_points)};
   profiles_ = std::make_unique<SpscRing<ProfileSlot>>(config_.profile_slots, profile_prototype);
+  // Detectors that look at earlier frames must see every frame, even one whose profile has no slot.
+  unpublished_profile_ = pipeline::Profile(max_points);
   ImageSlot image_prototype{{}, format_, std::vector<std::uint8_t>(format_.bytes(), 0)};
   images_ = std::make_unique<SpscRing<ImageSlot>>(config_.image_slots, image_prototype);
   publisher_ = std::make_unique<LcmPublisher>(
@@ -232,8 +234,10 @@ void FramePath::worker_loop() {
         counters_.images_dropped.fetch_add(1, std::memory_order_relaxed);
       }
     }
-    if (ProfileSlot* out = profiles_->try_claim()) {
-      detector_.detect(view, out->profile);
+    const pipeline::FrameContext context{frame->info.sequence, frame->info.laser_on};
+    ProfileSlot* out = profiles_->try_claim();
+    detector_.detect(view, context, out ? out->profile : unpublished_profile_);
+    if (out) {
       out->info = frame->info;
       out->width = format_.width;
       out->height = format_.height;

@@ -79,6 +79,7 @@ class FramePath {
 
   std::unique_ptr<SpscRing<FrameSlot>> frames_;
   std::unique_ptr<SpscRing<ProfileSlot>> profiles_;
+  pipeline::Profile unpublished_profile_;  // detector output when the profile ring is full
   std::unique_ptr<SpscRing<ImageSlot>> images_;
   std::unique_ptr<LcmPublisher> publisher_;
   std::unique_ptr<LatencyStats> latency_;   // exposure -> published

@@ -1,23 +1,54 @@
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
 
+#include "pipeline/geometry.hpp"
 #include "pipeline/image_view.hpp"
+#include "pipeline/motion.hpp"
 #include "pipeline/profile.hpp"
 
 namespace laserline::pipeline {
+
+// The paper's Section III front-end (stages III-B to III-E), shared by `fir` and `background`.
+struct FrontendOptions {
+  // Depth range the laser is searched in: rows where the sheet would lie outside it are never
+  // looked at (the laser cannot physically appear there). Paper V-A: 0.5 - 2.5 m working area.
+  double min_depth_m = 0.5;
+  double max_depth_m = 2.5;
+  double normalised_width_px = 3.0;  // laser width after width normalisation (III-B)
+  // Band-pass (III-C): inner box = normalised width, outer box = passband_ratio times it. A wider
+  // passband tolerates backscatter and non-Lambertian surfaces at some loss of SNR.
+  double passband_ratio = 3.0;
+  // SNR (III-D): noise = mean |band-pass| over this window (normalised rows x columns).
+  int noise_rows = 31;
+  int noise_columns = 9;
+  double snr_threshold_db = 4.0;  // III-E: paper 3 - 6 dB
+  int max_candidates_per_column = 4;
+  int saturation_level = 255;  // a run at or above this is a clipped core: its centre is the peak
+};
 
 // Options of every detector, filled from the configuration. Each detector reads its own part.
 struct DetectorOptions {
   // maxvalue: a column's maximum is a laser point when it is at least this bright (grey level).
   int maxvalue_threshold = 40;
+  ScannerGeometry geometry;
+  FrontendOptions frontend;
+  MotionOptions motion;
+};
+
+// What the pipeline may know about a frame besides its pixels.
+struct FrameContext {
+  std::uint64_t sequence = 0;
+  bool laser_on = true;  // the laser state the frame was exposed with
 };
 
 // Finds laser points in one frame. Epipolar lines are image columns, so a detector looks for the
 // laser along each column. reset() sizes every buffer for a frame size (allocates); detect() then
-// does not allocate and its work is bounded by the image size.
+// does not allocate and its work is bounded by the image size. Detectors that use earlier frames
+// keep what they need themselves: the image passed to detect() is not valid after it returns.
 // Thread context: one thread at a time per instance.
 class Detector {
  public:
@@ -26,11 +57,12 @@ class Detector {
   // Most points one frame can produce (capacity the caller gives the output Profile).
   virtual std::size_t max_points(int width, int height) const = 0;
   virtual void reset(int width, int height) = 0;
-  virtual void detect(const ImageView& image, Profile& out) = 0;
+  virtual void detect(const ImageView& image, const FrameContext& frame, Profile& out) = 0;
 };
 
 std::vector<std::string> detector_names();
-// nullptr for an unknown name.
+// nullptr for an unknown name. Throws std::invalid_argument when the options cannot work (e.g. a
+// laser plane whose lines are not image rows), naming the option.
 std::unique_ptr<Detector> make_detector(const std::string& name, const DetectorOptions& options);
 
 }  // namespace laserline::pipeline

@@ -20,7 +20,7 @@ void MaxValueDetector::reset(int width, int height) {
   sum_.assign(width, 0);
 }
 
-void MaxValueDetector::detect(const ImageView& image, Profile& out) {
+void MaxValueDetector::detect(const ImageView& image, const FrameContext& /*frame*/, Profile& out) {
   out.clear();
   const int width = image.width;
   if (static_cast<int>(max_value_.size()) != width || image.height > 65535) return;

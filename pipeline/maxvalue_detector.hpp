@@ -21,7 +21,7 @@ class MaxValueDetector final : public Detector {
     return static_cast<std::size_t>(width);
   }
   void reset(int width, int height) override;
-  void detect(const ImageView& image, Profile& out) override;
+  void detect(const ImageView& image, const FrameContext& frame, Profile& out) override;
 
  private:
   int threshold_;

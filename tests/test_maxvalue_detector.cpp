@@ -53,7 +53,7 @@ TEST(MaxValueDetector, FindsASubPixelLineInEveryColumn) {
   MaxValueDetector detector(40);
   detector.reset(w, h);
   Profile profile(detector.max_points(w, h));
-  detector.detect(img.view(), profile);
+  detector.detect(img.view(), {}, profile);
   ASSERT_EQ(profile.size(), static_cast<std::size_t>(w));
   double sum_sq = 0;
   for (const auto& p : profile.points()) {
@@ -77,7 +77,7 @@ TEST(MaxValueDetector, IgnoresColumnsBelowThreshold) {
   MaxValueDetector detector(40);
   detector.reset(32, 32);
   Profile profile(32);
-  detector.detect(img.view(), profile);
+  detector.detect(img.view(), {}, profile);
   ASSERT_EQ(profile.size(), 1u);
   EXPECT_EQ(profile.points()[0].u, 7);
   EXPECT_FLOAT_EQ(profile.points()[0].v, 20.0f);
@@ -95,7 +95,7 @@ TEST(MaxValueDetector, SaturatedRunTakesItsCentre) {
   MaxValueDetector detector(40);
   detector.reset(4, 32);
   Profile profile(4);
-  detector.detect(img.view(), profile);
+  detector.detect(img.view(), {}, profile);
   ASSERT_EQ(profile.size(), 4u);
   for (const auto& p : profile.points())
     EXPECT_FLOAT_EQ(p.v, 12.0f);
@@ -110,7 +110,7 @@ TEST(MaxValueDetector, PeakOnTheBorderIsNotRefinedOutsideTheImage) {
   MaxValueDetector detector(40);
   detector.reset(2, 8);
   Profile profile(2);
-  detector.detect(img.view(), profile);
+  detector.detect(img.view(), {}, profile);
   ASSERT_EQ(profile.size(), 2u);
   EXPECT_FLOAT_EQ(profile.points()[0].v, 0.0f);
   EXPECT_FLOAT_EQ(profile.points()[1].v, 7.0f);
@@ -125,7 +125,7 @@ TEST(MaxValueDetector, FailsUnderAmbientLightBrighterThanTheLaser) {
   MaxValueDetector detector(40);
   detector.reset(16, 64);
   Profile profile(16);
-  detector.detect(img.view(), profile);
+  detector.detect(img.view(), {}, profile);
   ASSERT_EQ(profile.size(), 16u);
   for (const auto& p : profile.points())
     EXPECT_NEAR(p.v, 10.0f, 0.5f);
