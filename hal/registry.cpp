@@ -99,6 +99,8 @@ SimSceneOptions read_sim_options(YamlMap& sim, const Calibration& calibration,
   o.sway_m = sim.number("sway_m", o.sway_m, 0.0, 1.0);
   o.sway_deg = sim.number("sway_deg", o.sway_deg, 0.0, 20.0);
   o.sway_period_s = sim.number("sway_period_s", o.sway_period_s, 0.1, 3600.0);
+  o.scan_rate_deg_s = sim.number("scan_rate_deg_s", o.scan_rate_deg_s, 0.0, 1000.0);
+  o.scan_amplitude_deg = sim.number("scan_amplitude_deg", o.scan_amplitude_deg, 0.0, 45.0);
   return o;
 }
 

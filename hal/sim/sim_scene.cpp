@@ -290,6 +290,10 @@ void validate(const SimSceneOptions& o) {
           "ambient, laser_peak and backscatter must be <= 1e4, noise_sigma <= 1e3");
   require(finite_nonneg(o.sway_m) && finite_nonneg(o.sway_deg), "sway_m and sway_deg must be >= 0");
   require(std::isfinite(o.sway_period_s) && o.sway_period_s > 0, "sway_period_s must be > 0");
+  require(finite_nonneg(o.scan_rate_deg_s) && o.scan_rate_deg_s <= 1000,
+          "scan_rate_deg_s must be within [0, 1000]");
+  require(finite_nonneg(o.scan_amplitude_deg) && o.scan_amplitude_deg <= 45,
+          "scan_amplitude_deg must be within [0, 45]");
 }
 
 // Smooth value noise on a wrapping lattice of `spacing` texels, values in [-1, 1], added * amp.
@@ -489,7 +493,14 @@ SimScene::Pose SimScene::pose_at(std::uint64_t sequence) const {
   pose.t = {options_.sway_m * wave(phase, 0.0), options_.sway_m * 0.6 * wave(1.3 * phase, 1.0),
             options_.sway_m * 0.4 * wave(0.7 * phase, 2.0)};
   const double amp = options_.sway_deg * kDeg;
-  const double ax = amp * wave(0.9 * phase, 0.5);
+  double scan = 0.0;
+  if (options_.scan_rate_deg_s > 0 && options_.scan_amplitude_deg > 0) {
+    // Triangle wave: 0 -> +A -> -A -> 0 over a period of 4 A / rate.
+    const double a = options_.scan_amplitude_deg;
+    const double x = std::fmod(options_.scan_rate_deg_s * time + a, 4.0 * a);  // in [0, 4A)
+    scan = (x < 2.0 * a ? x - a : 3.0 * a - x) * kDeg;
+  }
+  const double ax = amp * wave(0.9 * phase, 0.5) + scan;
   const double ay = amp * 0.7 * wave(1.1 * phase, 2.3);
   const double az = amp * 0.5 * wave(0.8 * phase, 4.1);
   pose.r = mul(rot_z(az), mul(rot_y(ay), rot_x(ax)));

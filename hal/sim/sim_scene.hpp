@@ -37,6 +37,11 @@ struct SimSceneOptions {
   double sway_m = 0.02;
   double sway_deg = 0.5;
   double sway_period_s = 4.0;
+  // A pan-tilt unit scanning: the camera (with its laser) tilts about its x axis back and forth
+  // between -scan_amplitude_deg and +scan_amplitude_deg at scan_rate_deg_s, starting at 0 going
+  // up. The scene then moves across the laser line, as the paper's background subtraction needs.
+  double scan_rate_deg_s = 0.0;
+  double scan_amplitude_deg = 10.0;
 };
 
 // The exact answer for one frame.

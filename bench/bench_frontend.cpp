@@ -1,0 +1,191 @@
+// The paper's front-end (Section III) at 2048x1536 mono8, single thread, beside a straightforward
+// composition of stock OpenCV calls doing the same stages, in the same run:
+//   frontend_stages_*: our fused stages after homography estimation (warp + subtract + width
+//                      normalisation, band-pass, SNR, peaks with sub-pixel refinement) plus the
+//                      copy of the frame the background detector keeps for the next frame
+//   naive_opencv_stages: warpPerspective, subtract, remap, boxFilter x4, absdiff, divide, and a
+//                      per-column loop for the peaks
+//   frontend_background_detector: the whole `background` detector, homography estimation included
+//   frontend_fir_detector: the `fir` detector (no background subtraction)
+// Run: build/default/bench/laserline_bench --benchmark_filter='frontend|naive'
+#include <benchmark/benchmark.h>
+
+#include <cmath>
+#include <cstring>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <vector>
+
+#include "hal/sim/sim_scene.hpp"
+#include "pipeline/frontend.hpp"
+#include "pipeline/frontend_detectors.hpp"
+#include "pipeline/subpixel.hpp"
+
+namespace {
+
+using namespace laserline;
+
+constexpr int kWidth = 2048, kHeight = 1536;
+
+// The scanner of the benchmark: the product's default mount on a 2048x1536 camera.
+pipeline::DetectorOptions bench_options() {
+  pipeline::DetectorOptions o;
+  o.geometry.width = kWidth;
+  o.geometry.height = kHeight;
+  o.geometry.fx = o.geometry.fy = 2240.0;
+  o.geometry.cx = (kWidth - 1) / 2.0;
+  o.geometry.cy = (kHeight - 1) / 2.0;
+  return o;
+}
+
+// Two consecutive frames of a PTU scanning a textured wall in bright ambient light, and the
+// homography between them (pure tilt: exact, H = K R K^-1).
+struct Frames {
+  std::vector<std::uint8_t> previous, current;
+  pipeline::Homography current_to_previous;
+
+  Frames() {
+    const pipeline::DetectorOptions o = bench_options();
+    hal::SimSceneOptions scene;
+    scene.calibration.camera.width = kWidth;
+    scene.calibration.camera.height = kHeight;
+    scene.calibration.camera.fx = scene.calibration.camera.fy = o.geometry.fx;
+    scene.calibration.camera.cx = o.geometry.cx;
+    scene.calibration.camera.cy = o.geometry.cy;
+    scene.ambient = 150;
+    scene.texture_contrast = 0.6;
+    scene.laser_peak = 100;
+    scene.sway_m = 0;
+    scene.sway_deg = 0;
+    scene.scan_rate_deg_s = 10;
+    hal::SimScene sim(scene);
+    previous.resize(sim.format().bytes());
+    current.resize(sim.format().bytes());
+    sim.render(10, true, previous);
+    sim.render(11, true, current);
+    // Tilt of scan_rate / frame_rate about x between the frames.
+    const double a = 10.0 / 30.0 * M_PI / 180.0;
+    const cv::Matx33d k(o.geometry.fx, 0, o.geometry.cx, 0, o.geometry.fy, o.geometry.cy, 0, 0, 1);
+    const cv::Matx33d r(1, 0, 0, 0, std::cos(a), -std::sin(a), 0, std::sin(a), std::cos(a));
+    const cv::Matx33d h = k * r.t() * k.inv();
+    for (int i = 0; i < 9; ++i)
+      current_to_previous.h[i] = h.val[i];
+  }
+};
+
+const Frames& frames() {
+  static const Frames f;
+  return f;
+}
+
+pipeline::ImageView view(const std::vector<std::uint8_t>& pixels) {
+  return {pixels.data(), kWidth, kHeight, kWidth};
+}
+
+void BM_frontend_stages_after_homography(benchmark::State& state) {
+  const Frames& f = frames();
+  const pipeline::DetectorOptions o = bench_options();
+  pipeline::Frontend frontend(o.geometry, o.frontend);
+  frontend.reset(kWidth, kHeight);
+  pipeline::Profile profile(static_cast<std::size_t>(kWidth) *
+                            o.frontend.max_candidates_per_column);
+  std::vector<std::uint8_t> kept(f.current.size());
+  for (auto _ : state) {
+    frontend.normalise_subtracting(view(f.current), view(f.previous), f.current_to_previous);
+    frontend.band_pass();
+    frontend.find_candidates(profile);
+    std::memcpy(kept.data(), f.current.data(), kept.size());  // the next frame's background
+    benchmark::DoNotOptimize(profile.points().data());
+    benchmark::ClobberMemory();
+  }
+  state.counters["points"] = static_cast<double>(profile.size());
+  state.counters["normalised_rows"] = frontend.rows().rows();
+}
+BENCHMARK(BM_frontend_stages_after_homography)->Unit(benchmark::kMillisecond);
+
+// The same stages composed from stock OpenCV calls on float images, the way one would first
+// write them. Maps and buffers are made once, outside the timing.
+void BM_naive_opencv_stages(benchmark::State& state) {
+  cv::setNumThreads(1);
+  const Frames& f = frames();
+  const pipeline::DetectorOptions o = bench_options();
+  pipeline::Frontend reference(o.geometry, o.frontend);  // for the row mapping only
+  const pipeline::RowNormalisation& rows = reference.rows();
+  const int inner = 3, outer = 9;
+  const int guard = inner / 2 + outer / 2, hn = o.frontend.noise_rows / 2;
+  const int noise_columns = o.frontend.noise_columns;
+  const float threshold = std::pow(10.0f, static_cast<float>(o.frontend.snr_threshold_db) / 20.0f);
+
+  const cv::Mat previous(kHeight, kWidth, CV_8UC1, const_cast<std::uint8_t*>(f.previous.data()));
+  const cv::Mat current(kHeight, kWidth, CV_8UC1, const_cast<std::uint8_t*>(f.current.data()));
+  cv::Matx33d h;
+  for (int i = 0; i < 9; ++i)
+    h.val[i] = f.current_to_previous.h[i];
+  cv::Mat map_x(rows.rows(), kWidth, CV_32FC1), map_y(rows.rows(), kWidth, CV_32FC1);
+  for (int r = 0; r < rows.rows(); ++r) {
+    for (int u = 0; u < kWidth; ++u) {
+      map_x.at<float>(r, u) = static_cast<float>(u);
+      map_y.at<float>(r, u) = rows.source_row(r);
+    }
+  }
+  cv::Mat warped, cur_f, prev_f, diff, normalised, box_in, box_out, band, mag, box_n, box_g, noise,
+      snr;
+  pipeline::Profile profile(static_cast<std::size_t>(kWidth) *
+                            o.frontend.max_candidates_per_column);
+  for (auto _ : state) {
+    profile.clear();
+    cv::warpPerspective(previous, warped, cv::Mat(h), current.size(),
+                        cv::INTER_LINEAR | cv::WARP_INVERSE_MAP);
+    current.convertTo(cur_f, CV_32F);
+    warped.convertTo(prev_f, CV_32F);
+    cv::subtract(cur_f, prev_f, diff);
+    cv::max(diff, 0.0, diff);
+    cv::remap(diff, normalised, map_x, map_y, cv::INTER_LINEAR);
+    cv::boxFilter(normalised, box_in, CV_32F, cv::Size(1, inner));
+    cv::boxFilter(normalised, box_out, CV_32F, cv::Size(1, outer));
+    cv::subtract(box_in, box_out, band);
+    mag = cv::abs(band);
+    cv::boxFilter(mag, box_n, CV_32F, cv::Size(noise_columns, 2 * hn + 1), cv::Point(-1, -1),
+                  false);
+    cv::boxFilter(mag, box_g, CV_32F, cv::Size(noise_columns, 2 * guard + 1), cv::Point(-1, -1),
+                  false);
+    cv::subtract(box_n, box_g, noise);
+    noise *= 1.0 / (noise_columns * 2 * (hn - guard));
+    cv::max(noise, 1.0, noise);
+    cv::divide(band, noise, snr);
+    for (int u = 0; u < kWidth; ++u) {
+      for (int r = 2; r < rows.rows() - 2; ++r) {
+        const float s = snr.at<float>(r, u);
+        if (s < threshold || !(s > snr.at<float>(r - 1, u) && s >= snr.at<float>(r + 1, u) &&
+                               s > snr.at<float>(r - 2, u) && s >= snr.at<float>(r + 2, u))) {
+          continue;
+        }
+        const float offset = pipeline::gaussian_offset(
+            band.at<float>(r - 1, u), band.at<float>(r, u), band.at<float>(r + 1, u));
+        pipeline::ProfilePoint p;
+        p.u = u;
+        p.v = static_cast<float>(rows.to_source(r + offset));
+        p.snr_db = 20.0f * std::log10(s);
+        profile.add(p);
+      }
+    }
+    benchmark::DoNotOptimize(profile.points().data());
+  }
+  state.counters["points"] = static_cast<double>(profile.size());
+}
+BENCHMARK(BM_naive_opencv_stages)->Unit(benchmark::kMillisecond);
+
+void BM_frontend_fir_detector(benchmark::State& state) {
+  const Frames& f = frames();
+  pipeline::FirDetector detector(bench_options());
+  detector.reset(kWidth, kHeight);
+  pipeline::Profile profile(detector.max_points(kWidth, kHeight));
+  for (auto _ : state) {
+    detector.detect(view(f.current), {}, profile);
+    benchmark::DoNotOptimize(profile.points().data());
+  }
+  state.counters["points"] = static_cast<double>(profile.size());
+}
+BENCHMARK(BM_frontend_fir_detector)->Unit(benchmark::kMillisecond);
+
+}  // namespace

@@ -1,0 +1,22 @@
+#include "pipeline/frontend_detectors.hpp"
+
+namespace laserline::pipeline {
+
+FirDetector::FirDetector(const DetectorOptions& options)
+    : frontend_(options.geometry, options.frontend) {}
+
+std::size_t FirDetector::max_points(int width, int /*height*/) const {
+  return static_cast<std::size_t>(width) * frontend_.options().max_candidates_per_column;
+}
+
+void FirDetector::reset(int width, int height) {
+  frontend_.reset(width, height);
+}
+
+void FirDetector::detect(const ImageView& image, const FrameContext& /*frame*/, Profile& out) {
+  frontend_.normalise(image);
+  frontend_.band_pass();
+  frontend_.find_candidates(out);
+}
+
+}  // namespace laserline::pipeline

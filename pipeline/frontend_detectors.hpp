@@ -1,0 +1,55 @@
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "pipeline/detector.hpp"
+#include "pipeline/frontend.hpp"
+#include "pipeline/motion.hpp"
+
+namespace laserline::pipeline {
+
+// The paper's "FIR" detector: width normalisation, band-pass, SNR, thresholding and peaks on the
+// frame itself (no background subtraction). Robust to backscatter; texture lit by ambient light
+// gives false candidates.
+class FirDetector final : public Detector {
+ public:
+  explicit FirDetector(const DetectorOptions& options);
+  const char* name() const override { return "fir"; }
+  std::size_t max_points(int width, int height) const override;
+  void reset(int width, int height) override;
+  void detect(const ImageView& image, const FrameContext& frame, Profile& out) override;
+
+  const Frontend& frontend() const { return frontend_; }
+
+ private:
+  Frontend frontend_;
+};
+
+// The paper's "Background" detector: the previous frame, warped onto this one by the homography
+// estimated from tracked features (III-A), is subtracted before the FIR stages. With the laser
+// alternating, the previous frame is the laser-off one: the classic on/off subtraction, motion
+// compensated. Laser-off frames and frames without a motion estimate (the first one) give no
+// points. Keeps a copy of the previous frame.
+class BackgroundDetector final : public Detector {
+ public:
+  explicit BackgroundDetector(const DetectorOptions& options);
+  const char* name() const override { return "background"; }
+  std::size_t max_points(int width, int height) const override;
+  void reset(int width, int height) override;
+  void detect(const ImageView& image, const FrameContext& frame, Profile& out) override;
+
+  const Frontend& frontend() const { return frontend_; }
+  const MotionEstimator& motion() const { return motion_; }
+  const MotionEstimate& last_motion() const { return last_motion_; }
+
+ private:
+  Frontend frontend_;
+  MotionEstimator motion_;
+  MotionEstimate last_motion_;
+  std::vector<std::uint8_t> background_;  // the previous frame, packed
+  bool have_background_ = false;
+  int width_ = 0, height_ = 0;
+};
+
+}  // namespace laserline::pipeline

@@ -1,0 +1,153 @@
+#include "tools/evaluation.hpp"
+
+#include <cmath>
+#include <limits>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+
+#include "daemon/config.hpp"
+
+namespace laserline::tools {
+
+std::vector<Scenario> standard_scenarios(int width, int height) {
+  hal::SimSceneOptions base;
+  hal::CameraIntrinsics& cam = base.calibration.camera;
+  const double scale = width / 1280.0;
+  cam.width = width;
+  cam.height = height;
+  cam.fx = cam.fy = 1400.0 * scale;
+  cam.cx = (width - 1) / 2.0;
+  cam.cy = (height - 1) / 2.0;
+  base.frame_rate_hz = 30.0;
+  base.distance_m = 1.2;
+  base.tilt_y_deg = 8.0;
+  base.sway_m = 0.01;
+  base.sway_deg = 0.3;
+  // A pan-tilt unit sweeping the scene: about 8 px of scene motion per frame across the line.
+  base.scan_rate_deg_s = 10.0;
+  base.scan_amplitude_deg = 10.0;
+
+  std::vector<Scenario> out;
+  {
+    Scenario s{"clean", "moderate ambient light, clear water", base};
+    s.scene.ambient = 40;
+    s.scene.texture_contrast = 0.5;
+    s.scene.laser_peak = 180;
+    s.scene.noise_sigma = 1.5;
+    out.push_back(s);
+  }
+  {
+    Scenario s{"ambient", "texture as bright as the laser peak (daylight on a textured pier)",
+               base};
+    s.scene.ambient = 150;
+    s.scene.texture_contrast = 0.6;
+    s.scene.laser_peak = 100;
+    s.scene.noise_sigma = 2.0;
+    s.scene.seed = 7;
+    out.push_back(s);
+  }
+  {
+    Scenario s = out.back();
+    s.name = "ambient-alternate";
+    s.description = "as ambient, laser on/off every frame (motion-compensated on/off subtraction)";
+    s.alternate = true;
+    out.push_back(s);
+  }
+  {
+    Scenario s{"backscatter", "turbid water: glow of the sheet in the water, weak line", base};
+    s.scene.ambient = 15;
+    s.scene.texture_contrast = 0.3;
+    s.scene.laser_peak = 30;
+    s.scene.backscatter = 40;
+    s.scene.attenuation_per_m = 0.3;
+    s.scene.noise_sigma = 2.5;
+    s.scene.seed = 3;
+    out.push_back(s);
+  }
+  {
+    Scenario s{"clipped", "laser far brighter than the sensor range: saturated core", base};
+    s.scene.ambient = 40;
+    s.scene.texture_contrast = 0.5;
+    s.scene.laser_peak = 700;
+    s.scene.noise_sigma = 1.5;
+    s.scene.seed = 5;
+    out.push_back(s);
+  }
+  return out;
+}
+
+Score evaluate(const Scenario& scenario, const std::string& detector_name,
+               pipeline::DetectorOptions options, double tolerance_px,
+               const std::function<void(const ScoredFrame&)>& on_frame) {
+  hal::SimScene scene(scenario.scene);
+  const hal::FrameFormat format = scene.format();
+  options.geometry = daemon::scanner_geometry(scenario.scene.calibration);
+  auto detector = pipeline::make_detector(detector_name, options);
+  if (!detector) throw std::invalid_argument("unknown detector " + detector_name);
+  detector->reset(format.width, format.height);
+  pipeline::Profile profile(detector->max_points(format.width, format.height));
+  std::vector<std::uint8_t> pixels(format.bytes());
+  hal::SimGroundTruth truth;
+
+  Score score;
+  for (int i = 0; i < scenario.frames; ++i) {
+    const auto sequence = static_cast<std::uint64_t>(scenario.first_frame + i);
+    const bool laser_on = !scenario.alternate || sequence % 2 == 0;
+    scene.render(sequence, laser_on, pixels);
+    const pipeline::ImageView view{pixels.data(), format.width, format.height, format.stride};
+    detector->detect(view, {sequence, laser_on}, profile);
+    if (i == 0) continue;  // warm-up
+    scene.ground_truth(sequence, laser_on, truth);
+    ++score.frames;
+
+    const int width = format.width;
+    std::vector<double> best(static_cast<std::size_t>(width),
+                             std::numeric_limits<double>::infinity());
+    for (const pipeline::ProfilePoint& p : profile.points()) {
+      if (!p.valid) continue;
+      ++score.points;
+      const float row = truth.row[static_cast<std::size_t>(p.u)];
+      if (std::isnan(row)) continue;
+      const double error = p.v - row;
+      if (std::abs(error) <= tolerance_px) ++score.correct_points;
+      double& b = best[static_cast<std::size_t>(p.u)];
+      if (std::abs(error) < std::abs(b)) b = error;
+    }
+    for (int u = 0; u < width; ++u) {
+      if (std::isnan(truth.row[static_cast<std::size_t>(u)])) continue;
+      ++score.truth_columns;
+      const double error = best[static_cast<std::size_t>(u)];
+      if (!(std::abs(error) <= tolerance_px)) continue;
+      ++score.found_columns;
+      score.sum_error += error;
+      score.sum_squared_error += error * error;
+      score.max_error = std::max(score.max_error, std::abs(error));
+    }
+    if (on_frame) on_frame({i, &pixels, format.width, format.height, &truth, &profile});
+  }
+  return score;
+}
+
+bool write_overlay(const std::string& path, const ScoredFrame& frame, double tolerance_px) {
+  const cv::Mat grey(frame.height, frame.width, CV_8UC1,
+                     const_cast<std::uint8_t*>(frame.pixels->data()));
+  cv::Mat colour;
+  cv::cvtColor(grey, colour, cv::COLOR_GRAY2BGR);
+  for (int u = 0; u < frame.width; ++u) {
+    const float row = frame.truth->row[static_cast<std::size_t>(u)];
+    if (std::isnan(row)) continue;
+    const int v = static_cast<int>(std::lround(row)) - 6;
+    if (v >= 0 && v < frame.height) colour.at<cv::Vec3b>(v, u) = {255, 128, 0};  // truth, above
+  }
+  for (const pipeline::ProfilePoint& p : frame.profile->points()) {
+    const float row = frame.truth->row[static_cast<std::size_t>(p.u)];
+    const bool correct = !std::isnan(row) && std::abs(p.v - row) <= tolerance_px;
+    const int v = static_cast<int>(std::lround(p.v));
+    if (v < 0 || v >= frame.height) continue;
+    colour.at<cv::Vec3b>(v, p.u) = correct ? cv::Vec3b{0, 255, 0} : cv::Vec3b{0, 0, 255};
+  }
+  return cv::imwrite(path, colour);
+}
+
+}  // namespace laserline::tools

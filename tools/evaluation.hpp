@@ -1,0 +1,62 @@
+#pragma once
+
+#include <cmath>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "hal/sim/sim_scene.hpp"
+#include "pipeline/detector.hpp"
+
+namespace laserline::tools {
+
+// A simulated sequence with an exact answer: what every detector is scored on.
+struct Scenario {
+  std::string name;
+  std::string description;
+  hal::SimSceneOptions scene;
+  bool alternate = false;  // laser on for even frames, off for odd (the classic on/off method)
+  int first_frame = 0;
+  int frames = 16;  // the first is warm-up for detectors that need a previous frame; not scored
+};
+
+// clean, ambient (texture as bright as the laser, PTU scanning), backscatter (turbid water,
+// 3 dB line), clipped (saturated core), ambient-alternate (on/off subtraction).
+std::vector<Scenario> standard_scenarios(int width = 1280, int height = 1024);
+
+struct Score {
+  int frames = 0;           // scored frames
+  long truth_columns = 0;   // columns where the laser is visible
+  long found_columns = 0;   // of those, with a point within the tolerance
+  long points = 0;          // valid points the detector returned
+  long correct_points = 0;  // of those, within the tolerance of the truth
+  double sum_error = 0;     // over the closest correct point of each found column
+  double sum_squared_error = 0;
+  double max_error = 0;
+
+  double recall() const { return truth_columns ? double(found_columns) / truth_columns : 0.0; }
+  double precision() const { return points ? double(correct_points) / points : 1.0; }
+  double rms() const { return found_columns ? std::sqrt(sum_squared_error / found_columns) : 0.0; }
+  double bias() const { return found_columns ? sum_error / found_columns : 0.0; }
+};
+
+// One scored frame, for overlays: the frame, its truth and the detector's points.
+struct ScoredFrame {
+  int index = 0;
+  const std::vector<std::uint8_t>* pixels = nullptr;
+  int width = 0, height = 0;
+  const hal::SimGroundTruth* truth = nullptr;
+  const pipeline::Profile* profile = nullptr;
+};
+
+// Runs `detector` over the scenario and scores it: a point is correct within `tolerance_px` of the
+// true row in its column. `options` supplies everything but the geometry (taken from the scene).
+Score evaluate(const Scenario& scenario, const std::string& detector,
+               pipeline::DetectorOptions options, double tolerance_px,
+               const std::function<void(const ScoredFrame&)>& on_frame = {});
+
+// Draws the truth (blue) and the points (green within tolerance, red otherwise) on a frame and
+// writes a PNG. Returns false when it could not be written.
+bool write_overlay(const std::string& path, const ScoredFrame& frame, double tolerance_px);
+
+}  // namespace laserline::tools
