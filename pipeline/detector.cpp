@@ -6,13 +6,13 @@
 namespace laserline::pipeline {
 
 std::vector<std::string> detector_names() {
-  return {"maxvalue", "fir" /*MOTION, "background"*/};
+  return {"maxvalue", "fir", "background"};
 }
 
 std::unique_ptr<Detector> make_detector(const std::string& name, const DetectorOptions& options) {
   if (name == "maxvalue") return std::make_unique<MaxValueDetector>(options.maxvalue_threshold);
   if (name == "fir") return std::make_unique<FirDetector>(options);
-  // MOTION if (name == "background") return std::make_unique<BackgroundDetector>(options);
+  if (name == "background") return std::make_unique<BackgroundDetector>(options);
   return nullptr;
 }
 

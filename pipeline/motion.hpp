@@ -78,6 +78,13 @@ class MotionEstimator {
 
  private:
   struct State;
+  // Finds the features of the frame in pyramid `index` (and the ones the laser filter rejects).
+  void detect_features(int index);
+  // Tracks the previous frame's features into pyramid `current` and fits the homography.
+  MotionEstimate estimate_from_previous(int current);
+  // RANSAC and least-squares refit over the first n tracked pairs; false when nothing fits.
+  bool fit_homography(int n, Homography& result, int& inlier_count);
+
   MotionOptions options_;
   State* state_ = nullptr;
 };

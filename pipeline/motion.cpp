@@ -1,0 +1,764 @@
+#include "pipeline/motion.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+
+namespace laserline::pipeline {
+
+namespace {
+
+constexpr int kMaxLevels = 8;
+constexpr int kMaxWindowRadius = 15;
+// Sampled patch around a tracked point: the window plus one pixel each side for the gradient.
+constexpr int kMaxPatch = 2 * kMaxWindowRadius + 3;
+// Shi-Tomasi floor: the weaker eigenvalue of the 3x3 structure tensor (half central differences,
+// grey levels) must exceed this, i.e. about one grey level per pixel of gradient in the weaker
+// direction. Sensor noise at the detect level (averaged over 2^level squared pixels) stays well
+// below.
+constexpr float kMinEigenvalue = 9.0f;
+// Laser filter Haar wavelets at the detect level: boxes of kHaarSize x kHaarSize/2 (difference of
+// the two halves), laid on a grid of step kHaarSize/2 across the neighbourhood. Boxes integrate
+// along the line, where the laser is coherent and the texture is not.
+constexpr int kHaarSize = 4;
+// A track has converged when its last update at full size moved it less than this (pixels).
+constexpr float kConvergedStep = 0.05f;
+constexpr float kStopStep = 0.01f;
+constexpr double kRansacConfidence = 0.999;
+constexpr std::uint64_t kRansacSeed = 0x9e3779b97f4a7c15ull;
+
+struct Level {
+  int width = 0;
+  int height = 0;
+  std::vector<std::uint8_t> pixels;  // stride = width
+  const std::uint8_t* row(int v) const {
+    return pixels.data() + static_cast<std::ptrdiff_t>(v) * width;
+  }
+};
+
+struct Pyramid {
+  std::array<Level, kMaxLevels> levels;
+};
+
+using Point = std::array<float, 2>;
+
+// splitmix64: small, fast and the same everywhere, so RANSAC repeats bit for bit.
+struct Random {
+  std::uint64_t state;
+  std::uint64_t next() {
+    std::uint64_t z = (state += 0x9e3779b97f4a7c15ull);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return z ^ (z >> 31);
+  }
+  int below(int n) { return static_cast<int>(next() % static_cast<std::uint64_t>(n)); }
+};
+
+using Matrix3 = Eigen::Matrix3d;
+
+// Similarity that moves the points' centroid to the origin and their mean distance to sqrt(2)
+// (Hartley's normalisation, which keeps the DLT well conditioned).
+Matrix3 normalising_transform(const double* x, const double* y, const int* index, int count) {
+  double cx = 0, cy = 0;
+  for (int i = 0; i < count; ++i) {
+    cx += x[index[i]];
+    cy += y[index[i]];
+  }
+  cx /= count;
+  cy /= count;
+  double mean_distance = 0;
+  for (int i = 0; i < count; ++i)
+    mean_distance += std::hypot(x[index[i]] - cx, y[index[i]] - cy);
+  mean_distance /= count;
+  const double s = mean_distance > 1e-12 ? std::sqrt(2.0) / mean_distance : 1.0;
+  Matrix3 t;
+  t << s, 0, -s * cx, 0, s, -s * cy, 0, 0, 1;
+  return t;
+}
+
+Matrix3 to_matrix(const Homography& h) {
+  Matrix3 m;
+  m << h.h[0], h.h[1], h.h[2], h.h[3], h.h[4], h.h[5], h.h[6], h.h[7], h.h[8];
+  return m;
+}
+
+Homography to_homography(const Matrix3& m_in) {
+  Matrix3 m = m_in;
+  if (std::abs(m(2, 2)) > 1e-12) {
+    m /= m(2, 2);
+  } else {
+    m /= m.norm();
+  }
+  Homography h;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c)
+      h.h[r * 3 + c] = m(r, c);
+  return h;
+}
+
+// Twice the signed area of the triangle a, b, c.
+double twice_area(double ax, double ay, double bx, double by, double cx, double cy) {
+  return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
+}
+
+}  // namespace
+
+Homography Homography::inverse() const {
+  const Matrix3 m = to_matrix(*this);
+  const double det = m.determinant();
+  if (!(std::abs(det) > 0)) return Homography{{0, 0, 0, 0, 0, 0, 0, 0, 0}};
+  // The adjugate is the inverse up to scale, and a homography is defined up to scale only.
+  Matrix3 adjugate;
+  adjugate(0, 0) = m(1, 1) * m(2, 2) - m(1, 2) * m(2, 1);
+  adjugate(0, 1) = m(0, 2) * m(2, 1) - m(0, 1) * m(2, 2);
+  adjugate(0, 2) = m(0, 1) * m(1, 2) - m(0, 2) * m(1, 1);
+  adjugate(1, 0) = m(1, 2) * m(2, 0) - m(1, 0) * m(2, 2);
+  adjugate(1, 1) = m(0, 0) * m(2, 2) - m(0, 2) * m(2, 0);
+  adjugate(1, 2) = m(0, 2) * m(1, 0) - m(0, 0) * m(1, 2);
+  adjugate(2, 0) = m(1, 0) * m(2, 1) - m(1, 1) * m(2, 0);
+  adjugate(2, 1) = m(0, 1) * m(2, 0) - m(0, 0) * m(2, 1);
+  adjugate(2, 2) = m(0, 0) * m(1, 1) - m(0, 1) * m(1, 0);
+  return to_homography(adjugate / det);
+}
+
+struct MotionEstimator::State {
+  int width = 0;
+  int height = 0;
+  bool has_previous = false;
+  std::array<Pyramid, 2> pyramids;
+  int previous = 0;  // index of the previous frame's pyramid and features
+
+  // Features found in each pyramid's frame, full-size coordinates, and the ones the laser filter
+  // kept out.
+  std::array<std::vector<Point>, 2> features;
+  std::array<int, 2> feature_count{};
+  std::array<std::vector<Point>, 2> rejected;
+  std::array<int, 2> rejected_count{};
+  int reported_rejected = -1;  // index of the rejected list the last update() reports, -1: none
+
+  std::vector<FeatureTrack> tracks;
+  int track_count = 0;
+
+  // Feature detection at the detect level: margin, cell of every column and row of the valid area.
+  int margin = 0;
+  std::vector<int> cell_of_column;
+  std::vector<int> cell_of_row;
+  std::array<std::vector<float>, 3> gxx, gxy, gyy;  // rolling rows of gradient products
+  std::vector<float> score_row;
+  std::vector<float> cell_score;
+  std::vector<int> cell_u, cell_v;
+
+  // RANSAC, per tracked pair: full-size coordinates as double, indices of the converged tracks.
+  std::vector<double> px, py, cx, cy;
+  std::vector<int> all_index;  // 0..n-1
+  std::vector<int> inlier_index;
+  std::vector<std::uint8_t> is_inlier;
+  std::vector<std::uint8_t> best_inlier;
+};
+
+MotionEstimator::MotionEstimator(const MotionOptions& options) : options_(options) {
+  const auto require = [](bool ok, const char* what) {
+    if (!ok) throw std::invalid_argument(std::string("MotionOptions: ") + what);
+  };
+  require(options.grid_columns >= 1 && options.grid_rows >= 1,
+          "grid_columns and grid_rows must be >= 1");
+  require(options.pyramid_levels >= 1 && options.pyramid_levels <= kMaxLevels,
+          "pyramid_levels must be within [1, 8]");
+  require(options.detect_level >= 0 && options.detect_level < options.pyramid_levels,
+          "detect_level must be within [0, pyramid_levels)");
+  require(options.window_radius >= 1 && options.window_radius <= kMaxWindowRadius,
+          "window_radius must be within [1, 15]");
+  require(options.max_iterations >= 1, "max_iterations must be >= 1");
+  require(options.ransac_iterations >= 1, "ransac_iterations must be >= 1");
+  require(std::isfinite(options.inlier_px) && options.inlier_px > 0, "inlier_px must be > 0");
+  require(options.min_inliers >= 4, "min_inliers must be >= 4");
+  require(!(options.laser_filter_ratio < 1.0), "laser_filter_ratio must be >= 1");
+  state_ = new State;
+}
+
+MotionEstimator::~MotionEstimator() {
+  delete state_;
+}
+
+void MotionEstimator::reset(int width, int height) {
+  const MotionOptions& o = options_;
+  const std::string size = std::to_string(width) + "x" + std::to_string(height);
+  if (width <= 0 || height <= 0 || width > 65535 || height > 65535) {
+    throw std::invalid_argument("MotionEstimator::reset: image size " + size +
+                                " must be within 1x1 .. 65535x65535");
+  }
+  State& s = *state_;
+  s.has_previous = false;
+  s.reported_rejected = -1;
+  s.track_count = 0;
+
+  // Every level must hold a whole tracking window with its gradient border.
+  const int top = o.pyramid_levels - 1;
+  const int min_side = 2 * (o.window_radius + 2) + 1;
+  const int top_width = width >> top, top_height = height >> top;
+  if (top_width < min_side || top_height < min_side) {
+    throw std::invalid_argument(
+        "MotionEstimator::reset: image " + size + " is too small for " +
+        std::to_string(o.pyramid_levels) + " pyramid levels: level " + std::to_string(top) +
+        " would be " + std::to_string(top_width) + "x" + std::to_string(top_height) +
+        ", tracking with window_radius " + std::to_string(o.window_radius) + " needs at least " +
+        std::to_string(min_side) + "x" + std::to_string(min_side));
+  }
+  // Features keep clear of the border by a tracking window at the coarsest level, so that they
+  // can be tracked at every level.
+  const int detect_width = width >> o.detect_level, detect_height = height >> o.detect_level;
+  s.margin = (o.window_radius + 2) << std::max(0, top - o.detect_level);
+  const int valid_width = detect_width - 2 * s.margin, valid_height = detect_height - 2 * s.margin;
+  if (valid_width < o.grid_columns || valid_height < o.grid_rows) {
+    throw std::invalid_argument("MotionEstimator::reset: image " + size + " is too small for a " +
+                                std::to_string(o.grid_columns) + "x" + std::to_string(o.grid_rows) +
+                                " feature grid at detect_level " + std::to_string(o.detect_level) +
+                                " (" + std::to_string(detect_width) + "x" +
+                                std::to_string(detect_height) + " with a border of " +
+                                std::to_string(s.margin) + ")");
+  }
+
+  for (Pyramid& pyramid : s.pyramids) {
+    for (int l = 0; l < kMaxLevels; ++l) {
+      Level& level = pyramid.levels[l];
+      if (l < o.pyramid_levels) {
+        level.width = width >> l;
+        level.height = height >> l;
+        level.pixels.assign(static_cast<std::size_t>(level.width) * level.height, 0);
+      } else {
+        level = Level{};
+      }
+    }
+  }
+  s.width = width;
+  s.height = height;
+
+  const int cells = o.grid_columns * o.grid_rows;
+  for (int i = 0; i < 2; ++i) {
+    s.features[i].assign(cells, Point{});
+    s.rejected[i].assign(cells, Point{});
+    s.feature_count[i] = 0;
+    s.rejected_count[i] = 0;
+  }
+  s.tracks.assign(cells, FeatureTrack{});
+
+  s.cell_of_column.assign(detect_width, -1);
+  for (int u = s.margin; u < detect_width - s.margin; ++u)
+    s.cell_of_column[u] = (u - s.margin) * o.grid_columns / valid_width;
+  s.cell_of_row.assign(detect_height, -1);
+  for (int v = s.margin; v < detect_height - s.margin; ++v)
+    s.cell_of_row[v] = (v - s.margin) * o.grid_rows / valid_height;
+  for (int i = 0; i < 3; ++i) {
+    s.gxx[i].assign(detect_width, 0);
+    s.gxy[i].assign(detect_width, 0);
+    s.gyy[i].assign(detect_width, 0);
+  }
+  s.score_row.assign(detect_width, 0);
+  s.cell_score.assign(cells, 0);
+  s.cell_u.assign(cells, 0);
+  s.cell_v.assign(cells, 0);
+
+  for (auto* v : {&s.px, &s.py, &s.cx, &s.cy})
+    v->assign(cells, 0);
+  s.all_index.assign(cells, 0);
+  s.inlier_index.assign(cells, 0);
+  s.is_inlier.assign(cells, 0);
+  s.best_inlier.assign(cells, 0);
+}
+
+std::span<const FeatureTrack> MotionEstimator::tracks() const {
+  return {state_->tracks.data(), static_cast<std::size_t>(state_->track_count)};
+}
+
+std::span<const std::array<float, 2>> MotionEstimator::rejected_features() const {
+  const State& s = *state_;
+  if (s.reported_rejected < 0) return {};
+  return {s.rejected[s.reported_rejected].data(),
+          static_cast<std::size_t>(s.rejected_count[s.reported_rejected])};
+}
+
+namespace {
+
+void copy_level0(const ImageView& frame, Level& level) {
+  for (int v = 0; v < level.height; ++v) {
+    std::memcpy(level.pixels.data() + static_cast<std::ptrdiff_t>(v) * level.width, frame.row(v),
+                static_cast<std::size_t>(level.width));
+  }
+}
+
+// 2x2 box average, rounded.
+void downsample(const Level& fine, Level& coarse) {
+  for (int v = 0; v < coarse.height; ++v) {
+    const std::uint8_t* a = fine.row(2 * v);
+    const std::uint8_t* b = fine.row(2 * v + 1);
+    std::uint8_t* out = coarse.pixels.data() + static_cast<std::ptrdiff_t>(v) * coarse.width;
+    for (int u = 0; u < coarse.width; ++u) {
+      const unsigned sum = 2u + a[2 * u] + a[2 * u + 1] + b[2 * u] + b[2 * u + 1];
+      out[u] = static_cast<std::uint8_t>(sum >> 2);
+    }
+  }
+}
+
+// Sum of the level's pixels in [u0, u0 + w) x [v0, v0 + h) (the caller keeps it inside).
+int box_sum(const Level& level, int u0, int v0, int w, int h) {
+  int sum = 0;
+  for (int v = v0; v < v0 + h; ++v) {
+    const std::uint8_t* p = level.row(v) + u0;
+    for (int u = 0; u < w; ++u)
+      sum += p[u];
+  }
+  return sum;
+}
+
+// Paper IV-A: summed |Haar d/dv| over summed |Haar d/du| in the neighbourhood of (u, v), detect
+// level coordinates. A bright line along the rows answers across it (d/dv) far more than along it.
+bool looks_like_laser(const Level& level, int u, int v, int radius, double ratio) {
+  constexpr int half = kHaarSize / 2;
+  const int u_lo = std::max(u - radius, half), u_hi = std::min(u + radius, level.width - half);
+  const int v_lo = std::max(v - radius, half), v_hi = std::min(v + radius, level.height - half);
+  long long sum_du = 0, sum_dv = 0;
+  for (int y = v_lo; y <= v_hi; y += half) {
+    for (int x = u_lo; x <= u_hi; x += half) {
+      // Wavelets centred between pixels x-1 and x (du), rows y-1 and y (dv).
+      const int left = box_sum(level, x - half, y - half, half, kHaarSize);
+      const int right = box_sum(level, x, y - half, half, kHaarSize);
+      const int top = box_sum(level, x - half, y - half, kHaarSize, half);
+      const int bottom = box_sum(level, x - half, y, kHaarSize, half);
+      sum_du += std::abs(right - left);
+      sum_dv += std::abs(bottom - top);
+    }
+  }
+  return static_cast<double>(sum_dv) > ratio * static_cast<double>(sum_du);
+}
+
+// Samples a (2n+1)^2 patch of `level` centred on (x, y) with bilinear interpolation; every sample
+// shares the same sub-pixel weights. False when a sample would fall outside.
+bool sample_patch(const Level& level, float x, float y, int n, float* out) {
+  const float fx = std::floor(x), fy = std::floor(y);
+  const int ix = static_cast<int>(fx), iy = static_cast<int>(fy);
+  if (ix - n < 0 || iy - n < 0 || ix + n + 1 >= level.width || iy + n + 1 >= level.height)
+    return false;
+  const float ax = x - fx, ay = y - fy;
+  const float w00 = (1 - ax) * (1 - ay), w01 = ax * (1 - ay), w10 = (1 - ax) * ay, w11 = ax * ay;
+  const int side = 2 * n + 1;
+  for (int j = 0; j < side; ++j) {
+    const std::uint8_t* a = level.row(iy - n + j) + (ix - n);
+    const std::uint8_t* b = a + level.width;
+    float* o = out + j * side;
+    for (int i = 0; i < side; ++i)
+      o[i] = w00 * a[i] + w01 * a[i + 1] + w10 * b[i] + w11 * b[i + 1];
+  }
+  return true;
+}
+
+struct TrackResult {
+  float u = 0, v = 0;
+  bool converged = false;
+};
+
+// Pyramidal Lucas-Kanade (translation only) of the point (pu, pv), full-size coordinates, from
+// the previous pyramid into the current one, coarse to fine. Levels where the window does not fit
+// are skipped; the full-size level must fit.
+TrackResult track_point(const Pyramid& previous, const Pyramid& current, const MotionOptions& o,
+                        float pu, float pv) {
+  const int r = o.window_radius;
+  const int side = 2 * r + 1;
+  const int patch_side = side + 2;
+  std::array<float, kMaxPatch * kMaxPatch> templ;
+  std::array<float, kMaxPatch * kMaxPatch> grad_x, grad_y;
+  std::array<float, kMaxPatch * kMaxPatch> warped;
+  float du = 0, dv = 0;  // displacement, full-size pixels
+  TrackResult result;
+  for (int l = o.pyramid_levels - 1; l >= 0; --l) {
+    const float scale = 1.0f / static_cast<float>(1 << l);
+    const float x = (pu + 0.5f) * scale - 0.5f, y = (pv + 0.5f) * scale - 0.5f;
+    const Level& prev_level = previous.levels[l];
+    const Level& cur_level = current.levels[l];
+    if (!sample_patch(prev_level, x, y, r + 1, templ.data())) {
+      if (l == 0) return result;
+      continue;
+    }
+    // Template gradients (central differences) and the 2x2 normal matrix.
+    double gxx = 0, gxy = 0, gyy = 0;
+    for (int j = 0; j < side; ++j) {
+      const float* t = templ.data() + (j + 1) * patch_side + 1;
+      for (int i = 0; i < side; ++i) {
+        const float gx = 0.5f * (t[i + 1] - t[i - 1]);
+        const float gy = 0.5f * (t[i + patch_side] - t[i - patch_side]);
+        grad_x[j * side + i] = gx;
+        grad_y[j * side + i] = gy;
+        gxx += gx * gx;
+        gxy += gx * gy;
+        gyy += gy * gy;
+      }
+    }
+    const double det = gxx * gyy - gxy * gxy;
+    const double trace = gxx + gyy;
+    // Flat or edge-only window: this level cannot tell where the point went.
+    if (!(det > 1e-6 * trace * trace) || trace < 1e-3) {
+      if (l == 0) return result;
+      continue;
+    }
+    const double inv_det = 1.0 / det;
+    float cx = (pu + du + 0.5f) * scale - 0.5f, cy = (pv + dv + 0.5f) * scale - 0.5f;
+    float last_step = 1e9f;
+    bool inside = true;
+    for (int iteration = 0; iteration < o.max_iterations; ++iteration) {
+      if (!sample_patch(cur_level, cx, cy, r, warped.data())) {
+        inside = false;
+        break;
+      }
+      double bx = 0, by = 0;
+      for (int j = 0; j < side; ++j) {
+        const float* t = templ.data() + (j + 1) * patch_side + 1;
+        const float* w = warped.data() + j * side;
+        const float* gx = grad_x.data() + j * side;
+        const float* gy = grad_y.data() + j * side;
+        for (int i = 0; i < side; ++i) {
+          const float e = t[i] - w[i];
+          bx += e * gx[i];
+          by += e * gy[i];
+        }
+      }
+      const float step_x = static_cast<float>(inv_det * (gyy * bx - gxy * by));
+      const float step_y = static_cast<float>(inv_det * (gxx * by - gxy * bx));
+      cx += step_x;
+      cy += step_y;
+      last_step = std::sqrt(step_x * step_x + step_y * step_y);
+      if (last_step < kStopStep) break;
+    }
+    if (!inside) {
+      if (l == 0) return result;
+      continue;
+    }
+    du = (cx + 0.5f) / scale - 0.5f - pu;
+    dv = (cy + 0.5f) / scale - 0.5f - pv;
+    if (l == 0) {
+      result.u = pu + du;
+      result.v = pv + dv;
+      result.converged = last_step < kConvergedStep;
+    }
+  }
+  return result;
+}
+
+}  // namespace
+
+MotionEstimate MotionEstimator::update(const ImageView& frame) {
+  State& s = *state_;
+  const MotionOptions& o = options_;
+  MotionEstimate estimate;
+  s.track_count = 0;
+  s.reported_rejected = -1;
+  if (s.width == 0 || frame.width != s.width || frame.height != s.height || frame.data == nullptr ||
+      frame.stride < frame.width) {
+    return estimate;
+  }
+
+  const int current = 1 - s.previous;
+  Pyramid& pyramid = s.pyramids[current];
+  copy_level0(frame, pyramid.levels[0]);
+  for (int l = 1; l < o.pyramid_levels; ++l)
+    downsample(pyramid.levels[l - 1], pyramid.levels[l]);
+
+  if (s.has_previous) {
+    estimate = estimate_from_previous(current);
+    s.reported_rejected = s.previous;
+  }
+  detect_features(current);
+  s.previous = current;
+  s.has_previous = true;
+  return estimate;
+}
+
+void MotionEstimator::detect_features(int index) {
+  State& s = *state_;
+  const MotionOptions& o = options_;
+  const Level& level = s.pyramids[index].levels[o.detect_level];
+  const int width = level.width;
+  const int cells = o.grid_columns * o.grid_rows;
+  std::fill(s.cell_score.begin(), s.cell_score.end(), kMinEigenvalue);
+  std::fill(s.cell_u.begin(), s.cell_u.end(), -1);
+
+  // Gradient products of rows margin-1 .. height-margin, kept three at a time; the structure
+  // tensor of row v sums rows v-1, v, v+1 and columns u-1, u, u+1.
+  const int first = s.margin - 1, last = level.height - s.margin;
+  const auto products = [&](int v) {
+    const int slot = v % 3;
+    const std::uint8_t* up = level.row(v - 1);
+    const std::uint8_t* mid = level.row(v);
+    const std::uint8_t* down = level.row(v + 1);
+    float* xx = s.gxx[slot].data();
+    float* xy = s.gxy[slot].data();
+    float* yy = s.gyy[slot].data();
+    for (int u = s.margin - 1; u <= width - s.margin; ++u) {
+      const float gx = 0.5f * (static_cast<float>(mid[u + 1]) - static_cast<float>(mid[u - 1]));
+      const float gy = 0.5f * (static_cast<float>(down[u]) - static_cast<float>(up[u]));
+      xx[u] = gx * gx;
+      xy[u] = gx * gy;
+      yy[u] = gy * gy;
+    }
+  };
+  products(first);
+  products(first + 1);
+  for (int v = s.margin; v < last; ++v) {
+    products(v + 1);
+    const float* xx0 = s.gxx[(v + 2) % 3].data();
+    const float* xx1 = s.gxx[v % 3].data();
+    const float* xx2 = s.gxx[(v + 1) % 3].data();
+    const float* xy0 = s.gxy[(v + 2) % 3].data();
+    const float* xy1 = s.gxy[v % 3].data();
+    const float* xy2 = s.gxy[(v + 1) % 3].data();
+    const float* yy0 = s.gyy[(v + 2) % 3].data();
+    const float* yy1 = s.gyy[v % 3].data();
+    const float* yy2 = s.gyy[(v + 1) % 3].data();
+    float* score = s.score_row.data();
+    for (int u = s.margin; u < width - s.margin; ++u) {
+      float a = 0, b = 0, c = 0;
+      for (int k = -1; k <= 1; ++k) {
+        a += xx0[u + k] + xx1[u + k] + xx2[u + k];
+        b += xy0[u + k] + xy1[u + k] + xy2[u + k];
+        c += yy0[u + k] + yy1[u + k] + yy2[u + k];
+      }
+      const float half_difference = 0.5f * (a - c);
+      score[u] = 0.5f * (a + c) - std::sqrt(half_difference * half_difference + b * b);
+    }
+    const int row_cell = s.cell_of_row[v] * o.grid_columns;
+    for (int u = s.margin; u < width - s.margin; ++u) {
+      const int cell = row_cell + s.cell_of_column[u];
+      if (score[u] > s.cell_score[cell]) {
+        s.cell_score[cell] = score[u];
+        s.cell_u[cell] = u;
+        s.cell_v[cell] = v;
+      }
+    }
+  }
+
+  // Full-size position of a detect-level pixel: the whole pixel nearest its block's centre, so
+  // the full-size template needs no interpolation.
+  const int factor = 1 << o.detect_level;
+  const int offset = factor / 2;
+  int kept = 0, rejected = 0;
+  for (int cell = 0; cell < cells; ++cell) {
+    if (s.cell_u[cell] < 0) continue;
+    const Point p{static_cast<float>(s.cell_u[cell] * factor + offset),
+                  static_cast<float>(s.cell_v[cell] * factor + offset)};
+    if (looks_like_laser(level, s.cell_u[cell], s.cell_v[cell], 2 * o.window_radius,
+                         o.laser_filter_ratio)) {
+      s.rejected[index][rejected++] = p;
+    } else {
+      s.features[index][kept++] = p;
+    }
+  }
+  s.feature_count[index] = kept;
+  s.rejected_count[index] = rejected;
+}
+
+MotionEstimate MotionEstimator::estimate_from_previous(int current) {
+  State& s = *state_;
+  const MotionOptions& o = options_;
+  MotionEstimate estimate;
+  const int previous = s.previous;
+  estimate.detected = s.feature_count[previous] + s.rejected_count[previous];
+  estimate.rejected_on_laser = s.rejected_count[previous];
+
+  int n = 0;
+  for (int i = 0; i < s.feature_count[previous]; ++i) {
+    const Point p = s.features[previous][i];
+    const TrackResult t = track_point(s.pyramids[previous], s.pyramids[current], o, p[0], p[1]);
+    if (!t.converged) continue;
+    FeatureTrack& track = s.tracks[s.track_count++];
+    track = FeatureTrack{p[0], p[1], t.u, t.v, false};
+    s.px[n] = p[0];
+    s.py[n] = p[1];
+    s.cx[n] = t.u;
+    s.cy[n] = t.v;
+    s.all_index[n] = n;
+    ++n;
+  }
+  estimate.tracked = n;
+  if (n < std::max(4, o.min_inliers)) return estimate;
+
+  Homography h;
+  int inliers = 0;
+  if (!fit_homography(n, h, inliers)) return estimate;
+
+  double sum_squared = 0;
+  for (int i = 0; i < n; ++i) {
+    s.tracks[i].inlier = s.is_inlier[i] != 0;
+    if (!s.is_inlier[i]) continue;
+    const auto q = h.map(s.px[i], s.py[i]);
+    sum_squared += (q[0] - s.cx[i]) * (q[0] - s.cx[i]) + (q[1] - s.cy[i]) * (q[1] - s.cy[i]);
+  }
+  estimate.inliers = inliers;
+  estimate.rms_px = static_cast<float>(std::sqrt(sum_squared / std::max(inliers, 1)));
+  estimate.previous_to_current = h;
+  estimate.valid = inliers >= o.min_inliers;
+  return estimate;
+}
+
+namespace {
+
+using Matrix8 = Eigen::Matrix<double, 8, 8>;
+using Vector8 = Eigen::Matrix<double, 8, 1>;
+using Matrix9 = Eigen::Matrix<double, 9, 9>;
+using Vector9 = Eigen::Matrix<double, 9, 1>;
+
+// Homography through four correspondences (h33 = 1; with the points normalised around their
+// centroid h33 = 0 would need a transformation far beyond any frame-to-frame motion).
+bool minimal_homography(const double* x, const double* y, const double* xp, const double* yp,
+                        Matrix3& out) {
+  Matrix8 a;
+  Vector8 b;
+  for (int k = 0; k < 4; ++k) {
+    a.row(2 * k) << x[k], y[k], 1, 0, 0, 0, -x[k] * xp[k], -y[k] * xp[k];
+    a.row(2 * k + 1) << 0, 0, 0, x[k], y[k], 1, -x[k] * yp[k], -y[k] * yp[k];
+    b(2 * k) = xp[k];
+    b(2 * k + 1) = yp[k];
+  }
+  const Eigen::FullPivLU<Matrix8> lu(a);
+  if (!lu.isInvertible()) return false;
+  const Vector8 h = lu.solve(b);
+  out << h(0), h(1), h(2), h(3), h(4), h(5), h(6), h(7), 1;
+  return out.allFinite();
+}
+
+}  // namespace
+
+bool MotionEstimator::fit_homography(int n, Homography& result, int& inlier_count) {
+  State& s = *state_;
+  const MotionOptions& o = options_;
+  const double* px = s.px.data();
+  const double* py = s.py.data();
+  const double* cx = s.cx.data();
+  const double* cy = s.cy.data();
+  const double threshold_squared = o.inlier_px * o.inlier_px;
+
+  // Errors in full-size pixels of the current frame; MSAC cost (inliers by their error, outliers
+  // by the threshold) picks the better of two hypotheses with as many inliers.
+  const auto score = [&](const Matrix3& h, std::uint8_t* flags, int& count) {
+    double cost = 0;
+    count = 0;
+    for (int i = 0; i < n; ++i) {
+      const double w = h(2, 0) * px[i] + h(2, 1) * py[i] + h(2, 2);
+      const double ex = (h(0, 0) * px[i] + h(0, 1) * py[i] + h(0, 2)) / w - cx[i];
+      const double ey = (h(1, 0) * px[i] + h(1, 1) * py[i] + h(1, 2)) / w - cy[i];
+      const double e = ex * ex + ey * ey;
+      const bool inlier = w > 0 && e < threshold_squared;
+      flags[i] = inlier ? 1 : 0;
+      count += inlier ? 1 : 0;
+      cost += inlier ? e : threshold_squared;
+    }
+    return cost;
+  };
+
+  const Matrix3 t_previous = normalising_transform(px, py, s.all_index.data(), n);
+  const Matrix3 t_current = normalising_transform(cx, cy, s.all_index.data(), n);
+  const Matrix3 t_current_inverse = t_current.inverse();
+
+  Random random{kRansacSeed};
+  double best_cost = 0;
+  int best_count = 0;
+  bool found = false;
+  int iterations_needed = o.ransac_iterations;
+  for (int iteration = 0; iteration < iterations_needed; ++iteration) {
+    int pick[4];
+    for (int k = 0; k < 4; ++k) {
+      bool repeated = true;
+      while (repeated) {
+        pick[k] = random.below(n);
+        repeated = false;
+        for (int j = 0; j < k; ++j)
+          repeated = repeated || pick[j] == pick[k];
+      }
+    }
+    double x[4], y[4], xp[4], yp[4];
+    for (int k = 0; k < 4; ++k) {
+      const Eigen::Vector3d a = t_previous * Eigen::Vector3d(px[pick[k]], py[pick[k]], 1);
+      const Eigen::Vector3d b = t_current * Eigen::Vector3d(cx[pick[k]], cy[pick[k]], 1);
+      x[k] = a(0);
+      y[k] = a(1);
+      xp[k] = b(0);
+      yp[k] = b(1);
+    }
+    // Three nearly collinear points make the sample degenerate.
+    bool degenerate = false;
+    for (int k = 0; k < 4 && !degenerate; ++k) {
+      const int i0 = (k + 1) % 4, i1 = (k + 2) % 4, i2 = (k + 3) % 4;
+      degenerate = std::abs(twice_area(x[i0], y[i0], x[i1], y[i1], x[i2], y[i2])) < 1e-2 ||
+                   std::abs(twice_area(xp[i0], yp[i0], xp[i1], yp[i1], xp[i2], yp[i2])) < 1e-2;
+    }
+    if (degenerate) continue;
+    Matrix3 h_normalised;
+    if (!minimal_homography(x, y, xp, yp, h_normalised)) continue;
+    const Matrix3 h = t_current_inverse * h_normalised * t_previous;
+    int count = 0;
+    const double cost = score(h, s.is_inlier.data(), count);
+    if (!found || cost < best_cost) {
+      found = true;
+      best_cost = cost;
+      best_count = count;
+      std::copy(s.is_inlier.begin(), s.is_inlier.begin() + n, s.best_inlier.begin());
+      // Stop once a sample of all inliers has been drawn with the wanted confidence.
+      const double inlier_ratio = static_cast<double>(count) / n;
+      const double all_inliers = std::pow(inlier_ratio, 4);
+      if (all_inliers >= 1.0) {
+        iterations_needed = std::min(iterations_needed, iteration + 1);
+      } else if (all_inliers > 0) {
+        const double needed = std::log(1 - kRansacConfidence) / std::log(1 - all_inliers) + 1;
+        if (needed < iterations_needed) iterations_needed = static_cast<int>(needed);
+      }
+    }
+  }
+  if (!found || best_count < 4) return false;
+
+  // Least-squares refit on the inliers (normalised DLT), repeated while the inlier set grows.
+  std::copy(s.best_inlier.begin(), s.best_inlier.begin() + n, s.is_inlier.begin());
+  Matrix3 h_best;
+  int count = best_count;
+  bool refitted = false;
+  for (int round = 0; round < 3; ++round) {
+    int m = 0;
+    for (int i = 0; i < n; ++i)
+      if (s.is_inlier[i]) s.inlier_index[m++] = i;
+    if (m < 4) break;
+    const Matrix3 tp = normalising_transform(px, py, s.inlier_index.data(), m);
+    const Matrix3 tc = normalising_transform(cx, cy, s.inlier_index.data(), m);
+    Matrix9 normal = Matrix9::Zero();
+    for (int k = 0; k < m; ++k) {
+      const int i = s.inlier_index[k];
+      const double x = tp(0, 0) * px[i] + tp(0, 2), y = tp(1, 1) * py[i] + tp(1, 2);
+      const double xp = tc(0, 0) * cx[i] + tc(0, 2), yp = tc(1, 1) * cy[i] + tc(1, 2);
+      Vector9 r1, r2;
+      r1 << x, y, 1, 0, 0, 0, -xp * x, -xp * y, -xp;
+      r2 << 0, 0, 0, x, y, 1, -yp * x, -yp * y, -yp;
+      normal.noalias() += r1 * r1.transpose();
+      normal.noalias() += r2 * r2.transpose();
+    }
+    const Eigen::SelfAdjointEigenSolver<Matrix9> solver(normal);
+    if (solver.info() != Eigen::Success) break;
+    const Vector9 v = solver.eigenvectors().col(0);
+    Matrix3 h_normalised;
+    h_normalised << v(0), v(1), v(2), v(3), v(4), v(5), v(6), v(7), v(8);
+    const Matrix3 h = tc.inverse() * h_normalised * tp;
+    if (!h.allFinite() || std::abs(h(2, 2)) < 1e-12) break;
+    const Matrix3 h_scaled = h / h(2, 2);
+    int new_count = 0;
+    score(h_scaled, s.best_inlier.data(), new_count);
+    h_best = h_scaled;
+    refitted = true;
+    const bool grew = new_count > count;
+    count = new_count;
+    std::copy(s.best_inlier.begin(), s.best_inlier.begin() + n, s.is_inlier.begin());
+    if (!grew) break;
+  }
+  if (!refitted) return false;
+  result = to_homography(h_best);
+  inlier_count = count;
+  return true;
+}
+
+}  // namespace laserline::pipeline

@@ -1,0 +1,401 @@
+// MotionEstimator: homography accuracy against frames warped by a known homography (OpenCV does
+// the warping, only here), the laser filter with a line that stays while the scene moves, invalid
+// estimates, no allocation in update(), and sizes too small for the pyramid.
+#include "pipeline/motion.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "hal/sim/sim_scene.hpp"
+
+// ---- Allocation counting (as tests/test_frame_path.cpp does it) --------------------------------
+namespace {
+std::atomic<bool> g_counting{false};
+std::atomic<long> g_allocations{0};
+void count_allocation() {
+  if (g_counting.load(std::memory_order_relaxed))
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
+}
+}  // namespace
+
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+// Sanitizers own malloc; they report every allocation to this hook instead.
+extern "C" int __sanitizer_install_malloc_and_free_hooks(void (*malloc_hook)(const volatile void*,
+                                                                             std::size_t),
+                                                         void (*free_hook)(const volatile void*));
+extern "C" void laserline_motion_malloc_hook(const volatile void*, std::size_t) {
+  count_allocation();
+}
+extern "C" void laserline_motion_free_hook(const volatile void*) {}
+static const int kHooksInstalled = __sanitizer_install_malloc_and_free_hooks(
+    laserline_motion_malloc_hook, laserline_motion_free_hook);
+#else
+// glibc: interpose the C allocator, which operator new (and Eigen's dynamic storage) end up in.
+extern "C" {
+void* __libc_malloc(std::size_t);
+void* __libc_calloc(std::size_t, std::size_t);
+void* __libc_realloc(void*, std::size_t);
+void* __libc_memalign(std::size_t, std::size_t);
+void* malloc(std::size_t size) {
+  count_allocation();
+  return __libc_malloc(size);
+}
+void* calloc(std::size_t n, std::size_t size) {
+  count_allocation();
+  return __libc_calloc(n, size);
+}
+void* realloc(void* p, std::size_t size) {
+  count_allocation();
+  return __libc_realloc(p, size);
+}
+void* memalign(std::size_t alignment, std::size_t size) {
+  count_allocation();
+  return __libc_memalign(alignment, size);
+}
+int posix_memalign(void** out, std::size_t alignment, std::size_t size) {
+  count_allocation();
+  *out = __libc_memalign(alignment, size);
+  return *out != nullptr ? 0 : ENOMEM;
+}
+void* aligned_alloc(std::size_t alignment, std::size_t size) {
+  count_allocation();
+  return __libc_memalign(alignment, size);
+}
+}
+#endif
+
+namespace laserline::pipeline {
+namespace {
+
+constexpr int kWidth = 1280;
+constexpr int kHeight = 1024;
+
+ImageView view_of(const cv::Mat& image) {
+  return ImageView{image.ptr<std::uint8_t>(0), image.cols, image.rows,
+                   static_cast<int>(image.step[0])};
+}
+
+// A simulated underwater frame, laser off: the product's own scene renderer.
+cv::Mat sim_texture() {
+  hal::SimSceneOptions o;
+  o.calibration.camera.width = kWidth;
+  o.calibration.camera.height = kHeight;
+  o.tilt_y_deg = 8;
+  hal::SimScene scene(o);
+  cv::Mat image(kHeight, kWidth, CV_8UC1);
+  scene.render(0, false, {image.ptr<std::uint8_t>(0), image.total()});
+  return image;
+}
+
+// Smoothed uniform noise: a plain random texture with no structure at all.
+cv::Mat random_texture() {
+  cv::Mat noise(kHeight, kWidth, CV_8UC1);
+  cv::RNG rng(12345);
+  rng.fill(noise, cv::RNG::UNIFORM, 0, 256);
+  cv::Mat smooth;
+  cv::GaussianBlur(noise, smooth, cv::Size(0, 0), 2.0);
+  // Stretch the contrast the blur took away.
+  cv::Mat stretched;
+  smooth.convertTo(stretched, CV_8UC1, 4.0, -3.0 * 128);
+  return stretched;
+}
+
+cv::Mat warp(const cv::Mat& image, const cv::Matx33d& h) {
+  cv::Mat out;
+  cv::warpPerspective(image, out, h, image.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
+  return out;
+}
+
+cv::Matx33d rotation_about_centre(double degrees) {
+  const double a = degrees * CV_PI / 180.0, c = std::cos(a), s = std::sin(a);
+  const double x0 = (kWidth - 1) / 2.0, y0 = (kHeight - 1) / 2.0;
+  return cv::Matx33d(c, -s, x0 - c * x0 + s * y0, s, c, y0 - s * x0 - c * y0, 0, 0, 1);
+}
+
+// A mild perspective change about the centre plus a shift: a few pixels at the corners.
+cv::Matx33d perspective_warp() {
+  const double x0 = (kWidth - 1) / 2.0, y0 = (kHeight - 1) / 2.0;
+  const cv::Matx33d to_centre(1, 0, -x0, 0, 1, -y0, 0, 0, 1);
+  const cv::Matx33d back(1, 0, x0 + 2.5, 0, 1, y0 - 1.5, 0, 0, 1);
+  const cv::Matx33d p(1.002, 0.001, 0, -0.0015, 0.999, 0, 6e-6, -5e-6, 1);
+  return back * p * to_centre;
+}
+
+// Largest distance between the estimate and the truth over a grid covering the image.
+double max_grid_error(const Homography& estimate, const cv::Matx33d& truth) {
+  double worst = 0;
+  for (int j = 0; j <= 8; ++j) {
+    for (int i = 0; i <= 8; ++i) {
+      const double u = 0.05 * kWidth + 0.9 * kWidth * i / 8.0;
+      const double v = 0.05 * kHeight + 0.9 * kHeight * j / 8.0;
+      const cv::Vec3d t = truth * cv::Vec3d(u, v, 1);
+      const auto e = estimate.map(u, v);
+      worst = std::max(worst, std::hypot(e[0] - t[0] / t[2], e[1] - t[1] / t[2]));
+    }
+  }
+  return worst;
+}
+
+MotionEstimate estimate_pair(MotionEstimator& estimator, const cv::Mat& first,
+                             const cv::Mat& second) {
+  estimator.reset(first.cols, first.rows);
+  const MotionEstimate none = estimator.update(view_of(first));
+  EXPECT_FALSE(none.valid) << "the first frame after reset() has nothing to compare with";
+  return estimator.update(view_of(second));
+}
+
+void print(const char* name, const MotionEstimate& e, double grid_error) {
+  std::printf(
+      "%-28s valid %d detected %3d rejected %2d tracked %3d inliers %3d rms %.3f px, "
+      "max grid error %.4f px\n",
+      name, e.valid, e.detected, e.rejected_on_laser, e.tracked, e.inliers, e.rms_px, grid_error);
+}
+
+struct WarpCase {
+  const char* name;
+  cv::Matx33d h;
+};
+
+std::vector<WarpCase> warp_cases() {
+  return {{"translation", cv::Matx33d(1, 0, 7.3, 0, 1, -4.6, 0, 0, 1)},
+          {"rotation 1 deg", rotation_about_centre(1.0)},
+          {"perspective", perspective_warp()}};
+}
+
+TEST(MotionEstimator, RecoversKnownHomographyOfSimulatedScene) {
+  const cv::Mat first = sim_texture();
+  MotionEstimator estimator;
+  for (const WarpCase& c : warp_cases()) {
+    const MotionEstimate e = estimate_pair(estimator, first, warp(first, c.h));
+    const double error = max_grid_error(e.previous_to_current, c.h);
+    print((std::string("sim scene, ") + c.name).c_str(), e, error);
+    ASSERT_TRUE(e.valid) << c.name;
+    EXPECT_GE(e.inliers, 100) << c.name;
+    EXPECT_LT(error, 0.1) << c.name;
+  }
+}
+
+TEST(MotionEstimator, RecoversKnownHomographyOfRandomTexture) {
+  const cv::Mat first = random_texture();
+  MotionEstimator estimator;
+  for (const WarpCase& c : warp_cases()) {
+    const MotionEstimate e = estimate_pair(estimator, first, warp(first, c.h));
+    const double error = max_grid_error(e.previous_to_current, c.h);
+    print((std::string("random texture, ") + c.name).c_str(), e, error);
+    ASSERT_TRUE(e.valid) << c.name;
+    EXPECT_GE(e.inliers, 100) << c.name;
+    EXPECT_LT(error, 0.1) << c.name;
+  }
+}
+
+// Draws a bright horizontal laser line centred on `row`, modulated by the surface brightness as
+// a real line on a textured surface is (the simulator's ambient 40 against a laser peak of 180).
+void draw_laser_line(cv::Mat& image, double row, double sigma_px) {
+  for (int v = 0; v < image.rows; ++v) {
+    const double d = (v - row) / sigma_px;
+    const double gain = 1.0 + 4.5 * std::exp(-0.5 * d * d);
+    if (gain < 1.001) continue;
+    std::uint8_t* p = image.ptr<std::uint8_t>(v);
+    for (int u = 0; u < image.cols; ++u)
+      p[u] = static_cast<std::uint8_t>(std::min(255.0, std::round(p[u] * gain)));
+  }
+}
+
+int count_near_row(std::span<const std::array<float, 2>> points, double row, double distance) {
+  return static_cast<int>(std::count_if(points.begin(), points.end(), [&](const auto& p) {
+    return std::abs(p[1] - row) <= distance;
+  }));
+}
+
+// A PTU tilt: the scene moves vertically, the laser line stays on the same rows.
+TEST(MotionEstimator, LaserFilterRejectsFeaturesOnAStaticLine) {
+  const cv::Mat scene = sim_texture();
+  const cv::Matx33d tilt(1, 0, 0.4, 0, 1, 6.5, 0, 0, 1);
+  cv::Mat first = scene.clone();
+  cv::Mat second = warp(scene, tilt);
+  const double line_row = 517.3, near_px = 12.0;
+  draw_laser_line(first, line_row, 2.0);
+  draw_laser_line(second, line_row, 2.0);
+
+  // Where the features of the first frame lie: kept and rejected by the filter, and all of them
+  // without it.
+  MotionEstimator filtered;
+  const MotionEstimate e = estimate_pair(filtered, first, second);
+  std::vector<std::array<float, 2>> kept;
+  for (const FeatureTrack& t : filtered.tracks())
+    kept.push_back({t.previous_u, t.previous_v});
+  const auto rejected = filtered.rejected_features();
+
+  MotionOptions no_filter_options;
+  no_filter_options.laser_filter_ratio = 1e9;
+  MotionEstimator unfiltered(no_filter_options);
+  const MotionEstimate u = estimate_pair(unfiltered, first, second);
+  std::vector<std::array<float, 2>> all;
+  for (const FeatureTrack& t : unfiltered.tracks())
+    all.push_back({t.previous_u, t.previous_v});
+
+  const double error = max_grid_error(e.previous_to_current, tilt);
+  print("laser line, filter on", e, error);
+  print("laser line, filter off", u, max_grid_error(u.previous_to_current, tilt));
+  const int rejected_near = count_near_row(rejected, line_row, near_px);
+  const int kept_near = count_near_row(kept, line_row, near_px);
+  const int all_near = count_near_row(all, line_row, near_px);
+  std::printf(
+      "rejected %zu (%d near the line); tracked near the line: %d with filter, %d without\n",
+      rejected.size(), rejected_near, kept_near, all_near);
+
+  ASSERT_TRUE(e.valid);
+  EXPECT_EQ(e.rejected_on_laser, static_cast<int>(rejected.size()));
+  EXPECT_EQ(u.rejected_on_laser, 0);
+  ASSERT_GE(rejected.size(), 4u) << "the filter should see the line";
+  EXPECT_GE(rejected_near, static_cast<int>(0.8 * static_cast<double>(rejected.size())))
+      << "most rejected features should lie on the line";
+  EXPECT_LT(kept_near, all_near);
+  EXPECT_LT(error, 0.2);
+}
+
+TEST(MotionEstimator, InvalidForFirstFrameAndBlankFrames) {
+  const cv::Mat textured = sim_texture();
+  MotionEstimator estimator;
+  estimator.reset(kWidth, kHeight);
+  const MotionEstimate first = estimator.update(view_of(textured));
+  EXPECT_FALSE(first.valid);
+  EXPECT_EQ(first.detected, 0) << "no previous frame to report on";
+  EXPECT_TRUE(estimator.tracks().empty());
+  EXPECT_TRUE(estimator.rejected_features().empty());
+  EXPECT_TRUE(estimator.update(view_of(textured)).valid) << "the same frame twice is identity";
+
+  const cv::Mat blank(kHeight, kWidth, CV_8UC1, cv::Scalar(90));
+  estimator.reset(kWidth, kHeight);
+  EXPECT_FALSE(estimator.update(view_of(blank)).valid);
+  const MotionEstimate pair = estimator.update(view_of(blank));
+  EXPECT_FALSE(pair.valid);
+  EXPECT_EQ(pair.detected, 0);
+  EXPECT_EQ(pair.tracked, 0);
+
+  // Textured after blank: the blank frame had no features to track.
+  EXPECT_FALSE(estimator.update(view_of(textured)).valid);
+}
+
+TEST(MotionEstimator, SameInputSameResult) {
+  const cv::Mat first = sim_texture();
+  const cv::Mat second = warp(first, rotation_about_centre(0.7));
+  MotionEstimator a, b;
+  const MotionEstimate ea = estimate_pair(a, first, second);
+  const MotionEstimate eb = estimate_pair(b, first, second);
+  ASSERT_TRUE(ea.valid);
+  EXPECT_EQ(ea.previous_to_current.h, eb.previous_to_current.h);
+  EXPECT_EQ(ea.inliers, eb.inliers);
+}
+
+TEST(MotionEstimator, UpdateDoesNotAllocate) {
+  const cv::Mat first = sim_texture();
+  const cv::Mat second = warp(first, rotation_about_centre(0.5));
+  cv::Mat with_line = second.clone();
+  draw_laser_line(with_line, 300.0, 2.0);
+  const cv::Mat blank(kHeight, kWidth, CV_8UC1, cv::Scalar(0));
+  MotionEstimator estimator;
+  estimator.reset(kWidth, kHeight);
+  estimator.update(view_of(first));
+
+  int valid = 0;
+  g_allocations = 0;
+  g_counting = true;
+  for (const cv::Mat* frame : std::initializer_list<const cv::Mat*>{&second, &first, &with_line,
+                                                                    &blank, &first, &second}) {
+    valid += estimator.update(view_of(*frame)).valid ? 1 : 0;
+  }
+  g_counting = false;
+  EXPECT_EQ(g_allocations.load(), 0);
+  EXPECT_GE(valid, 3);
+}
+
+TEST(MotionEstimator, TooSmallImagesAreRefusedByReset) {
+  MotionEstimator estimator;
+  try {
+    estimator.reset(40, 30);
+    FAIL() << "reset(40, 30) should throw";
+  } catch (const std::invalid_argument& e) {
+    const std::string message = e.what();
+    std::printf("%s\n", message.c_str());
+    EXPECT_NE(message.find("40x30"), std::string::npos);
+    EXPECT_NE(message.find("too small"), std::string::npos);
+    EXPECT_NE(message.find("pyramid"), std::string::npos);
+  }
+  EXPECT_THROW(estimator.reset(0, 100), std::invalid_argument);
+  EXPECT_THROW(estimator.reset(-5, 100), std::invalid_argument);
+
+  // A grid too fine for the detect level.
+  MotionOptions fine;
+  fine.grid_columns = 64;
+  fine.grid_rows = 64;
+  MotionEstimator fine_grid(fine);
+  try {
+    fine_grid.reset(320, 240);
+    FAIL() << "a 64x64 grid on 320x240 should be refused";
+  } catch (const std::invalid_argument& e) {
+    std::printf("%s\n", e.what());
+    EXPECT_NE(std::string(e.what()).find("feature grid"), std::string::npos);
+  }
+
+  // Bad options are refused at construction, naming the option.
+  MotionOptions bad;
+  bad.detect_level = 4;
+  bad.pyramid_levels = 4;
+  try {
+    MotionEstimator refused(bad);
+    FAIL() << "detect_level 4 of 4 levels should be refused";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("detect_level"), std::string::npos);
+  }
+
+  // update() before reset() or with a frame of another size: invalid, no crash.
+  const cv::Mat small(30, 40, CV_8UC1, cv::Scalar(7));
+  MotionEstimator unset;
+  EXPECT_FALSE(unset.update(view_of(small)).valid);
+  estimator.reset(kWidth, kHeight);
+  EXPECT_FALSE(estimator.update(view_of(small)).valid);
+  EXPECT_FALSE(estimator.update(ImageView{}).valid);
+
+  // The smallest size the default options take (a 16x12 grid inside a border of 12 at level 2)
+  // works; one pixel less is refused.
+  EXPECT_THROW(estimator.reset(159, 144), std::invalid_argument);
+  EXPECT_THROW(estimator.reset(160, 143), std::invalid_argument);
+  estimator.reset(160, 144);
+  const cv::Mat tiny = random_texture()(cv::Rect(100, 100, 160, 144)).clone();
+  EXPECT_FALSE(estimator.update(view_of(tiny)).valid);
+  const MotionEstimate same = estimator.update(view_of(tiny));
+  ASSERT_TRUE(same.valid) << "the same frame twice";
+  const auto centre = same.previous_to_current.map(80, 72);
+  EXPECT_NEAR(centre[0], 80, 0.05);
+  EXPECT_NEAR(centre[1], 72, 0.05);
+}
+
+TEST(Homography, InverseUndoesTheMapping) {
+  Homography h;
+  const cv::Matx33d m = perspective_warp() * rotation_about_centre(3.0);
+  for (int i = 0; i < 9; ++i)
+    h.h[i] = m.val[i];
+  const Homography inverse = h.inverse();
+  for (const auto& p : {std::array<double, 2>{0, 0}, {1279, 0}, {640.5, 511.5}, {17, 1000}}) {
+    const auto q = h.map(p[0], p[1]);
+    const auto back = inverse.map(q[0], q[1]);
+    EXPECT_NEAR(back[0], p[0], 1e-9);
+    EXPECT_NEAR(back[1], p[1], 1e-9);
+  }
+  EXPECT_DOUBLE_EQ(inverse.h[8], 1.0);
+}
+
+}  // namespace
+}  // namespace laserline::pipeline
