@@ -200,9 +200,18 @@ void Frontend::normalise_subtracting(const ImageView& current, const ImageView& 
       const double x0 = x - (centre - u0);
       const double fx0 = std::floor(x0), fy0 = std::floor(y);
       if (!(fx0 >= 0.0 && fx0 + count < width_ && fy0 >= 0.0 && fy0 + 1 < height_)) {
-        // Partly outside the background frame: nothing to compare with, no signal there.
-        for (int k = 0; k < count; ++k)
-          sum[u0 + k] = above[u0 + k];
+        // At the border of the background frame, pixel by pixel; where there is nothing to
+        // compare with there is no signal.
+        for (int k = 0; k < count; ++k) {
+          const double xk = x0 + k;
+          const float x_cur = static_cast<float>(a[u0 + k]);
+          const float now = x_cur + f * (static_cast<float>(b[u0 + k]) - x_cur);
+          const bool inside = xk >= 0.0 && xk < width_ - 1 && y >= 0.0 && y < height_ - 1;
+          const float difference =
+              inside ? now - bilinear(background, static_cast<float>(xk), static_cast<float>(y))
+                     : 0.0f;
+          sum[u0 + k] = above[u0 + k] + std::max(difference, 0.0f);
+        }
         continue;
       }
       const auto ix = static_cast<int>(fx0), iy = static_cast<int>(fy0);
@@ -289,9 +298,12 @@ void Frontend::difference_column(int u, int first, int count, float* out) const 
   const double dx = (x1 - x0) / count, dy = (y1 - y0) / count;
   for (int i = 0; i < count; ++i) {
     const double x = x0 + dx * i, y = y0 + dy * i;
+    // Clipped at 0 as in normalise_subtracting(): the previous frame's laser, warped a few
+    // pixels away, must not pull the baseline of the fit down on one side.
     out[i] = x >= 0.0 && x < width_ - 1 && y >= 0.0 && y < height_ - 1
-                 ? current_.at(u, first + i) -
-                       bilinear(background_, static_cast<float>(x), static_cast<float>(y))
+                 ? std::max(current_.at(u, first + i) -
+                                bilinear(background_, static_cast<float>(x), static_cast<float>(y)),
+                            0.0f)
                  : 0.0f;
   }
 }

@@ -140,12 +140,19 @@ bool write_overlay(const std::string& path, const ScoredFrame& frame, double tol
     const int v = static_cast<int>(std::lround(row)) - 6;
     if (v >= 0 && v < frame.height) colour.at<cv::Vec3b>(v, u) = {255, 128, 0};  // truth, above
   }
-  for (const pipeline::ProfilePoint& p : frame.profile->points()) {
-    const float row = frame.truth->row[static_cast<std::size_t>(p.u)];
-    const bool correct = !std::isnan(row) && std::abs(p.v - row) <= tolerance_px;
-    const int v = static_cast<int>(std::lround(p.v));
-    if (v < 0 || v >= frame.height) continue;
-    colour.at<cv::Vec3b>(v, p.u) = correct ? cv::Vec3b{0, 255, 0} : cv::Vec3b{0, 0, 255};
+  // Rejected candidates first (dim yellow), valid points over them: green where within the
+  // tolerance of the truth, red where not.
+  for (const bool valid : {false, true}) {
+    for (const pipeline::ProfilePoint& p : frame.profile->points()) {
+      if (p.valid != valid) continue;
+      const float row = frame.truth->row[static_cast<std::size_t>(p.u)];
+      const bool correct = !std::isnan(row) && std::abs(p.v - row) <= tolerance_px;
+      const int v = static_cast<int>(std::lround(p.v));
+      if (v < 0 || v >= frame.height) continue;
+      colour.at<cv::Vec3b>(v, p.u) = !valid    ? cv::Vec3b{0, 140, 140}
+                                     : correct ? cv::Vec3b{0, 255, 0}
+                                               : cv::Vec3b{0, 0, 255};
+    }
   }
   return cv::imwrite(path, colour);
 }

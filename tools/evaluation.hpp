@@ -55,8 +55,9 @@ Score evaluate(const Scenario& scenario, const std::string& detector,
                pipeline::DetectorOptions options, double tolerance_px,
                const std::function<void(const ScoredFrame&)>& on_frame = {});
 
-// Draws the truth (blue) and the points (green within tolerance, red otherwise) on a frame and
-// writes a PNG. Returns false when it could not be written.
+// Draws the truth (blue, 6 px above the line), valid points (green within the tolerance, red
+// otherwise) and rejected candidates (dim yellow) on a frame and writes a PNG. Returns false when
+// it could not be written.
 bool write_overlay(const std::string& path, const ScoredFrame& frame, double tolerance_px);
 
 }  // namespace laserline::tools
