@@ -25,7 +25,7 @@ struct FrontendOptions {
   // SNR (III-D): noise = mean |band-pass| over this window (normalised rows x columns).
   int noise_rows = 31;
   int noise_columns = 9;
-  double snr_threshold_db = 4.0;  // III-E: paper 3 - 6 dB
+  double snr_threshold_db = 6.0;  // III-E: paper 3 - 6 dB
   int max_candidates_per_column = 4;
   int saturation_level = 255;  // a run at or above this is a clipped core: its centre is the peak
 };

@@ -233,15 +233,18 @@ void Frontend::band_pass() {
   const int rows = rows_.rows();
   const std::size_t s = static_cast<std::size_t>(stride_);
   const int hi = inner_ / 2, ho = outer_ / 2;
-  const float wi = 1.0f / static_cast<float>(inner_), wo = 1.0f / static_cast<float>(outer_);
   // Boxes of any height from the column prefix sums (III-C's integral image), and the prefix
-  // sums of |band| for the noise of III-D, in one pass.
+  // sums of |band| for the noise of III-D, in one pass. At the ends the boxes are cut short and
+  // averaged over what they cover.
   std::fill(abs_prefix_.begin(), abs_prefix_.begin() + stride_, 0.0f);
   for (int r = 0; r < rows; ++r) {
-    const float* __restrict i_hi = prefix_.data() + std::min(r + hi + 1, rows) * s;
-    const float* __restrict i_lo = prefix_.data() + std::max(r - hi, 0) * s;
-    const float* __restrict o_hi = prefix_.data() + std::min(r + ho + 1, rows) * s;
-    const float* __restrict o_lo = prefix_.data() + std::max(r - ho, 0) * s;
+    const int i0 = std::max(r - hi, 0), i1 = std::min(r + hi + 1, rows);
+    const int o0 = std::max(r - ho, 0), o1 = std::min(r + ho + 1, rows);
+    const float wi = 1.0f / static_cast<float>(i1 - i0), wo = 1.0f / static_cast<float>(o1 - o0);
+    const float* __restrict i_hi = prefix_.data() + i1 * s;
+    const float* __restrict i_lo = prefix_.data() + i0 * s;
+    const float* __restrict o_hi = prefix_.data() + o1 * s;
+    const float* __restrict o_lo = prefix_.data() + o0 * s;
     float* __restrict out = band_passed_.data() + r * s;
     const float* __restrict abs_above = abs_prefix_.data() + r * s;
     float* __restrict abs_sum = abs_prefix_.data() + (r + 1) * s;
@@ -280,33 +283,45 @@ void Frontend::signal_to_noise_image(std::span<float> out) const {
   }
 }
 
-float Frontend::difference_at(int u, int v) const {
-  float value = 0.0f;
-  difference_column(u, v, 1, &value);
-  return value;
-}
+namespace {
 
-void Frontend::difference_column(int u, int first, int count, float* out) const {
-  if (!subtracting_) {
-    for (int i = 0; i < count; ++i)
-      out[i] = current_.at(u, first + i);
-    return;
+// The background-free column u near one row: the current frame minus the background seen
+// through the homography, which along a short stretch of column moves linearly with the row.
+// Clipped at 0 as in normalise_subtracting(): the previous frame's laser, warped a few pixels
+// away, must not pull the baseline of the fit down on one side.
+class ColumnSampler {
+ public:
+  ColumnSampler(const ImageView& current, const ImageView* background, const Homography& h, int u,
+                int v)
+      : current_(current), background_(background), u_(u), v0_(v) {
+    if (background_ == nullptr) return;
+    const auto [x0, y0] = h.map(u, v);
+    const auto [x1, y1] = h.map(u, v + 1);
+    x0_ = static_cast<float>(x0);
+    y0_ = static_cast<float>(y0);
+    dx_ = static_cast<float>(x1 - x0);
+    dy_ = static_cast<float>(y1 - y0);
+    x_max_ = static_cast<float>(current.width - 1);
+    y_max_ = static_cast<float>(current.height - 1);
   }
-  // Along a short stretch of column the background position moves linearly with the row.
-  const auto [x0, y0] = to_background_.map(u, first);
-  const auto [x1, y1] = to_background_.map(u, first + count);
-  const double dx = (x1 - x0) / count, dy = (y1 - y0) / count;
-  for (int i = 0; i < count; ++i) {
-    const double x = x0 + dx * i, y = y0 + dy * i;
-    // Clipped at 0 as in normalise_subtracting(): the previous frame's laser, warped a few
-    // pixels away, must not pull the baseline of the fit down on one side.
-    out[i] = x >= 0.0 && x < width_ - 1 && y >= 0.0 && y < height_ - 1
-                 ? std::max(current_.at(u, first + i) -
-                                bilinear(background_, static_cast<float>(x), static_cast<float>(y)),
-                            0.0f)
-                 : 0.0f;
+
+  float operator()(int v) const {
+    const float value = current_.at(u_, v);
+    if (background_ == nullptr) return value;
+    const auto k = static_cast<float>(v - v0_);
+    const float x = x0_ + dx_ * k, y = y0_ + dy_ * k;
+    if (!(x >= 0.0f && x < x_max_ && y >= 0.0f && y < y_max_)) return 0.0f;
+    return std::max(value - bilinear(*background_, x, y), 0.0f);
   }
-}
+
+ private:
+  const ImageView& current_;
+  const ImageView* background_;
+  int u_, v0_;
+  float x0_ = 0, y0_ = 0, dx_ = 0, dy_ = 0, x_max_ = 0, y_max_ = 0;
+};
+
+}  // namespace
 
 float Frontend::refine_row(int u, float v_guess) const {
   const double width = std::max(rows_.width_px(v_guess), 1.0);
@@ -314,21 +329,22 @@ float Frontend::refine_row(int u, float v_guess) const {
   const double sigma = width / kFwhmToSigma;
   const int spacing = std::max(1, static_cast<int>(std::lround(sigma)));
   const int edge = static_cast<int>(std::ceil(2.5 * sigma)) + 1;
-  const int reach = static_cast<int>(std::ceil(0.75 * width)) + 1;
+  // The guess comes from a normalised row, good to about half a normalised width.
+  const int reach =
+      static_cast<int>(std::ceil(0.5 * width / options_.normalised_width_px + 0.5)) + 1;
   const int centre = std::clamp(static_cast<int>(std::lround(v_guess)), 0, last);
+  const ColumnSampler at(current_, subtracting_ ? &background_ : nullptr, to_background_, u,
+                         centre);
 
-  // The column around the guess, once: search window plus what the fit needs beyond it.
-  constexpr int kMaxSamples = 256;
-  const int first = std::max(centre - reach - edge, 0);
-  const int end = std::min({centre + reach + edge + 1, last + 1, first + kMaxSamples});
-  float column[kMaxSamples];
-  difference_column(u, first, end - first, column);
-  auto at = [&](int v) { return column[v - first]; };
-
-  const int lo = std::max(centre - reach, first), hi = std::min(centre + reach, end - 1);
+  const int lo = std::max(centre - reach, 0), hi = std::min(centre + reach, last);
   int best = lo;
+  float best_value = at(lo);
   for (int v = lo + 1; v <= hi; ++v) {
-    if (at(v) > at(best)) best = v;
+    const float value = at(v);
+    if (value > best_value) {
+      best_value = value;
+      best = v;
+    }
   }
 
   // A clipped core (real green lasers saturate): the centre of the run, located on its flanks.
@@ -358,13 +374,13 @@ float Frontend::refine_row(int u, float v_guess) const {
   // wide line is not fitted on nearly equal samples. The baseline, the straight line through the
   // samples just beyond the line on either side, is removed first: ambient light under the line
   // would bend the logarithms.
-  if (best - edge < first || best + edge >= end) return static_cast<float>(best);
+  if (best - edge < 0 || best + edge > last) return static_cast<float>(best);
   const float before = at(best - edge), after = at(best + edge);
   const float slope = (after - before) / static_cast<float>(2 * edge);
   const float level = 0.5f * (before + after);
   const float step = slope * static_cast<float>(spacing);
   const float a = at(best - spacing) - (level - step);
-  const float b = at(best) - level;
+  const float b = best_value - level;
   const float c = at(best + spacing) - (level + step);
   return static_cast<float>(best) + static_cast<float>(spacing) * gaussian_offset(a, b, c);
 }

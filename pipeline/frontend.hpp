@@ -89,9 +89,6 @@ class Frontend {
 
  private:
   float refine_row(int u, float v_guess) const;
-  float difference_at(int u, int v) const;
-  // Difference samples of column u at rows first .. first + count - 1 into out.
-  void difference_column(int u, int first, int count, float* out) const;
 
   ScannerGeometry geometry_;
   FrontendOptions options_;

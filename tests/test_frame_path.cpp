@@ -9,69 +9,10 @@
 #include <cstdlib>
 #include <thread>
 
+#include "allocation_counter.hpp"
 #include "daemon/backends.hpp"
 #include "hal/clock.hpp"
 #include "private_network.hpp"
-
-// ---- Allocation counting over every thread of the process --------------------------------------
-namespace {
-std::atomic<bool> g_counting{false};
-std::atomic<long> g_allocations{0};
-std::atomic<long> g_allocated_bytes{0};
-void count_allocation(std::size_t bytes) {
-  if (g_counting.load(std::memory_order_relaxed)) {
-    g_allocations.fetch_add(1, std::memory_order_relaxed);
-    g_allocated_bytes.fetch_add(static_cast<long>(bytes), std::memory_order_relaxed);
-  }
-}
-}  // namespace
-
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-// Sanitizers own malloc; they report every allocation to this hook instead. (Declared here: GCC
-// does not install the sanitizer interface headers.)
-extern "C" int __sanitizer_install_malloc_and_free_hooks(void (*malloc_hook)(const volatile void*,
-                                                                             std::size_t),
-                                                         void (*free_hook)(const volatile void*));
-extern "C" void laserline_malloc_hook(const volatile void*, std::size_t size) {
-  count_allocation(size);
-}
-extern "C" void laserline_free_hook(const volatile void*) {}
-static const int kHooksInstalled =
-    __sanitizer_install_malloc_and_free_hooks(laserline_malloc_hook, laserline_free_hook);
-#else
-// glibc: interpose the C allocator, which operator new, LCM and glib all end up in.
-extern "C" {
-void* __libc_malloc(std::size_t);
-void* __libc_calloc(std::size_t, std::size_t);
-void* __libc_realloc(void*, std::size_t);
-void* __libc_memalign(std::size_t, std::size_t);
-void* malloc(std::size_t size) {
-  count_allocation(size);
-  return __libc_malloc(size);
-}
-void* calloc(std::size_t n, std::size_t size) {
-  count_allocation(n * size);
-  return __libc_calloc(n, size);
-}
-void* realloc(void* p, std::size_t size) {
-  count_allocation(size);
-  return __libc_realloc(p, size);
-}
-void* memalign(std::size_t alignment, std::size_t size) {
-  count_allocation(size);
-  return __libc_memalign(alignment, size);
-}
-int posix_memalign(void** out, std::size_t alignment, std::size_t size) {
-  count_allocation(size);
-  *out = __libc_memalign(alignment, size);
-  return *out != nullptr ? 0 : ENOMEM;
-}
-void* aligned_alloc(std::size_t alignment, std::size_t size) {
-  count_allocation(size);
-  return __libc_memalign(alignment, size);
-}
-}
-#endif
 
 namespace laserline::daemon {
 namespace {
@@ -111,26 +52,17 @@ lcm: {url: "udpm://239.255.76.67:7667?ttl=0", image_every_n: 5, status_period_s:
   ASSERT_TRUE(lcm.good());
   FramePath path(config, *backends.camera, *backends.laser, *backends.detector, lcm);
   // The counter must see allocations, or a zero below would prove nothing.
-  g_counting = true;
-  {
-    auto* probe = new std::vector<int>(100);
-    void* c_probe = std::malloc(64);
-    std::free(c_probe);
-    delete probe;
-  }
-  g_counting = false;
-  ASSERT_GE(g_allocations.exchange(0), 2) << "allocation counting does not work";
-  g_allocated_bytes = 0;
+  ASSERT_TRUE(testing::allocation_counter_works()) << "allocation counting does not work";
 
   ASSERT_TRUE(path.start(&error)) << error;
   std::this_thread::sleep_for(std::chrono::seconds(1));  // warm-up: first status, first image
   const auto processed_before = path.counters().frames_processed.load();
-  g_counting = true;
+  testing::start_counting_allocations();
   std::this_thread::sleep_for(std::chrono::seconds(kCountSeconds));
-  g_counting = false;
+  const testing::Allocations counted = testing::stop_counting_allocations();
   const auto processed = path.counters().frames_processed.load() - processed_before;
-  const long allocations = g_allocations.load();
-  const long bytes = g_allocated_bytes.load();
+  const long allocations = counted.count;
+  const long bytes = counted.bytes;
   path.stop();
   const FramePathSummary s = path.summary();
   EXPECT_GT(processed, kMinFrames) << "the frame path must have been busy while counting";

@@ -1,0 +1,280 @@
+// The paper's front-end (Section III): each stage alone on constructed input, then every detector
+// on the simulated scenarios against the simulator's exact ground truth (the same figures
+// laserline-evaluate prints), and no allocation per frame.
+#include "pipeline/frontend.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <stdexcept>
+#include <vector>
+
+#include "allocation_counter.hpp"
+#include "pipeline/frontend_detectors.hpp"
+#include "tools/evaluation.hpp"
+
+namespace laserline::pipeline {
+namespace {
+
+ScannerGeometry small_geometry() {
+  ScannerGeometry g;
+  g.width = 320;
+  g.height = 256;
+  g.fx = g.fy = 350;
+  g.cx = 159.5;
+  g.cy = 127.5;
+  return g;
+}
+
+// A mono8 image with a Gaussian line of `sigma` whose centre is at row centre(u), on `ambient`.
+struct Image {
+  int width, height;
+  std::vector<std::uint8_t> pixels;
+  Image(int w, int h, double ambient) : width(w), height(h), pixels(w * h) {
+    for (auto& p : pixels)
+      p = static_cast<std::uint8_t>(ambient);
+  }
+  template <typename Centre>
+  void add_line(Centre centre, double peak, double sigma) {
+    for (int u = 0; u < width; ++u) {
+      for (int v = 0; v < height; ++v) {
+        const double d = v - centre(u);
+        const double x = pixels[v * width + u] + peak * std::exp(-d * d / (2 * sigma * sigma));
+        pixels[v * width + u] = static_cast<std::uint8_t>(std::min(255.0, std::round(x)));
+      }
+    }
+  }
+  ImageView view() const { return {pixels.data(), width, height, width}; }
+};
+
+TEST(RowNormalisation, MakesTheLineWidthConstantAndMapsBothWays) {
+  const ScannerGeometry g = small_geometry();
+  FrontendOptions o;
+  o.normalised_width_px = 3.0;
+  const RowNormalisation rows(g, o, 5);
+  // Paper eq. 3 in the OpenCV convention: l(v) = f l_w / Z(v).
+  for (double v : {20.0, 80.0, 150.0}) {
+    const double z = 1.0 / g.inverse_depth(g.cx, v);
+    EXPECT_NEAR(rows.width_px(v), g.fy * g.sheet_width_m / z, 1e-9);
+    // dr/dv * l(v) = W: one laser width is W normalised rows everywhere.
+    const double drdv = (rows.to_normalised(v + 1e-3) - rows.to_normalised(v - 1e-3)) / 2e-3;
+    EXPECT_NEAR(drdv * rows.width_px(v), 3.0, 1e-6) << "row " << v;
+    EXPECT_NEAR(rows.to_source(rows.to_normalised(v)), v, 1e-9);
+  }
+  // Only rows with the sheet between min and max depth (plus the margins) are kept.
+  const double v_far = g.cy + g.fy * (-(g.laser_plane[2] + g.laser_plane[3] / o.max_depth_m));
+  EXPECT_NEAR(rows.source_row(rows.rows() - 1 - 5), v_far, 1.0);
+}
+
+TEST(RowNormalisation, RefusesGeometryThatCannotWork) {
+  ScannerGeometry g = small_geometry();
+  FrontendOptions o;
+  g.laser_plane = {0.0, 0.0, 1.0, -1.0};  // a sheet facing the camera: no row-depth relation
+  EXPECT_THROW(RowNormalisation(g, o, 2), std::invalid_argument);
+  g = small_geometry();
+  g.sheet_width_m = 0.0;
+  EXPECT_THROW(RowNormalisation(g, o, 2), std::invalid_argument);
+  g = small_geometry();
+  o.min_depth_m = 0.1;  // so near that the sheet would be above the top row
+  o.max_depth_m = 0.2;
+  EXPECT_THROW(RowNormalisation(g, o, 2), std::invalid_argument);
+}
+
+TEST(Frontend, FlatImageGivesNoBandPassAndNoCandidates) {
+  const ScannerGeometry g = small_geometry();
+  Frontend frontend(g, {});
+  frontend.reset(g.width, g.height);
+  const Image flat(g.width, g.height, 90);
+  frontend.normalise(flat.view());
+  EXPECT_FLOAT_EQ(frontend.normalised_at(frontend.rows().rows() / 2, 100), 90.0f);
+  frontend.band_pass();
+  for (float x : frontend.band_passed())
+    ASSERT_NEAR(x, 0.0f, 1e-3f);
+  Profile out(10000);
+  frontend.find_candidates(out);
+  EXPECT_EQ(out.size(), 0u);
+}
+
+TEST(Frontend, SignalToNoiseHasAMinimalNoiseOfOneAndMatchesTheImage) {
+  const ScannerGeometry g = small_geometry();
+  FrontendOptions o;
+  Frontend frontend(g, o);
+  frontend.reset(g.width, g.height);
+  Image image(g.width, g.height, 20);
+  image.add_line([](int) { return 100.0; }, 6.0, 1.2);  // faint line on a flat background
+  frontend.normalise(image.view());
+  frontend.band_pass();
+  std::vector<float> snr(static_cast<std::size_t>(frontend.rows().rows()) * frontend.stride());
+  frontend.signal_to_noise_image(snr);
+  int peak_row = 0;
+  for (int r = 0; r < frontend.rows().rows(); ++r) {
+    if (snr[r * frontend.stride() + 50] > snr[peak_row * frontend.stride() + 50]) peak_row = r;
+  }
+  const float band = frontend.band_passed()[peak_row * frontend.stride() + 50];
+  // No texture, no noise: the noise level is the minimum, 1, and the SNR is the band-pass.
+  EXPECT_GT(band, 1.0f);
+  EXPECT_FLOAT_EQ(snr[peak_row * frontend.stride() + 50], band);
+  EXPECT_FLOAT_EQ(frontend.snr_at(peak_row, 50), band);
+  EXPECT_NEAR(frontend.rows().to_source(peak_row), 100.0, 1.5);
+}
+
+TEST(Frontend, FindsAWideAndANarrowLineAtSubPixelRows) {
+  const ScannerGeometry g = small_geometry();
+  Frontend frontend(g, {});
+  frontend.reset(g.width, g.height);
+  // A sloping line: its true width follows the geometry (the normalisation is built for it).
+  auto centre = [](int u) { return 60.3 + 0.37 * u; };
+  Image image(g.width, g.height, 30);
+  for (int u = 0; u < g.width; ++u) {
+    const double sigma = std::max(0.8, frontend.rows().width_px(centre(u)) / 2.3548);
+    for (int v = 0; v < g.height; ++v) {
+      const double d = v - centre(u);
+      image.pixels[v * g.width + u] =
+          static_cast<std::uint8_t>(std::round(30 + 150 * std::exp(-d * d / (2 * sigma * sigma))));
+    }
+  }
+  frontend.normalise(image.view());
+  frontend.band_pass();
+  Profile out(static_cast<std::size_t>(g.width) * 4);
+  frontend.find_candidates(out);
+  int found = 0;
+  double worst = 0;
+  for (const ProfilePoint& p : out.points()) {
+    if (!p.valid) continue;
+    ++found;
+    worst = std::max(worst, std::abs(p.v - centre(p.u)));
+  }
+  const double visible_columns =
+      (frontend.rows().source_row(frontend.rows().rows() - 5) - 60.3) / 0.37;
+  EXPECT_GE(found, static_cast<int>(0.95 * std::min<double>(visible_columns, g.width)));
+  EXPECT_LT(worst, 0.1);  // quantisation to 8 bit only
+}
+
+// A clipped core: the naive 3-point fit at the first saturated pixel is off by up to half the
+// run; the flank crossing finds the centre.
+TEST(Frontend, ClippedCoreIsCentredFromItsFlanks) {
+  const ScannerGeometry g = small_geometry();
+  Frontend frontend(g, {});
+  frontend.reset(g.width, g.height);
+  auto centre = [](int u) { return 120.0 + 0.013 * u; };  // sweeps the sub-pixel phase
+  Image image(g.width, g.height, 10);
+  image.add_line(centre, 900.0, 1.6);  // clips at 255 over about 5 rows
+  frontend.normalise(image.view());
+  frontend.band_pass();
+  Profile out(static_cast<std::size_t>(g.width) * 4);
+  frontend.find_candidates(out);
+  double sum_sq = 0, worst = 0;
+  int n = 0;
+  for (const ProfilePoint& p : out.points()) {
+    if (!p.valid) continue;
+    const double e = p.v - centre(p.u);
+    sum_sq += e * e;
+    worst = std::max(worst, std::abs(e));
+    ++n;
+  }
+  ASSERT_GT(n, g.width * 9 / 10);
+  EXPECT_LT(std::sqrt(sum_sq / n), 0.05);
+  EXPECT_LT(worst, 0.15);
+}
+
+TEST(Detectors, AreMadeByNameAndRefuseImpossibleOptions) {
+  DetectorOptions o;
+  o.geometry = small_geometry();
+  for (const std::string& name : detector_names()) {
+    auto detector = make_detector(name, o);
+    ASSERT_NE(detector, nullptr) << name;
+    EXPECT_EQ(detector->name(), name);
+  }
+  EXPECT_EQ(make_detector("nonsense", o), nullptr);
+  o.frontend.min_depth_m = 3.0;
+  o.frontend.max_depth_m = 2.0;
+  EXPECT_THROW(make_detector("fir", o), std::invalid_argument);
+  auto fir = make_detector("fir", DetectorOptions{});
+  EXPECT_THROW(fir->reset(640, 480), std::invalid_argument);  // not the calibrated size
+}
+
+TEST(Detectors, DoNotAllocatePerFrame) {
+  ASSERT_TRUE(testing::allocation_counter_works());
+  const tools::Scenario scenario = tools::standard_scenarios(640, 512)[1];  // ambient, scanning
+  hal::SimScene scene(scenario.scene);
+  DetectorOptions o;
+  o.geometry.width = 640;
+  o.geometry.height = 512;
+  o.geometry.fx = o.geometry.fy = scenario.scene.calibration.camera.fx;
+  o.geometry.cx = scenario.scene.calibration.camera.cx;
+  o.geometry.cy = scenario.scene.calibration.camera.cy;
+  std::vector<std::vector<std::uint8_t>> frames(4, std::vector<std::uint8_t>(640 * 512));
+  for (int i = 0; i < 4; ++i)
+    scene.render(static_cast<std::uint64_t>(i), true, frames[i]);
+  for (const std::string& name : detector_names()) {
+    auto detector = make_detector(name, o);
+    detector->reset(640, 512);
+    Profile out(detector->max_points(640, 512));
+    detector->detect({frames[0].data(), 640, 512, 640}, {0, true}, out);  // first frame
+    testing::start_counting_allocations();
+    for (std::uint64_t i = 1; i < 4; ++i) {
+      detector->detect({frames[i].data(), 640, 512, 640}, {i, true}, out);
+    }
+    const testing::Allocations counted = testing::stop_counting_allocations();
+    EXPECT_EQ(counted.count, 0) << name << " allocated " << counted.bytes << " bytes";
+    if (name != "maxvalue") {
+      EXPECT_GT(out.size(), 100u) << name;
+    }
+  }
+}
+
+// ---- Accuracy against the simulator's exact ground truth ---------------------------------------
+
+tools::Score score(const std::string& scenario_name, const std::string& detector,
+                   DetectorOptions options = {}) {
+  for (const tools::Scenario& scenario : tools::standard_scenarios()) {
+    if (scenario.name != scenario_name) continue;
+    const tools::Score s = tools::evaluate(scenario, detector, options, 2.0);
+    std::printf("%-18s %-11s recall %6.2f%% precision %6.2f%% rms %.3f px bias %+.3f px\n",
+                scenario_name.c_str(), detector.c_str(), 100 * s.recall(), 100 * s.precision(),
+                s.rms(), s.bias());
+    return s;
+  }
+  ADD_FAILURE() << "no scenario " << scenario_name;
+  return {};
+}
+
+TEST(Accuracy, CleanSceneIsSubPixel) {
+  for (const char* detector : {"fir", "background"}) {
+    const tools::Score s = score("clean", detector);
+    EXPECT_GE(s.recall(), 0.99) << detector;
+    EXPECT_LE(s.rms(), 0.05) << detector;
+    EXPECT_LE(std::abs(s.bias()), 0.02) << detector;
+  }
+}
+
+TEST(Accuracy, BackgroundSubtractionWinsUnderStrongAmbientLight) {
+  for (const char* scenario : {"ambient", "ambient-alternate"}) {
+    const tools::Score background = score(scenario, "background");
+    EXPECT_GE(background.recall(), 0.98) << scenario;
+    EXPECT_GE(background.precision(), 0.99) << scenario;
+  }
+  // Where the maximum-value assumption fails, the simple detectors visibly do.
+  EXPECT_LT(score("ambient", "maxvalue").recall(), 0.6);
+  EXPECT_LT(score("ambient", "fir").recall(), 0.6);
+}
+
+TEST(Accuracy, BandPassFindsTheLineInBackscatterAtTheLowestThreshold) {
+  DetectorOptions o;
+  o.frontend.snr_threshold_db = 3.0;  // paper V-B: below 3 dB no clear detection
+  const tools::Score s = score("backscatter", "fir", o);
+  EXPECT_GE(s.recall(), 0.95);
+  EXPECT_GE(s.precision(), 0.95);
+}
+
+TEST(Accuracy, ClippedLineStaysSubPixel) {
+  for (const char* detector : {"fir", "background"}) {
+    const tools::Score s = score("clipped", detector);
+    EXPECT_GE(s.recall(), 0.99) << detector;
+    EXPECT_LE(s.rms(), 0.1) << detector;
+  }
+}
+
+}  // namespace
+}  // namespace laserline::pipeline
