@@ -123,7 +123,7 @@ void Frontend::reset(int width, int height) {
   height_ = height;
   stride_ = (width + kBlock - 1) / kBlock * kBlock;
   const auto n = static_cast<std::size_t>(rows_.rows()) * stride_;
-  prefix_.assign(n + stride_, 0.0f);
+  prefix_.assign(n + stride_, 0);
   band_passed_.assign(n, 0.0f);
   abs_prefix_.assign(n + stride_, 0.0f);
   row_mask_.assign(static_cast<std::size_t>(stride_), 0);
@@ -133,30 +133,52 @@ void Frontend::reset(int width, int height) {
 
 namespace {
 
-// One row of the normalised image, accumulated into the column prefix sums: sum = above + value,
-// value = the current frame interpolated between rows a and b.
-void accumulate_row(const std::uint8_t* __restrict a, const std::uint8_t* __restrict b, float f,
-                    const float* __restrict above, int count, float* __restrict sum) {
+// The normalised image is held in fixed point, 1/256 grey level: interpolation weights of 8 bit
+// and 16-bit lanes (twice the floats per vector), clipping at 0 by a saturating subtraction, and
+// exact 32-bit column prefix sums (no rounding drift down a column).
+constexpr int kFixedOne = 256;
+
+inline std::uint16_t fixed_weight(float t) {
+  return static_cast<std::uint16_t>(std::clamp(t, 0.0f, 1.0f) * kFixedOne + 0.5f);
+}
+
+// One row of the normalised image accumulated into the column prefix sums: sum = above + value,
+// value = the current frame interpolated between rows a and b (weight fb of b).
+void accumulate_row(const std::uint8_t* __restrict a, const std::uint8_t* __restrict b,
+                    std::uint16_t fb, const std::int32_t* __restrict above, int count,
+                    std::int32_t* __restrict sum) {
+  const auto fa = static_cast<std::uint16_t>(kFixedOne - fb);
   for (int u = 0; u < count; ++u) {
-    const float x = static_cast<float>(a[u]);
-    sum[u] = above[u] + (x + f * (static_cast<float>(b[u]) - x));
+    const auto value = static_cast<std::uint16_t>(a[u] * fa + b[u] * fb);
+    sum[u] = above[u] + value;
   }
 }
 
-// The same minus the background sampled bilinearly at a constant sub-pixel shift (rows p and q of
-// the background, weights w), clipped at 0.
+// The same for one warp block, minus the background sampled bilinearly at a constant sub-pixel
+// shift (rows p and q of the background, weights w summing to 256), clipped at 0.
 void accumulate_difference(const std::uint8_t* __restrict a, const std::uint8_t* __restrict b,
-                           float f, const std::uint8_t* __restrict p,
-                           const std::uint8_t* __restrict q, const std::array<float, 4>& w,
-                           const float* __restrict above, int count, float* __restrict sum) {
-  const float w00 = w[0], w01 = w[1], w10 = w[2], w11 = w[3];
-  for (int k = 0; k < count; ++k) {
-    const float x = static_cast<float>(a[k]);
-    const float current = x + f * (static_cast<float>(b[k]) - x);
-    const float warped = w00 * static_cast<float>(p[k]) + w01 * static_cast<float>(p[k + 1]) +
-                         w10 * static_cast<float>(q[k]) + w11 * static_cast<float>(q[k + 1]);
-    sum[k] = above[k] + std::max(current - warped, 0.0f);
+                           std::uint16_t fb, const std::uint8_t* __restrict p,
+                           const std::uint8_t* __restrict q, const std::array<std::uint16_t, 4>& w,
+                           const std::int32_t* __restrict above, std::int32_t* __restrict sum) {
+  const auto fa = static_cast<std::uint16_t>(kFixedOne - fb);
+  const std::uint16_t w00 = w[0], w01 = w[1], w10 = w[2], w11 = w[3];
+  for (int k = 0; k < Frontend::kWarpBlock; ++k) {
+    const auto current = static_cast<std::uint16_t>(a[k] * fa + b[k] * fb);
+    const auto warped =
+        static_cast<std::uint16_t>(p[k] * w00 + p[k + 1] * w01 + q[k] * w10 + q[k + 1] * w11);
+    const auto difference = static_cast<std::uint16_t>(current > warped ? current - warped : 0);
+    sum[k] = above[k] + difference;
   }
+}
+
+std::array<std::uint16_t, 4> bilinear_weights(float tx, float ty) {
+  const int wx = fixed_weight(tx), wy = fixed_weight(ty);
+  const int w00 = ((kFixedOne - wx) * (kFixedOne - wy) + kFixedOne / 2) / kFixedOne;
+  const int w01 = (wx * (kFixedOne - wy) + kFixedOne / 2) / kFixedOne;
+  const int w10 = ((kFixedOne - wx) * wy + kFixedOne / 2) / kFixedOne;
+  const int w11 = std::max(kFixedOne - w00 - w01 - w10, 0);  // the four sum to 256 (or 255)
+  return {static_cast<std::uint16_t>(w00), static_cast<std::uint16_t>(w01),
+          static_cast<std::uint16_t>(w10), static_cast<std::uint16_t>(w11)};
 }
 
 }  // namespace
@@ -170,7 +192,7 @@ void Frontend::normalise(const ImageView& current) {
     const float v = rows_.source_row(r);
     const int v0 = std::min(static_cast<int>(v), last);
     const int v1 = std::min(v0 + 1, last);
-    accumulate_row(current.row(v0), current.row(v1), v - static_cast<float>(v0),
+    accumulate_row(current.row(v0), current.row(v1), fixed_weight(v - static_cast<float>(v0)),
                    prefix_.data() + r * s, width_, prefix_.data() + (r + 1) * s);
   }
 }
@@ -190,43 +212,51 @@ void Frontend::normalise_subtracting(const ImageView& current, const ImageView& 
     const float f = v - static_cast<float>(v0);
     const std::uint8_t* a = current.row(v0);
     const std::uint8_t* b = current.row(v1);
-    const float* above = prefix_.data() + r * s;
-    float* sum = prefix_.data() + (r + 1) * s;
+    const std::int32_t* above = prefix_.data() + r * s;
+    std::int32_t* sum = prefix_.data() + (r + 1) * s;
+    const std::uint16_t fb = fixed_weight(f);
+    // Along the row the background position is a ratio of linear functions of u: numerators and
+    // denominator at u = 0, and their steps per pixel.
+    const auto& g = current_to_background.h;
+    const auto xn0 = static_cast<float>(g[1] * v + g[2]), xnu = static_cast<float>(g[0]);
+    const auto yn0 = static_cast<float>(g[4] * v + g[5]), ynu = static_cast<float>(g[3]);
+    const auto wn0 = static_cast<float>(g[7] * v + g[8]), wnu = static_cast<float>(g[6]);
     for (int u0 = 0; u0 < width_; u0 += kWarpBlock) {
       const int count = std::min(kWarpBlock, width_ - u0);
       // Where the block's centre was in the background; the block moves as a whole.
-      const double centre = u0 + 0.5 * (count - 1);
-      const auto [x, y] = current_to_background.map(centre, v);
-      const double x0 = x - (centre - u0);
-      const double fx0 = std::floor(x0), fy0 = std::floor(y);
-      if (!(fx0 >= 0.0 && fx0 + count < width_ && fy0 >= 0.0 && fy0 + 1 < height_)) {
+      const float centre = static_cast<float>(u0) + 0.5f * static_cast<float>(count - 1);
+      const float inv = 1.0f / (wn0 + wnu * centre);
+      const float y = (yn0 + ynu * centre) * inv;
+      const float x0 = (xn0 + xnu * centre) * inv - (centre - static_cast<float>(u0));
+      const float fx0 = std::floor(x0), fy0 = std::floor(y);
+      if (count != kWarpBlock || !(fx0 >= 0.0f && fx0 + static_cast<float>(count) < width_ &&
+                                   fy0 >= 0.0f && fy0 + 1.0f < height_)) {
         // At the border of the background frame, pixel by pixel; where there is nothing to
         // compare with there is no signal.
         for (int k = 0; k < count; ++k) {
-          const double xk = x0 + k;
+          const float xk = x0 + static_cast<float>(k);
           const float x_cur = static_cast<float>(a[u0 + k]);
           const float now = x_cur + f * (static_cast<float>(b[u0 + k]) - x_cur);
-          const bool inside = xk >= 0.0 && xk < width_ - 1 && y >= 0.0 && y < height_ - 1;
-          const float difference =
-              inside ? now - bilinear(background, static_cast<float>(xk), static_cast<float>(y))
-                     : 0.0f;
-          sum[u0 + k] = above[u0 + k] + std::max(difference, 0.0f);
+          const bool inside = xk >= 0.0f && xk < static_cast<float>(width_ - 1) && y >= 0.0f &&
+                              y < static_cast<float>(height_ - 1);
+          const float difference = inside ? now - bilinear(background, xk, y) : 0.0f;
+          sum[u0 + k] = above[u0 + k] + static_cast<std::int32_t>(
+                                            std::lround(std::max(difference, 0.0f) * kFixedOne));
         }
         continue;
       }
       const auto ix = static_cast<int>(fx0), iy = static_cast<int>(fy0);
-      const auto tx = static_cast<float>(x0 - fx0), ty = static_cast<float>(y - fy0);
-      const std::array<float, 4> w{(1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty};
+      const float tx = x0 - fx0, ty = y - fy0;
       const std::uint8_t* p = background.row(iy) + ix;
-      accumulate_difference(a + u0, b + u0, f, p, p + background.stride, w, above + u0, count,
-                            sum + u0);
+      accumulate_difference(a + u0, b + u0, fb, p, p + background.stride, bilinear_weights(tx, ty),
+                            above + u0, sum + u0);
     }
   }
 }
 
 float Frontend::normalised_at(int r, int u) const {
   const std::size_t s = static_cast<std::size_t>(stride_);
-  return prefix_[(r + 1) * s + u] - prefix_[r * s + u];
+  return static_cast<float>(prefix_[(r + 1) * s + u] - prefix_[r * s + u]) / kFixedOne;
 }
 
 void Frontend::band_pass() {
@@ -240,16 +270,18 @@ void Frontend::band_pass() {
   for (int r = 0; r < rows; ++r) {
     const int i0 = std::max(r - hi, 0), i1 = std::min(r + hi + 1, rows);
     const int o0 = std::max(r - ho, 0), o1 = std::min(r + ho + 1, rows);
-    const float wi = 1.0f / static_cast<float>(i1 - i0), wo = 1.0f / static_cast<float>(o1 - o0);
-    const float* __restrict i_hi = prefix_.data() + i1 * s;
-    const float* __restrict i_lo = prefix_.data() + i0 * s;
-    const float* __restrict o_hi = prefix_.data() + o1 * s;
-    const float* __restrict o_lo = prefix_.data() + o0 * s;
+    const float wi = 1.0f / static_cast<float>((i1 - i0) * kFixedOne);
+    const float wo = 1.0f / static_cast<float>((o1 - o0) * kFixedOne);
+    const std::int32_t* __restrict i_hi = prefix_.data() + i1 * s;
+    const std::int32_t* __restrict i_lo = prefix_.data() + i0 * s;
+    const std::int32_t* __restrict o_hi = prefix_.data() + o1 * s;
+    const std::int32_t* __restrict o_lo = prefix_.data() + o0 * s;
     float* __restrict out = band_passed_.data() + r * s;
     const float* __restrict abs_above = abs_prefix_.data() + r * s;
     float* __restrict abs_sum = abs_prefix_.data() + (r + 1) * s;
     for (int u = 0; u < stride_; ++u) {
-      const float band = (i_hi[u] - i_lo[u]) * wi - (o_hi[u] - o_lo[u]) * wo;
+      const float band =
+          static_cast<float>(i_hi[u] - i_lo[u]) * wi - static_cast<float>(o_hi[u] - o_lo[u]) * wo;
       out[u] = band;
       abs_sum[u] = abs_above[u] + std::abs(band);
     }

@@ -104,7 +104,8 @@ class Frontend {
   bool subtracting_ = false;
   Homography to_background_;
 
-  std::vector<float> prefix_;           // (rows() + 1) x stride_: column prefix sums of the image
+  // (rows() + 1) x stride_: column prefix sums of the normalised image, 1/256 grey levels
+  std::vector<std::int32_t> prefix_;
   std::vector<float> band_passed_;      // rows() x stride_
   std::vector<float> abs_prefix_;       // (rows() + 1) x stride_: column prefix sums of |band|
   std::vector<std::uint8_t> row_mask_;  // one row: band-pass peaks above the threshold

@@ -80,7 +80,7 @@ TEST(Config, OutOfRangeNamesTheLimits) {
 
 TEST(Config, ChoicesListTheAlternatives) {
   EXPECT_EQ(error_of("detector:\n  name: magic\n"),
-            "test.yaml:2: detector.name: must be one of maxvalue, got 'magic'");
+            "test.yaml:2: detector.name: must be one of maxvalue, fir, background, got 'magic'");
   EXPECT_EQ(error_of("laser:\n  mode: blink\n"),
             "test.yaml:2: laser.mode: must be one of on, alternate, off, got 'blink'");
   EXPECT_EQ(error_of("camera:\n  backend: gige\n"),
