@@ -9,6 +9,15 @@
 
 #include "pipeline/subpixel.hpp"
 
+// The dense kernels are compiled twice on x86-64, for the baseline and for AVX2, and the loader
+// picks the one the CPU runs (GCC function multi-versioning): twice the lanes per instruction where
+// the machine has them, and the same binary still runs everywhere.
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define LASERLINE_DENSE_KERNEL __attribute__((target_clones("avx2", "default")))
+#else
+#define LASERLINE_DENSE_KERNEL
+#endif
+
 namespace laserline::pipeline {
 
 namespace {
@@ -126,7 +135,7 @@ void Frontend::reset(int width, int height) {
   prefix_.assign(n + stride_, 0);
   band_passed_.assign(n, 0.0f);
   abs_prefix_.assign(n + stride_, 0.0f);
-  row_mask_.assign(static_cast<std::size_t>(stride_), 0);
+  row_mask_.assign(static_cast<std::size_t>(stride_), 0u);
   column_best_.assign(static_cast<std::size_t>(width) * options_.max_candidates_per_column, {});
   column_count_.assign(static_cast<std::size_t>(width), 0);
 }
@@ -171,18 +180,44 @@ void accumulate_difference(const std::uint8_t* __restrict a, const std::uint8_t*
   }
 }
 
-std::array<std::uint16_t, 4> bilinear_weights(float tx, float ty) {
-  const int wx = fixed_weight(tx), wy = fixed_weight(ty);
-  const int w00 = ((kFixedOne - wx) * (kFixedOne - wy) + kFixedOne / 2) / kFixedOne;
-  const int w01 = (wx * (kFixedOne - wy) + kFixedOne / 2) / kFixedOne;
-  const int w10 = ((kFixedOne - wx) * wy + kFixedOne / 2) / kFixedOne;
-  const int w11 = std::max(kFixedOne - w00 - w01 - w10, 0);  // the four sum to 256 (or 255)
-  return {static_cast<std::uint16_t>(w00), static_cast<std::uint16_t>(w01),
-          static_cast<std::uint16_t>(w10), static_cast<std::uint16_t>(w11)};
+// One row of the band-pass from box sums over the column prefix sums (inner minus outer mean),
+// and the prefix sums of its magnitude.
+void band_pass_row(const std::int32_t* __restrict i_hi, const std::int32_t* __restrict i_lo,
+                   float wi, const std::int32_t* __restrict o_hi,
+                   const std::int32_t* __restrict o_lo, float wo, const float* __restrict abs_above,
+                   int count, float* __restrict out, float* __restrict abs_sum) {
+  for (int u = 0; u < count; ++u) {
+    const float band =
+        static_cast<float>(i_hi[u] - i_lo[u]) * wi - static_cast<float>(o_hi[u] - o_lo[u]) * wo;
+    out[u] = band;
+    abs_sum[u] = abs_above[u] + std::abs(band);
+  }
+}
+
+// Flags the pixels of a band-pass row at or above the threshold and above their neighbours in the
+// rows above and below. 32-bit flags: what a vector float comparison yields, so it vectorises.
+void mark_peaks(const float* __restrict row, const float* __restrict up,
+                const float* __restrict down, float threshold, int count,
+                std::uint32_t* __restrict mask) {
+  for (int u = 0; u < count; ++u) {
+    const float x = row[u];
+    mask[u] = (x >= threshold ? 1u : 0u) & (x > up[u] ? 1u : 0u) & (x >= down[u] ? 1u : 0u);
+  }
+}
+
+inline std::array<std::uint16_t, 4> bilinear_weights(float tx, float ty) {
+  const float one = kFixedOne;
+  const auto w00 = static_cast<std::uint16_t>((1.0f - tx) * (1.0f - ty) * one + 0.5f);
+  const auto w01 = static_cast<std::uint16_t>(tx * (1.0f - ty) * one + 0.5f);
+  const auto w10 = static_cast<std::uint16_t>((1.0f - tx) * ty * one + 0.5f);
+  // The four sum to 256 (w11 absorbs the rounding; it cannot go below 0 by more than rounding).
+  const int w11 = std::max(kFixedOne - w00 - w01 - w10, 0);
+  return {w00, w01, w10, static_cast<std::uint16_t>(w11)};
 }
 
 }  // namespace
 
+LASERLINE_DENSE_KERNEL
 void Frontend::normalise(const ImageView& current) {
   current_ = current;
   subtracting_ = false;
@@ -197,6 +232,7 @@ void Frontend::normalise(const ImageView& current) {
   }
 }
 
+LASERLINE_DENSE_KERNEL
 void Frontend::normalise_subtracting(const ImageView& current, const ImageView& background,
                                      const Homography& current_to_background) {
   current_ = current;
@@ -259,6 +295,7 @@ float Frontend::normalised_at(int r, int u) const {
   return static_cast<float>(prefix_[(r + 1) * s + u] - prefix_[r * s + u]) / kFixedOne;
 }
 
+LASERLINE_DENSE_KERNEL
 void Frontend::band_pass() {
   const int rows = rows_.rows();
   const std::size_t s = static_cast<std::size_t>(stride_);
@@ -276,15 +313,8 @@ void Frontend::band_pass() {
     const std::int32_t* __restrict i_lo = prefix_.data() + i0 * s;
     const std::int32_t* __restrict o_hi = prefix_.data() + o1 * s;
     const std::int32_t* __restrict o_lo = prefix_.data() + o0 * s;
-    float* __restrict out = band_passed_.data() + r * s;
-    const float* __restrict abs_above = abs_prefix_.data() + r * s;
-    float* __restrict abs_sum = abs_prefix_.data() + (r + 1) * s;
-    for (int u = 0; u < stride_; ++u) {
-      const float band =
-          static_cast<float>(i_hi[u] - i_lo[u]) * wi - static_cast<float>(o_hi[u] - o_lo[u]) * wo;
-      out[u] = band;
-      abs_sum[u] = abs_above[u] + std::abs(band);
-    }
+    band_pass_row(i_hi, i_lo, wi, o_hi, o_lo, wo, abs_prefix_.data() + r * s, stride_,
+                  band_passed_.data() + r * s, abs_prefix_.data() + (r + 1) * s);
   }
 }
 
@@ -417,6 +447,7 @@ float Frontend::refine_row(int u, float v_guess) const {
   return static_cast<float>(best) + static_cast<float>(spacing) * gaussian_offset(a, b, c);
 }
 
+LASERLINE_DENSE_KERNEL
 void Frontend::find_candidates(Profile& out) {
   out.clear();
   const int rows = rows_.rows();
@@ -429,21 +460,20 @@ void Frontend::find_candidates(Profile& out) {
   // maxima of the SNR too. Rows in the margins are outside the depth range.
   const int reach = std::max(1, inner_ / 2 + 1);
   const int margin = outer_ / 2 + 2;
-  std::uint8_t* __restrict mask = row_mask_.data();
+  std::uint32_t* __restrict mask = row_mask_.data();
   for (int r = std::max(margin, reach); r < rows - std::max(margin, reach); ++r) {
     const float* __restrict row = band_passed_.data() + r * s;
     const float* __restrict up = row - s;
     const float* __restrict down = row + s;
     // The dense part, branch-free so that it vectorises: above the threshold and above the
     // direct neighbours. The wider window is checked on the few pixels that pass.
-    for (int u = 0; u < stride_; ++u) {
-      mask[u] = (row[u] >= threshold) & (row[u] > up[u]) & (row[u] >= down[u]);
-    }
-    for (int u0 = 0; u0 < width_; u0 += 8) {
-      std::uint64_t word;
-      std::memcpy(&word, mask + u0, sizeof word);
-      if (word == 0) continue;
-      for (int u = u0; u < std::min(u0 + 8, width_); ++u) {
+    mark_peaks(row, up, down, threshold, stride_, mask);
+    for (int u0 = 0; u0 < width_; u0 += kBlock) {
+      std::uint32_t any = 0;
+      for (int k = 0; k < kBlock; ++k)
+        any |= mask[u0 + k];
+      if (any == 0) continue;
+      for (int u = u0; u < std::min(u0 + kBlock, width_); ++u) {
         if (!mask[u]) continue;
         const float value = row[u];
         bool peak = true;

@@ -278,6 +278,42 @@ TEST_F(DaemonOverLcm, ProfilesMatchTheSimulatorGroundTruth) {
       << "arrival comes after exposure";
 }
 
+// The paper's background detector in the daemon: a pan-tilt unit sweeping a wall lit as brightly
+// as the laser, where the maximum-value assumption fails.
+TEST_F(DaemonOverLcm, BackgroundDetectorFindsTheLineUnderStrongAmbientLight) {
+  std::string config_text = test_config();
+  config_text.replace(config_text.find("ambient: 25"), 11, "ambient: 150");
+  config_text.replace(config_text.find("laser_peak: 190"), 15,
+                      "laser_peak: 110, scan_rate_deg_s: 10, scan_amplitude_deg: 10");
+  config_text.replace(config_text.find("detector: {name: maxvalue, maxvalue: {threshold: 60}}"), 53,
+                      "detector: {name: background}");
+  const Received rx = run_daemon(config_text, 3.0, SIGTERM);
+  ASSERT_GE(rx.profiles.size(), 50u / kSlowdown) << daemon_log();
+
+  laserline::daemon::DaemonConfig config = laserline::daemon::parse_config(
+      laserline::hal::load_yaml_text(config_text, "test.yaml"), "test.yaml");
+  laserline::hal::YamlMap sim = config.camera_options.map("sim");
+  laserline::hal::SimScene scene(
+      laserline::hal::read_sim_options(sim, config.calibration, config.frame_rate_hz));
+  laserline::hal::SimGroundTruth truth;
+  std::int64_t valid = 0, correct = 0, truth_columns = 0;
+  for (const auto& p : rx.profiles) {
+    EXPECT_EQ(p.detector, "background");
+    if (p.num_points == 0) continue;  // the first frame has no previous one to subtract
+    scene.ground_truth(static_cast<std::uint64_t>(p.sequence), true, truth);
+    for (float row : truth.row)
+      truth_columns += std::isfinite(row) ? 1 : 0;
+    for (const auto& pt : p.points) {
+      if (!pt.valid) continue;
+      ++valid;
+      const float expected = truth.row[static_cast<std::size_t>(pt.u)];
+      if (std::isfinite(expected) && std::abs(pt.v - expected) <= 2.0f) ++correct;
+    }
+  }
+  EXPECT_GE(static_cast<double>(correct), 0.95 * static_cast<double>(truth_columns));
+  EXPECT_GE(static_cast<double>(correct), 0.98 * static_cast<double>(valid));
+}
+
 TEST_F(DaemonOverLcm, AlternatingLaserSwitchesPerFrameAndSigintStops) {
   const Received rx = run_daemon(test_config("mode: alternate"), 2.0, SIGINT);
   ASSERT_GE(rx.profiles.size(), 40u / kSlowdown);

@@ -137,24 +137,25 @@ bool write_overlay(const Listener& l, const std::string& path) {
   for (const auto& p : l.recent) {
     if (p.sequence == img.sequence) match = &p;
   }
-  int drawn = 0;
+  int drawn = 0, rejected = 0;
   if (match != nullptr) {
     constexpr int kShift = 4;  // sub-pixel drawing: coordinates in 1/16 px
     for (const auto& pt : match->points) {
       const cv::Point centre(static_cast<int>(std::lround(pt.u * 16.0)),
                              static_cast<int>(std::lround(pt.v * 16.0)));
+      // Valid points red, rejected candidates blue.
       const cv::Scalar colour = pt.valid ? cv::Scalar(0, 0, 255) : cv::Scalar(255, 128, 0);
       // Half a pixel: the point marks the centre and leaves the line's flanks visible.
       cv::circle(overlay, centre, 1 << (kShift - 1), colour, cv::FILLED, cv::LINE_AA, kShift);
-      ++drawn;
+      ++(pt.valid ? drawn : rejected);
     }
   }
   if (!cv::imwrite(path, overlay)) {
     std::printf("  overlay: could not write %s\n", path.c_str());
     return false;
   }
-  std::printf("  overlay: %s (frame %lld, %d points drawn in red)\n", path.c_str(),
-              static_cast<long long>(img.sequence), drawn);
+  std::printf("  overlay: %s (frame %lld, %d points in red, %d rejected candidates in blue)\n",
+              path.c_str(), static_cast<long long>(img.sequence), drawn, rejected);
   return true;
 }
 
