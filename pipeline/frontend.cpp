@@ -520,7 +520,9 @@ void Frontend::find_candidates(Profile& out) {
     for (int i = 0; i < n; ++i) {
       ProfilePoint point;
       point.u = u;
-      point.v = refine_row(u, best[i].v);
+      // Only the chosen point gets the sub-pixel fit (the costly part of this stage); the others
+      // keep the band-pass peak's row, good to about half a laser width.
+      point.v = i == strongest ? refine_row(u, best[i].v) : best[i].v;
       point.snr_db = 20.0f * std::log10(best[i].snr);
       point.valid = i == strongest;
       if (!out.add(point)) return;

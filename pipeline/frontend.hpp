@@ -68,11 +68,12 @@ class Frontend {
   void normalise_subtracting(const ImageView& current, const ImageView& background,
                              const Homography& current_to_background);
   void band_pass();
-  // Local maxima of the band-pass along each column whose SNR passes the threshold (the
-  // max_candidates_per_column strongest; the strongest is valid, the others not), refined to
-  // sub-pixel rows in the original image (Gaussian 3-point fit on the background-free column; the
-  // centre of the run where the core is clipped). Uses the frames given to the last normalise
-  // call; they must still be valid.
+  // Local maxima of the band-pass along each column whose SNR passes the threshold, at most
+  // max_candidates_per_column (the strongest). The strongest is the valid point, refined to a
+  // sub-pixel row in the original image (Gaussian 3-point fit on the background-free column; the
+  // centre of the run where the core is clipped); the others are not valid and keep the row of
+  // their band-pass peak, good to half a laser width. Uses the frames given to the last
+  // normalise call; they must still be valid.
   void find_candidates(Profile& out);
 
   int width() const { return width_; }
