@@ -294,9 +294,11 @@ std::span<const std::array<float, 2>> MotionEstimator::rejected_features() const
 namespace {
 
 // Calls body(i) for i in [first, last). The blocks of a fixed length are what GCC's default -O2
-// ("very cheap") cost model is willing to vectorise; the rest runs one by one.
+// ("very cheap") cost model is willing to vectorise; the rest runs one by one. Flattened, so
+// that the body is inlined too. Its callers take __restrict pointers and stay out of line
+// (noinline): inlined, GCC loses the promise and declines to vectorise.
 template <typename Body>
-[[gnu::always_inline]] inline void for_each_index(int first, int last, Body body) {
+[[gnu::always_inline, gnu::flatten]] inline void for_each_index(int first, int last, Body body) {
   constexpr int kBlock = 16;
   int i = first;
   for (; i + kBlock <= last; i += kBlock) {
@@ -308,8 +310,9 @@ template <typename Body>
 }
 
 // 2x2 box average (rounded) of rows a and b into `count` pixels of out.
-void downsample_row(const std::uint8_t* __restrict a, const std::uint8_t* __restrict b,
-                    std::uint8_t* __restrict out, int count) {
+[[gnu::noinline]] void downsample_row(const std::uint8_t* __restrict a,
+                                      const std::uint8_t* __restrict b,
+                                      std::uint8_t* __restrict out, int count) {
   for_each_index(0, count, [&](int u) {
     const unsigned sum = 2u + a[2 * u] + a[2 * u + 1] + b[2 * u] + b[2 * u + 1];
     out[u] = static_cast<std::uint8_t>(sum >> 2);
@@ -331,6 +334,38 @@ void downsample(const Level& fine, Level& coarse) {
                    coarse.pixels.data() + static_cast<std::ptrdiff_t>(v) * coarse.width,
                    coarse.width);
   }
+}
+
+// Adds the gradient products of the row `mid` (doubled central differences) to the column sums
+// and replaces the products of the row three above (in xx, xy, yy) with them, for u in
+// [first, last).
+[[gnu::noinline]] void slide_structure_row(
+    const std::uint8_t* __restrict up, const std::uint8_t* __restrict mid,
+    const std::uint8_t* __restrict down, std::int32_t* __restrict xx, std::int32_t* __restrict xy,
+    std::int32_t* __restrict yy, std::int32_t* __restrict sum_xx, std::int32_t* __restrict sum_xy,
+    std::int32_t* __restrict sum_yy, int first, int last) {
+  for_each_index(first, last, [&](int u) {
+    const std::int32_t gx = mid[u + 1] - mid[u - 1];
+    const std::int32_t gy = down[u] - up[u];
+    const std::int32_t pxx = gx * gx, pxy = gx * gy, pyy = gy * gy;
+    sum_xx[u] += pxx - xx[u];
+    sum_xy[u] += pxy - xy[u];
+    sum_yy[u] += pyy - yy[u];
+    xx[u] = pxx;
+    xy[u] = pxy;
+    yy[u] = pyy;
+  });
+}
+
+// min(a, c) of the 3x3 structure tensor [a b; b c]: a bound of its smaller eigenvalue.
+[[gnu::noinline]] void eigenvalue_bound_row(const std::int32_t* __restrict sum_xx,
+                                            const std::int32_t* __restrict sum_yy,
+                                            std::int32_t* __restrict bound, int first, int last) {
+  for_each_index(first, last, [&](int u) {
+    const std::int32_t a = sum_xx[u - 1] + sum_xx[u] + sum_xx[u + 1];
+    const std::int32_t c = sum_yy[u - 1] + sum_yy[u] + sum_yy[u + 1];
+    bound[u] = std::min(a, c);
+  });
 }
 
 // Sum of the level's pixels in [u0, u0 + w) x [v0, v0 + h) (the caller keeps it inside).
@@ -549,23 +584,9 @@ void MotionEstimator::detect_features(int index, const ImageView& frame) {
   // Adds row v's products to the sums, replacing those of row v-3.
   const auto slide = [&](int v) {
     const int slot = v % 3;
-    const std::uint8_t* __restrict up = level.row(v - 1);
-    const std::uint8_t* __restrict mid = level.row(v);
-    const std::uint8_t* __restrict down = level.row(v + 1);
-    std::int32_t* __restrict xx = s.gxx[slot].data();
-    std::int32_t* __restrict xy = s.gxy[slot].data();
-    std::int32_t* __restrict yy = s.gyy[slot].data();
-    for_each_index(u_first, u_last + 1, [&](int u) {
-      const std::int32_t gx = mid[u + 1] - mid[u - 1];
-      const std::int32_t gy = down[u] - up[u];
-      const std::int32_t pxx = gx * gx, pxy = gx * gy, pyy = gy * gy;
-      sum_xx[u] += pxx - xx[u];
-      sum_xy[u] += pxy - xy[u];
-      sum_yy[u] += pyy - yy[u];
-      xx[u] = pxx;
-      xy[u] = pxy;
-      yy[u] = pyy;
-    });
+    slide_structure_row(level.row(v - 1), level.row(v), level.row(v + 1), s.gxx[slot].data(),
+                        s.gxy[slot].data(), s.gyy[slot].data(), sum_xx, sum_xy, sum_yy, u_first,
+                        u_last + 1);
   };
   const float floor4 = 4.0f * kMinEigenvalue;
   std::fill(s.cell_score.begin(), s.cell_score.end(), floor4);
@@ -575,11 +596,7 @@ void MotionEstimator::detect_features(int index, const ImageView& frame) {
   for (int v = s.margin; v < last; ++v) {
     slide(v + 1);
     // The smaller eigenvalue is at most min(a, c): most pixels stop at that bound.
-    for_each_index(s.margin, width - s.margin, [&](int u) {
-      const std::int32_t a = sum_xx[u - 1] + sum_xx[u] + sum_xx[u + 1];
-      const std::int32_t c = sum_yy[u - 1] + sum_yy[u] + sum_yy[u + 1];
-      bound[u] = std::min(a, c);
-    });
+    eigenvalue_bound_row(sum_xx, sum_yy, bound, s.margin, width - s.margin);
     float* cell_score = s.cell_score.data() + s.cell_of_row[v] * o.grid_columns;
     int* cell_u = s.cell_u.data() + s.cell_of_row[v] * o.grid_columns;
     int* cell_v = s.cell_v.data() + s.cell_of_row[v] * o.grid_columns;
