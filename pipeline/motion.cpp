@@ -24,6 +24,8 @@ constexpr float kMinEigenvalue = 9.0f;
 // the two halves), laid on a grid of step kHaarSize/2 across the neighbourhood. Boxes integrate
 // along the line, where the laser is coherent and the texture is not.
 constexpr int kHaarSize = 4;
+// Blocks across the laser filter's neighbourhood (radius 2 * window_radius) and one more.
+constexpr int kMaxHaarBlocks = (4 * kMaxWindowRadius) / (kHaarSize / 2) + 2;
 // A track has converged when its last update at full size moved it less than this (pixels).
 constexpr float kConvergedStep = 0.05f;
 constexpr float kStopStep = 0.01f;
@@ -368,33 +370,37 @@ void downsample(const Level& fine, Level& coarse) {
   });
 }
 
-// Sum of the level's pixels in [u0, u0 + w) x [v0, v0 + h) (the caller keeps it inside).
-int box_sum(const ImageView& level, int u0, int v0, int w, int h) {
-  int sum = 0;
-  for (int v = v0; v < v0 + h; ++v) {
-    const std::uint8_t* p = level.row(v) + u0;
-    for (int u = 0; u < w; ++u)
-      sum += p[u];
-  }
-  return sum;
-}
-
 // Paper IV-A: summed |Haar d/dv| over summed |Haar d/du| in the neighbourhood of (u, v), detect
 // level coordinates. A bright line along the rows answers across it (d/dv) far more than along it.
+// Wavelets of kHaarSize on a grid of step kHaarSize / 2, built from sums of half x half blocks.
 bool looks_like_laser(const ImageView& level, int u, int v, int radius, double ratio) {
   constexpr int half = kHaarSize / 2;
+  // Wavelet centres (x, y): du compares columns x-half .. x-1 with x .. x+half-1, dv rows alike.
   const int u_lo = std::max(u - radius, half), u_hi = std::min(u + radius, level.width - half);
   const int v_lo = std::max(v - radius, half), v_hi = std::min(v + radius, level.height - half);
+  if (u_hi < u_lo || v_hi < v_lo) return false;
+  const int columns = (u_hi - u_lo) / half + 1, rows = (v_hi - v_lo) / half + 1;
+  // block[j][i]: sum of the half x half block whose top left corner is
+  // (u_lo - half + i * half, v_lo - half + j * half).
+  std::array<std::array<int, kMaxHaarBlocks>, kMaxHaarBlocks> block;
+  for (int j = 0; j <= rows; ++j) {
+    for (int i = 0; i <= columns; ++i) {
+      int sum = 0;
+      for (int y = 0; y < half; ++y) {
+        const std::uint8_t* p = level.row(v_lo - half + j * half + y) + (u_lo - half + i * half);
+        for (int x = 0; x < half; ++x)
+          sum += p[x];
+      }
+      block[j][i] = sum;
+    }
+  }
   long long sum_du = 0, sum_dv = 0;
-  for (int y = v_lo; y <= v_hi; y += half) {
-    for (int x = u_lo; x <= u_hi; x += half) {
-      // Wavelets centred between pixels x-1 and x (du), rows y-1 and y (dv).
-      const int left = box_sum(level, x - half, y - half, half, kHaarSize);
-      const int right = box_sum(level, x, y - half, half, kHaarSize);
-      const int top = box_sum(level, x - half, y - half, kHaarSize, half);
-      const int bottom = box_sum(level, x - half, y, kHaarSize, half);
-      sum_du += std::abs(right - left);
-      sum_dv += std::abs(bottom - top);
+  for (int j = 0; j < rows; ++j) {
+    for (int i = 0; i < columns; ++i) {
+      const int top_left = block[j][i], top_right = block[j][i + 1];
+      const int bottom_left = block[j + 1][i], bottom_right = block[j + 1][i + 1];
+      sum_du += std::abs(top_right + bottom_right - top_left - bottom_left);
+      sum_dv += std::abs(bottom_left + bottom_right - top_left - top_right);
     }
   }
   return static_cast<double>(sum_dv) > ratio * static_cast<double>(sum_du);
