@@ -703,7 +703,11 @@ MotionEstimate MotionEstimator::estimate_from_previous(int current, const ImageV
   estimate.inliers = inliers;
   estimate.rms_px = static_cast<float>(std::sqrt(sum_squared / std::max(inliers, 1)));
   estimate.previous_to_current = h;
-  estimate.valid = inliers >= o.min_inliers;
+  // A frame-to-frame motion never mirrors the image: the local scale at the centre is positive.
+  const double cu = 0.5 * (s.width - 1), cv = 0.5 * (s.height - 1);
+  const double w = h.h[6] * cu + h.h[7] * cv + h.h[8];
+  const double determinant = to_matrix(h).determinant();
+  estimate.valid = inliers >= o.min_inliers && w > 0 && determinant > 0;
   return estimate;
 }
 
@@ -772,15 +776,12 @@ bool MotionEstimator::fit_homography(int n, Homography& result, int& inlier_coun
   bool found = false;
   int iterations_needed = o.ransac_iterations;
   for (int iteration = 0; iteration < iterations_needed; ++iteration) {
+    // Four distinct tracks: the first steps of a Fisher-Yates shuffle (bounded, no retries).
+    int* order = s.all_index.data();
     int pick[4];
     for (int k = 0; k < 4; ++k) {
-      bool repeated = true;
-      while (repeated) {
-        pick[k] = random.below(n);
-        repeated = false;
-        for (int j = 0; j < k; ++j)
-          repeated = repeated || pick[j] == pick[k];
-      }
+      std::swap(order[k], order[k + random.below(n - k)]);
+      pick[k] = order[k];
     }
     double x[4], y[4], xp[4], yp[4];
     for (int k = 0; k < 4; ++k) {
