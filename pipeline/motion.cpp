@@ -24,9 +24,12 @@ constexpr float kMinEigenvalue = 9.0f;
 // the two halves), laid on a grid of step kHaarSize/2 across the neighbourhood. Boxes integrate
 // along the line, where the laser is coherent and the texture is not.
 constexpr int kHaarSize = 4;
+// Blocks across the laser filter's neighbourhood (radius 2 * window_radius) and one more.
+constexpr int kMaxHaarBlocks = (4 * kMaxWindowRadius) / (kHaarSize / 2) + 2;
 // A track has converged when its last update at full size moved it less than this (pixels).
 constexpr float kConvergedStep = 0.05f;
 constexpr float kStopStep = 0.01f;
+constexpr float kCoarseStopStep = 0.05f;
 constexpr double kRansacConfidence = 0.999;
 constexpr std::uint64_t kRansacSeed = 0x9e3779b97f4a7c15ull;
 
@@ -37,6 +40,7 @@ struct Level {
   const std::uint8_t* row(int v) const {
     return pixels.data() + static_cast<std::ptrdiff_t>(v) * width;
   }
+  ImageView view() const { return ImageView{pixels.data(), width, height, width}; }
 };
 
 struct Pyramid {
@@ -136,18 +140,23 @@ struct MotionEstimator::State {
   std::array<std::vector<Point>, 2> features;
   std::array<int, 2> feature_count{};
   std::array<std::vector<Point>, 2> rejected;
+  // Full-size frames are not kept, only the (2r+3)^2 patch around each feature (what the
+  // tracker's full-size template needs): patch_bytes per feature.
+  std::array<std::vector<std::uint8_t>, 2> patches;
+  int patch_bytes = 0;
   std::array<int, 2> rejected_count{};
   int reported_rejected = -1;  // index of the rejected list the last update() reports, -1: none
 
   std::vector<FeatureTrack> tracks;
   int track_count = 0;
 
-  // Feature detection at the detect level: margin, cell of every column and row of the valid area.
+  // Feature detection at the detect level: border kept clear, grid cells of the area within.
   int margin = 0;
-  std::vector<int> cell_of_column;
   std::vector<int> cell_of_row;
-  std::array<std::vector<float>, 3> gxx, gxy, gyy;  // rolling rows of gradient products
-  std::vector<float> score_row;
+  std::vector<int> cell_start;  // first column of each grid column, and one past the last
+  std::array<std::vector<std::int32_t>, 3> gxx, gxy, gyy;     // rolling rows of gradient products
+  std::vector<std::int32_t> column_xx, column_xy, column_yy;  // their sums over three rows
+  std::vector<std::int32_t> eigen_bound;  // per column of the row: bound of the smaller eigenvalue
   std::vector<float> cell_score;
   std::vector<int> cell_u, cell_v;
 
@@ -224,7 +233,8 @@ void MotionEstimator::reset(int width, int height) {
   for (Pyramid& pyramid : s.pyramids) {
     for (int l = 0; l < kMaxLevels; ++l) {
       Level& level = pyramid.levels[l];
-      if (l < o.pyramid_levels) {
+      // Full size is not kept (see State::patches).
+      if (l >= 1 && l < o.pyramid_levels) {
         level.width = width >> l;
         level.height = height >> l;
         level.pixels.assign(static_cast<std::size_t>(level.width) * level.height, 0);
@@ -237,17 +247,16 @@ void MotionEstimator::reset(int width, int height) {
   s.height = height;
 
   const int cells = o.grid_columns * o.grid_rows;
+  s.patch_bytes = (2 * o.window_radius + 3) * (2 * o.window_radius + 3);
   for (int i = 0; i < 2; ++i) {
     s.features[i].assign(cells, Point{});
+    s.patches[i].assign(static_cast<std::size_t>(cells) * s.patch_bytes, 0);
     s.rejected[i].assign(cells, Point{});
     s.feature_count[i] = 0;
     s.rejected_count[i] = 0;
   }
   s.tracks.assign(cells, FeatureTrack{});
 
-  s.cell_of_column.assign(detect_width, -1);
-  for (int u = s.margin; u < detect_width - s.margin; ++u)
-    s.cell_of_column[u] = (u - s.margin) * o.grid_columns / valid_width;
   s.cell_of_row.assign(detect_height, -1);
   for (int v = s.margin; v < detect_height - s.margin; ++v)
     s.cell_of_row[v] = (v - s.margin) * o.grid_rows / valid_height;
@@ -256,7 +265,11 @@ void MotionEstimator::reset(int width, int height) {
     s.gxy[i].assign(detect_width, 0);
     s.gyy[i].assign(detect_width, 0);
   }
-  s.score_row.assign(detect_width, 0);
+  for (auto* v : {&s.column_xx, &s.column_xy, &s.column_yy, &s.eigen_bound})
+    v->assign(detect_width, 0);
+  s.cell_start.assign(o.grid_columns + 1, 0);
+  for (int column = 0; column <= o.grid_columns; ++column)
+    s.cell_start[column] = s.margin + (column * valid_width + o.grid_columns - 1) / o.grid_columns;
   s.cell_score.assign(cells, 0);
   s.cell_u.assign(cells, 0);
   s.cell_v.assign(cells, 0);
@@ -282,74 +295,144 @@ std::span<const std::array<float, 2>> MotionEstimator::rejected_features() const
 
 namespace {
 
-void copy_level0(const ImageView& frame, Level& level) {
-  for (int v = 0; v < level.height; ++v) {
-    std::memcpy(level.pixels.data() + static_cast<std::ptrdiff_t>(v) * level.width, frame.row(v),
-                static_cast<std::size_t>(level.width));
+// Calls body(i) for i in [first, last). The blocks of a fixed length are what GCC's default -O2
+// ("very cheap") cost model is willing to vectorise; the rest runs one by one. Flattened, so
+// that the body is inlined too. Its callers take __restrict pointers and stay out of line
+// (noinline): inlined, GCC loses the promise and declines to vectorise.
+template <typename Body>
+[[gnu::always_inline, gnu::flatten]] inline void for_each_index(int first, int last, Body body) {
+  constexpr int kBlock = 16;
+  int i = first;
+  for (; i + kBlock <= last; i += kBlock) {
+    for (int k = 0; k < kBlock; ++k)
+      body(i + k);
+  }
+  for (; i < last; ++i)
+    body(i);
+}
+
+// 2x2 box average (rounded) of rows a and b into `count` pixels of out.
+[[gnu::noinline]] void downsample_row(const std::uint8_t* __restrict a,
+                                      const std::uint8_t* __restrict b,
+                                      std::uint8_t* __restrict out, int count) {
+  for_each_index(0, count, [&](int u) {
+    const unsigned sum = 2u + a[2 * u] + a[2 * u + 1] + b[2 * u] + b[2 * u + 1];
+    out[u] = static_cast<std::uint8_t>(sum >> 2);
+  });
+}
+
+// Level 1 of the frame (full size is not kept: the tracker keeps patches of it, see State).
+void downsample_frame(const ImageView& frame, Level& level1) {
+  for (int v = 0; v < level1.height; ++v) {
+    downsample_row(frame.row(2 * v), frame.row(2 * v + 1),
+                   level1.pixels.data() + static_cast<std::ptrdiff_t>(v) * level1.width,
+                   level1.width);
   }
 }
 
-// 2x2 box average, rounded.
 void downsample(const Level& fine, Level& coarse) {
   for (int v = 0; v < coarse.height; ++v) {
-    const std::uint8_t* a = fine.row(2 * v);
-    const std::uint8_t* b = fine.row(2 * v + 1);
-    std::uint8_t* out = coarse.pixels.data() + static_cast<std::ptrdiff_t>(v) * coarse.width;
-    for (int u = 0; u < coarse.width; ++u) {
-      const unsigned sum = 2u + a[2 * u] + a[2 * u + 1] + b[2 * u] + b[2 * u + 1];
-      out[u] = static_cast<std::uint8_t>(sum >> 2);
-    }
+    downsample_row(fine.row(2 * v), fine.row(2 * v + 1),
+                   coarse.pixels.data() + static_cast<std::ptrdiff_t>(v) * coarse.width,
+                   coarse.width);
   }
 }
 
-// Sum of the level's pixels in [u0, u0 + w) x [v0, v0 + h) (the caller keeps it inside).
-int box_sum(const Level& level, int u0, int v0, int w, int h) {
-  int sum = 0;
-  for (int v = v0; v < v0 + h; ++v) {
-    const std::uint8_t* p = level.row(v) + u0;
-    for (int u = 0; u < w; ++u)
-      sum += p[u];
-  }
-  return sum;
+// Adds the gradient products of the row `mid` (doubled central differences) to the column sums
+// and replaces the products of the row three above (in xx, xy, yy) with them, for u in
+// [first, last).
+[[gnu::noinline]] void slide_structure_row(
+    const std::uint8_t* __restrict up, const std::uint8_t* __restrict mid,
+    const std::uint8_t* __restrict down, std::int32_t* __restrict xx, std::int32_t* __restrict xy,
+    std::int32_t* __restrict yy, std::int32_t* __restrict sum_xx, std::int32_t* __restrict sum_xy,
+    std::int32_t* __restrict sum_yy, int first, int last) {
+  for_each_index(first, last, [&](int u) {
+    const std::int32_t gx = mid[u + 1] - mid[u - 1];
+    const std::int32_t gy = down[u] - up[u];
+    const std::int32_t pxx = gx * gx, pxy = gx * gy, pyy = gy * gy;
+    sum_xx[u] += pxx - xx[u];
+    sum_xy[u] += pxy - xy[u];
+    sum_yy[u] += pyy - yy[u];
+    xx[u] = pxx;
+    xy[u] = pxy;
+    yy[u] = pyy;
+  });
+}
+
+// min(a, c) of the 3x3 structure tensor [a b; b c]: a bound of its smaller eigenvalue.
+[[gnu::noinline]] void eigenvalue_bound_row(const std::int32_t* __restrict sum_xx,
+                                            const std::int32_t* __restrict sum_yy,
+                                            std::int32_t* __restrict bound, int first, int last) {
+  for_each_index(first, last, [&](int u) {
+    const std::int32_t a = sum_xx[u - 1] + sum_xx[u] + sum_xx[u + 1];
+    const std::int32_t c = sum_yy[u - 1] + sum_yy[u] + sum_yy[u + 1];
+    bound[u] = std::min(a, c);
+  });
 }
 
 // Paper IV-A: summed |Haar d/dv| over summed |Haar d/du| in the neighbourhood of (u, v), detect
 // level coordinates. A bright line along the rows answers across it (d/dv) far more than along it.
-bool looks_like_laser(const Level& level, int u, int v, int radius, double ratio) {
+// Wavelets of kHaarSize on a grid of step kHaarSize / 2, built from sums of half x half blocks.
+bool looks_like_laser(const ImageView& level, int u, int v, int radius, double ratio) {
   constexpr int half = kHaarSize / 2;
+  // Wavelet centres (x, y): du compares columns x-half .. x-1 with x .. x+half-1, dv rows alike.
   const int u_lo = std::max(u - radius, half), u_hi = std::min(u + radius, level.width - half);
   const int v_lo = std::max(v - radius, half), v_hi = std::min(v + radius, level.height - half);
+  if (u_hi < u_lo || v_hi < v_lo) return false;
+  const int columns = (u_hi - u_lo) / half + 1, rows = (v_hi - v_lo) / half + 1;
+  // block[j][i]: sum of the half x half block whose top left corner is
+  // (u_lo - half + i * half, v_lo - half + j * half).
+  std::array<std::array<int, kMaxHaarBlocks>, kMaxHaarBlocks> block;
+  for (int j = 0; j <= rows; ++j) {
+    for (int i = 0; i <= columns; ++i) {
+      int sum = 0;
+      for (int y = 0; y < half; ++y) {
+        const std::uint8_t* p = level.row(v_lo - half + j * half + y) + (u_lo - half + i * half);
+        for (int x = 0; x < half; ++x)
+          sum += p[x];
+      }
+      block[j][i] = sum;
+    }
+  }
   long long sum_du = 0, sum_dv = 0;
-  for (int y = v_lo; y <= v_hi; y += half) {
-    for (int x = u_lo; x <= u_hi; x += half) {
-      // Wavelets centred between pixels x-1 and x (du), rows y-1 and y (dv).
-      const int left = box_sum(level, x - half, y - half, half, kHaarSize);
-      const int right = box_sum(level, x, y - half, half, kHaarSize);
-      const int top = box_sum(level, x - half, y - half, kHaarSize, half);
-      const int bottom = box_sum(level, x - half, y, kHaarSize, half);
-      sum_du += std::abs(right - left);
-      sum_dv += std::abs(bottom - top);
+  for (int j = 0; j < rows; ++j) {
+    for (int i = 0; i < columns; ++i) {
+      const int top_left = block[j][i], top_right = block[j][i + 1];
+      const int bottom_left = block[j + 1][i], bottom_right = block[j + 1][i + 1];
+      sum_du += std::abs(top_right + bottom_right - top_left - bottom_left);
+      sum_dv += std::abs(bottom_left + bottom_right - top_left - top_right);
     }
   }
   return static_cast<double>(sum_dv) > ratio * static_cast<double>(sum_du);
 }
 
-// Samples a (2n+1)^2 patch of `level` centred on (x, y) with bilinear interpolation; every sample
-// shares the same sub-pixel weights. False when a sample would fall outside.
-bool sample_patch(const Level& level, float x, float y, int n, float* out) {
+// Samples a (2n+1)^2 patch of `image` centred on (x, y) with bilinear interpolation; every
+// sample shares the same sub-pixel weights, so rows are interpolated once and blended. False when
+// a sample would fall outside.
+bool sample_patch(const ImageView& image, float x, float y, int n, float* out) {
   const float fx = std::floor(x), fy = std::floor(y);
-  const int ix = static_cast<int>(fx), iy = static_cast<int>(fy);
-  if (ix - n < 0 || iy - n < 0 || ix + n + 1 >= level.width || iy + n + 1 >= level.height)
+  if (!(fx - n >= 0 && fy - n >= 0 && fx + n + 1 < image.width && fy + n + 1 < image.height))
     return false;
+  const int ix = static_cast<int>(fx), iy = static_cast<int>(fy);
   const float ax = x - fx, ay = y - fy;
-  const float w00 = (1 - ax) * (1 - ay), w01 = ax * (1 - ay), w10 = (1 - ax) * ay, w11 = ax * ay;
   const int side = 2 * n + 1;
+  std::array<float, kMaxPatch + 2> rows[2];
+  const auto interpolate_row = [&](int v, float* row) {
+    const std::uint8_t* p = image.row(v) + (ix - n);
+    for (int i = 0; i < side; ++i) {
+      const float a = p[i];
+      row[i] = a + ax * (static_cast<float>(p[i + 1]) - a);
+    }
+  };
+  float* upper = rows[0].data();
+  float* lower = rows[1].data();
+  interpolate_row(iy - n, upper);
   for (int j = 0; j < side; ++j) {
-    const std::uint8_t* a = level.row(iy - n + j) + (ix - n);
-    const std::uint8_t* b = a + level.width;
+    interpolate_row(iy - n + j + 1, lower);
     float* o = out + j * side;
     for (int i = 0; i < side; ++i)
-      o[i] = w00 * a[i] + w01 * a[i + 1] + w10 * b[i] + w11 * b[i + 1];
+      o[i] = upper[i] + ay * (lower[i] - upper[i]);
+    std::swap(upper, lower);
   }
   return true;
 }
@@ -359,11 +442,14 @@ struct TrackResult {
   bool converged = false;
 };
 
-// Pyramidal Lucas-Kanade (translation only) of the point (pu, pv), full-size coordinates, from
-// the previous pyramid into the current one, coarse to fine. Levels where the window does not fit
-// are skipped; the full-size level must fit.
-TrackResult track_point(const Pyramid& previous, const Pyramid& current, const MotionOptions& o,
-                        float pu, float pv) {
+// Pyramidal Lucas-Kanade (translation only) of the point (pu, pv), full-size whole pixels, from
+// the previous frame into the current one, coarse to fine. Below full size both frames are
+// pyramid levels; at full size the previous frame is the (2r+3)^2 patch around the point kept
+// when it was detected, the current frame is the frame itself. Coarse levels where the window
+// does not fit are skipped; the full-size level must fit.
+TrackResult track_point(const Pyramid& previous, const Pyramid& current,
+                        const std::uint8_t* full_size_patch, const ImageView& frame,
+                        const MotionOptions& o, float pu, float pv) {
   const int r = o.window_radius;
   const int side = 2 * r + 1;
   const int patch_side = side + 2;
@@ -374,36 +460,41 @@ TrackResult track_point(const Pyramid& previous, const Pyramid& current, const M
   TrackResult result;
   for (int l = o.pyramid_levels - 1; l >= 0; --l) {
     const float scale = 1.0f / static_cast<float>(1 << l);
-    const float x = (pu + 0.5f) * scale - 0.5f, y = (pv + 0.5f) * scale - 0.5f;
-    const Level& prev_level = previous.levels[l];
-    const Level& cur_level = current.levels[l];
-    if (!sample_patch(prev_level, x, y, r + 1, templ.data())) {
-      if (l == 0) return result;
-      continue;
+    const ImageView cur_level = l == 0 ? frame : current.levels[l].view();
+    if (l == 0) {
+      for (int k = 0; k < patch_side * patch_side; ++k)
+        templ[k] = full_size_patch[k];
+    } else {
+      const float x = (pu + 0.5f) * scale - 0.5f, y = (pv + 0.5f) * scale - 0.5f;
+      if (!sample_patch(previous.levels[l].view(), x, y, r + 1, templ.data())) continue;
     }
     // Template gradients (central differences) and the 2x2 normal matrix.
-    double gxx = 0, gxy = 0, gyy = 0;
+    float gxx = 0, gxy = 0, gyy = 0;
     for (int j = 0; j < side; ++j) {
       const float* t = templ.data() + (j + 1) * patch_side + 1;
+      float* out_x = grad_x.data() + j * side;
+      float* out_y = grad_y.data() + j * side;
       for (int i = 0; i < side; ++i) {
         const float gx = 0.5f * (t[i + 1] - t[i - 1]);
         const float gy = 0.5f * (t[i + patch_side] - t[i - patch_side]);
-        grad_x[j * side + i] = gx;
-        grad_y[j * side + i] = gy;
+        out_x[i] = gx;
+        out_y[i] = gy;
         gxx += gx * gx;
         gxy += gx * gy;
         gyy += gy * gy;
       }
     }
-    const double det = gxx * gyy - gxy * gxy;
-    const double trace = gxx + gyy;
+    const double det = static_cast<double>(gxx) * gyy - static_cast<double>(gxy) * gxy;
+    const double trace = static_cast<double>(gxx) + gyy;
     // Flat or edge-only window: this level cannot tell where the point went.
     if (!(det > 1e-6 * trace * trace) || trace < 1e-3) {
       if (l == 0) return result;
       continue;
     }
-    const double inv_det = 1.0 / det;
+    const auto inv_det = static_cast<float>(1.0 / det);
     float cx = (pu + du + 0.5f) * scale - 0.5f, cy = (pv + dv + 0.5f) * scale - 0.5f;
+    // Coarse levels only need to land within the next level's reach.
+    const float stop_step = l == 0 ? kStopStep : kCoarseStopStep;
     float last_step = 1e9f;
     bool inside = true;
     for (int iteration = 0; iteration < o.max_iterations; ++iteration) {
@@ -411,7 +502,7 @@ TrackResult track_point(const Pyramid& previous, const Pyramid& current, const M
         inside = false;
         break;
       }
-      double bx = 0, by = 0;
+      float bx = 0, by = 0;
       for (int j = 0; j < side; ++j) {
         const float* t = templ.data() + (j + 1) * patch_side + 1;
         const float* w = warped.data() + j * side;
@@ -423,12 +514,12 @@ TrackResult track_point(const Pyramid& previous, const Pyramid& current, const M
           by += e * gy[i];
         }
       }
-      const float step_x = static_cast<float>(inv_det * (gyy * bx - gxy * by));
-      const float step_y = static_cast<float>(inv_det * (gxx * by - gxy * bx));
+      const float step_x = inv_det * (gyy * bx - gxy * by);
+      const float step_y = inv_det * (gxx * by - gxy * bx);
       cx += step_x;
       cy += step_y;
       last_step = std::sqrt(step_x * step_x + step_y * step_y);
-      if (last_step < kStopStep) break;
+      if (last_step < stop_step) break;
     }
     if (!inside) {
       if (l == 0) return result;
@@ -460,79 +551,83 @@ MotionEstimate MotionEstimator::update(const ImageView& frame) {
 
   const int current = 1 - s.previous;
   Pyramid& pyramid = s.pyramids[current];
-  copy_level0(frame, pyramid.levels[0]);
-  for (int l = 1; l < o.pyramid_levels; ++l)
+  if (o.pyramid_levels > 1) downsample_frame(frame, pyramid.levels[1]);
+  for (int l = 2; l < o.pyramid_levels; ++l)
     downsample(pyramid.levels[l - 1], pyramid.levels[l]);
 
   if (s.has_previous) {
-    estimate = estimate_from_previous(current);
+    estimate = estimate_from_previous(current, frame);
     s.reported_rejected = s.previous;
   }
-  detect_features(current);
+  detect_features(current, frame);
   s.previous = current;
   s.has_previous = true;
   return estimate;
 }
 
-void MotionEstimator::detect_features(int index) {
+void MotionEstimator::detect_features(int index, const ImageView& frame) {
   State& s = *state_;
   const MotionOptions& o = options_;
-  const Level& level = s.pyramids[index].levels[o.detect_level];
+  const ImageView level =
+      o.detect_level == 0 ? frame : s.pyramids[index].levels[o.detect_level].view();
   const int width = level.width;
   const int cells = o.grid_columns * o.grid_rows;
-  std::fill(s.cell_score.begin(), s.cell_score.end(), kMinEigenvalue);
   std::fill(s.cell_u.begin(), s.cell_u.end(), -1);
 
-  // Gradient products of rows margin-1 .. height-margin, kept three at a time; the structure
-  // tensor of row v sums rows v-1, v, v+1 and columns u-1, u, u+1.
+  // Gradient products (doubled central differences, integers) of the last three rows, and their
+  // sums over those rows (kept sliding); summed over columns u-1 .. u+1 they are the structure
+  // tensor of (u, v), four times over.
   const int first = s.margin - 1, last = level.height - s.margin;
-  const auto products = [&](int v) {
+  const int u_first = s.margin - 1, u_last = width - s.margin;  // inclusive
+  std::int32_t* __restrict sum_xx = s.column_xx.data();
+  std::int32_t* __restrict sum_xy = s.column_xy.data();
+  std::int32_t* __restrict sum_yy = s.column_yy.data();
+  for (int u = u_first; u <= u_last; ++u)
+    sum_xx[u] = sum_xy[u] = sum_yy[u] = 0;
+  for (auto* rows : {&s.gxx, &s.gxy, &s.gyy})
+    for (auto& row : *rows)
+      std::fill(row.begin(), row.end(), 0);
+  // Adds row v's products to the sums, replacing those of row v-3.
+  const auto slide = [&](int v) {
     const int slot = v % 3;
-    const std::uint8_t* up = level.row(v - 1);
-    const std::uint8_t* mid = level.row(v);
-    const std::uint8_t* down = level.row(v + 1);
-    float* xx = s.gxx[slot].data();
-    float* xy = s.gxy[slot].data();
-    float* yy = s.gyy[slot].data();
-    for (int u = s.margin - 1; u <= width - s.margin; ++u) {
-      const float gx = 0.5f * (static_cast<float>(mid[u + 1]) - static_cast<float>(mid[u - 1]));
-      const float gy = 0.5f * (static_cast<float>(down[u]) - static_cast<float>(up[u]));
-      xx[u] = gx * gx;
-      xy[u] = gx * gy;
-      yy[u] = gy * gy;
-    }
+    slide_structure_row(level.row(v - 1), level.row(v), level.row(v + 1), s.gxx[slot].data(),
+                        s.gxy[slot].data(), s.gyy[slot].data(), sum_xx, sum_xy, sum_yy, u_first,
+                        u_last + 1);
   };
-  products(first);
-  products(first + 1);
+  const float floor4 = 4.0f * kMinEigenvalue;
+  std::fill(s.cell_score.begin(), s.cell_score.end(), floor4);
+  slide(first);
+  slide(first + 1);
+  std::int32_t* __restrict bound = s.eigen_bound.data();
   for (int v = s.margin; v < last; ++v) {
-    products(v + 1);
-    const float* xx0 = s.gxx[(v + 2) % 3].data();
-    const float* xx1 = s.gxx[v % 3].data();
-    const float* xx2 = s.gxx[(v + 1) % 3].data();
-    const float* xy0 = s.gxy[(v + 2) % 3].data();
-    const float* xy1 = s.gxy[v % 3].data();
-    const float* xy2 = s.gxy[(v + 1) % 3].data();
-    const float* yy0 = s.gyy[(v + 2) % 3].data();
-    const float* yy1 = s.gyy[v % 3].data();
-    const float* yy2 = s.gyy[(v + 1) % 3].data();
-    float* score = s.score_row.data();
-    for (int u = s.margin; u < width - s.margin; ++u) {
-      float a = 0, b = 0, c = 0;
-      for (int k = -1; k <= 1; ++k) {
-        a += xx0[u + k] + xx1[u + k] + xx2[u + k];
-        b += xy0[u + k] + xy1[u + k] + xy2[u + k];
-        c += yy0[u + k] + yy1[u + k] + yy2[u + k];
+    slide(v + 1);
+    // The smaller eigenvalue is at most min(a, c): most pixels stop at that bound.
+    eigenvalue_bound_row(sum_xx, sum_yy, bound, s.margin, width - s.margin);
+    float* cell_score = s.cell_score.data() + s.cell_of_row[v] * o.grid_columns;
+    int* cell_u = s.cell_u.data() + s.cell_of_row[v] * o.grid_columns;
+    int* cell_v = s.cell_v.data() + s.cell_of_row[v] * o.grid_columns;
+    for (int column = 0; column < o.grid_columns; ++column) {
+      float best = cell_score[column];
+      int best_u = -1;
+      const int u_end = s.cell_start[column + 1];
+      for (int u = s.cell_start[column]; u < u_end; ++u) {
+        if (static_cast<float>(bound[u]) <= best) continue;
+        const std::int32_t a = sum_xx[u - 1] + sum_xx[u] + sum_xx[u + 1];
+        const std::int32_t c = sum_yy[u - 1] + sum_yy[u] + sum_yy[u + 1];
+        const std::int32_t b = sum_xy[u - 1] + sum_xy[u] + sum_xy[u + 1];
+        const float half_difference = 0.5f * static_cast<float>(a - c);
+        const float bf = static_cast<float>(b);
+        const float score = 0.5f * static_cast<float>(a + c) -
+                            std::sqrt(half_difference * half_difference + bf * bf);
+        if (score > best) {
+          best = score;
+          best_u = u;
+        }
       }
-      const float half_difference = 0.5f * (a - c);
-      score[u] = 0.5f * (a + c) - std::sqrt(half_difference * half_difference + b * b);
-    }
-    const int row_cell = s.cell_of_row[v] * o.grid_columns;
-    for (int u = s.margin; u < width - s.margin; ++u) {
-      const int cell = row_cell + s.cell_of_column[u];
-      if (score[u] > s.cell_score[cell]) {
-        s.cell_score[cell] = score[u];
-        s.cell_u[cell] = u;
-        s.cell_v[cell] = v;
+      if (best_u >= 0) {
+        cell_score[column] = best;
+        cell_u[column] = best_u;
+        cell_v[column] = v;
       }
     }
   }
@@ -550,6 +645,15 @@ void MotionEstimator::detect_features(int index) {
                          o.laser_filter_ratio)) {
       s.rejected[index][rejected++] = p;
     } else {
+      // The full-size template for the tracker, (2r+3)^2 around the feature.
+      const int n = o.window_radius + 1;
+      std::uint8_t* patch =
+          s.patches[index].data() + static_cast<std::ptrdiff_t>(kept) * s.patch_bytes;
+      for (int j = -n; j <= n; ++j) {
+        std::memcpy(patch, frame.row(static_cast<int>(p[1]) + j) + (static_cast<int>(p[0]) - n),
+                    static_cast<std::size_t>(2 * n + 1));
+        patch += 2 * n + 1;
+      }
       s.features[index][kept++] = p;
     }
   }
@@ -557,7 +661,7 @@ void MotionEstimator::detect_features(int index) {
   s.rejected_count[index] = rejected;
 }
 
-MotionEstimate MotionEstimator::estimate_from_previous(int current) {
+MotionEstimate MotionEstimator::estimate_from_previous(int current, const ImageView& frame) {
   State& s = *state_;
   const MotionOptions& o = options_;
   MotionEstimate estimate;
@@ -568,7 +672,10 @@ MotionEstimate MotionEstimator::estimate_from_previous(int current) {
   int n = 0;
   for (int i = 0; i < s.feature_count[previous]; ++i) {
     const Point p = s.features[previous][i];
-    const TrackResult t = track_point(s.pyramids[previous], s.pyramids[current], o, p[0], p[1]);
+    const TrackResult t =
+        track_point(s.pyramids[previous], s.pyramids[current],
+                    s.patches[previous].data() + static_cast<std::ptrdiff_t>(i) * s.patch_bytes,
+                    frame, o, p[0], p[1]);
     if (!t.converged) continue;
     FeatureTrack& track = s.tracks[s.track_count++];
     track = FeatureTrack{p[0], p[1], t.u, t.v, false};
@@ -596,7 +703,11 @@ MotionEstimate MotionEstimator::estimate_from_previous(int current) {
   estimate.inliers = inliers;
   estimate.rms_px = static_cast<float>(std::sqrt(sum_squared / std::max(inliers, 1)));
   estimate.previous_to_current = h;
-  estimate.valid = inliers >= o.min_inliers;
+  // A frame-to-frame motion never mirrors the image: the local scale at the centre is positive.
+  const double cu = 0.5 * (s.width - 1), cv = 0.5 * (s.height - 1);
+  const double w = h.h[6] * cu + h.h[7] * cv + h.h[8];
+  const double determinant = to_matrix(h).determinant();
+  estimate.valid = inliers >= o.min_inliers && w > 0 && determinant > 0;
   return estimate;
 }
 
@@ -665,15 +776,12 @@ bool MotionEstimator::fit_homography(int n, Homography& result, int& inlier_coun
   bool found = false;
   int iterations_needed = o.ransac_iterations;
   for (int iteration = 0; iteration < iterations_needed; ++iteration) {
+    // Four distinct tracks: the first steps of a Fisher-Yates shuffle (bounded, no retries).
+    int* order = s.all_index.data();
     int pick[4];
     for (int k = 0; k < 4; ++k) {
-      bool repeated = true;
-      while (repeated) {
-        pick[k] = random.below(n);
-        repeated = false;
-        for (int j = 0; j < k; ++j)
-          repeated = repeated || pick[j] == pick[k];
-      }
+      std::swap(order[k], order[k + random.below(n - k)]);
+      pick[k] = order[k];
     }
     double x[4], y[4], xp[4], yp[4];
     for (int k = 0; k < 4; ++k) {

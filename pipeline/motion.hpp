@@ -78,10 +78,11 @@ class MotionEstimator {
 
  private:
   struct State;
-  // Finds the features of the frame in pyramid `index` (and the ones the laser filter rejects).
-  void detect_features(int index);
-  // Tracks the previous frame's features into pyramid `current` and fits the homography.
-  MotionEstimate estimate_from_previous(int current);
+  // Finds the features of `frame`, whose pyramid is `index` (and the ones the laser filter
+  // rejects), and keeps the full-size patches around them.
+  void detect_features(int index, const ImageView& frame);
+  // Tracks the previous frame's features into `frame` (pyramid `current`), fits the homography.
+  MotionEstimate estimate_from_previous(int current, const ImageView& frame);
   // RANSAC and least-squares refit over the first n tracked pairs; false when nothing fits.
   bool fit_homography(int n, Homography& result, int& inlier_count);
 
