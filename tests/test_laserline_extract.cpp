@@ -463,8 +463,9 @@ TEST_F(LaserlineExtract, MissingAndWrongSizeInputsAreNamedAndSkipped) {
   hal::SimScene scene(options_);
   ASSERT_TRUE(cv::imwrite(path("good.png"), render(scene, 0)));
   ASSERT_TRUE(cv::imwrite(path("small.png"), cv::Mat(120, 160, CV_8UC1, cv::Scalar(10))));
-  const RunResult r =
-      extract(path("nothere.png") + " " + path("small.png") + " " + path("good.png"));
+  std::ofstream(path("garbage.avi")) << std::string(5000, 'x');
+  const RunResult r = extract(path("nothere.png") + " " + path("small.png") + " " +
+                              path("garbage.avi") + " " + path("good.png"));
   EXPECT_EQ(r.exit_code, 1) << r.out;
   EXPECT_NE(r.out.find("laserline-extract: " + path("nothere.png") +
                        ": no such file or folder; skipped\n"),
@@ -475,8 +476,13 @@ TEST_F(LaserlineExtract, MissingAndWrongSizeInputsAreNamedAndSkipped) {
                  ": image is 160x120 but the calibration " + calib_ + " is for 320x256; skipped\n"),
       std::string::npos)
       << r.out;
-  // The missing path takes no frame number (it is not known to be a frame); the wrong-size
-  // image does.
+  EXPECT_NE(
+      r.out.find("laserline-extract: " + path("garbage.avi") + ": not a readable video; skipped\n"),
+      std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("3 problems"), std::string::npos) << r.out;
+  // The missing path and the unreadable video take no frame number (it is not known to be a frame);
+  // the wrong-size image does.
   const Csv csv = read_csv(path("points.csv"));
   EXPECT_EQ(csv.frames.size(), 1u);
   expect_frames_match(csv, {{1, 0}}, scene);
@@ -555,6 +561,15 @@ TEST_F(LaserlineExtract, BadArgumentsAndConfiguration) {
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_EQ(r.out, "laserline-extract: " + path("bad.yaml") +
                        ":2: detector.maxvalue.threshold: must be between 1 and 255, got 0\n");
+
+  std::ofstream(path("file")) << "a file, not a folder\n";
+  r = extract("--overlay-dir " + path("file/overlays") + " x.png");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(
+      r.out.rfind(
+          "laserline-extract: --overlay-dir " + path("file/overlays") + ": cannot be created: ", 0),
+      0u)
+      << r.out;
 
   std::ofstream(path("badcalib.yaml")) << "camera: {fx: -1}\n";
   r = run_command(std::string(LASERLINE_EXTRACT_PATH) + " --calib " + path("badcalib.yaml") +
