@@ -488,6 +488,45 @@ TEST_F(LaserlineExtract, MissingAndWrongSizeInputsAreNamedAndSkipped) {
   expect_frames_match(csv, {{1, 0}}, scene);
 }
 
+// A video of the wrong size is one line, not one per frame; many bad frames in one input are
+// counted beyond the first ten lines.
+TEST_F(LaserlineExtract, RepeatedProblemsDoNotFloodTheTerminal) {
+  {
+    cv::VideoWriter writer(path("small.mkv"), cv::CAP_FFMPEG,
+                           cv::VideoWriter::fourcc('F', 'F', 'V', '1'), 30, cv::Size(160, 128),
+                           false);
+    ASSERT_TRUE(writer.isOpened());
+    for (int k = 0; k < 5; ++k)
+      writer.write(cv::Mat(128, 160, CV_8UC1, cv::Scalar(k)));
+  }
+  fs::create_directories(dir_ / "small");
+  for (int k = 0; k < 12; ++k) {
+    ASSERT_TRUE(cv::imwrite(path("small/s" + std::to_string(k + 10) + ".png"),
+                            cv::Mat(20, 20, CV_8UC1, cv::Scalar(0))));
+  }
+  const RunResult r = extract(path("small.mkv") + " " + path("small"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.out.find("laserline-extract: " + path("small.mkv") +
+                       ": video is 160x128 but the calibration is for 320x256; skipped\n"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find(path("small/s19.png") + ": image is 20x20"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find(path("small/s20.png")), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("laserline-extract: " + path("small") +
+                       ": further problems in this input are counted, not shown\n"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("12 frames from 2 inputs, 0 processed with maxvalue, 0 points written "
+                       "(0 valid) to " +
+                       path("points.csv") + ", 13 problems (see above)"),
+            std::string::npos)
+      << r.out;
+  std::size_t lines = 0;
+  for (char c : r.out)
+    lines += c == '\n';
+  EXPECT_EQ(lines, 13u) << r.out;  // video, 10 images, "further problems", summary
+}
+
 TEST_F(LaserlineExtract, OverlaysAndAllCandidates) {
   hal::SimScene scene(options_);
   ASSERT_TRUE(cv::imwrite(path("f.png"), render(scene, 0)));

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -150,6 +151,15 @@ class Extractor {
 
   Progress& progress() { return progress_; }
 
+  // The input that messages are about from now on.
+  void start_input(const std::string& input) {
+    input_ = input;
+    input_failures_ = 0;
+  }
+
+  int width() const { return width_; }
+  int height() const { return height_; }
+
   // Frames after this are not a continuation of the frames before (another video, log or
   // folder): detectors that use earlier frames start afresh.
   void start_sequence() { detector_->reset(width_, height_); }
@@ -195,9 +205,16 @@ class Extractor {
   }
 
   // A problem with an input as a whole (or an overlay): reported, counted, processing goes on.
+  // A long video or log with a problem in every frame must not bury the rest: after
+  // kShownPerInput lines for one input the others are only counted.
   void fail(const std::string& message) {
     ++failures_;
-    progress_.message("laserline-extract: " + message);
+    ++input_failures_;
+    if (input_failures_ <= kShownPerInput) progress_.message("laserline-extract: " + message);
+    if (input_failures_ == kShownPerInput + 1) {
+      progress_.message("laserline-extract: " + input_ +
+                        ": further problems in this input are counted, not shown");
+    }
   }
 
   std::int64_t frames() const { return next_frame_; }
@@ -242,6 +259,7 @@ class Extractor {
     cv::cvtColor(mono_, overlay_, cv::COLOR_GRAY2BGR);
     constexpr int kShift = 4;  // sub-pixel drawing: coordinates in 1/16 px
     for (const auto& p : profile_.points()) {
+      if (!std::isfinite(p.v)) continue;
       const cv::Point centre(static_cast<int>(std::lround(p.u * 16.0)),
                              static_cast<int>(std::lround(p.v * 16.0)));
       const cv::Scalar colour = p.valid ? cv::Scalar(0, 255, 0) : cv::Scalar(0, 0, 255);
@@ -269,6 +287,9 @@ class Extractor {
   cv::Mat mono_, overlay_;
   std::int64_t next_frame_ = 0, processed_ = 0, failures_ = 0;
   std::int64_t points_written_ = 0, valid_written_ = 0, overflowed_frames_ = 0;
+  static constexpr int kShownPerInput = 10;
+  std::string input_;
+  int input_failures_ = 0;
 };
 
 // An image file: one frame, counted even when it cannot be read so that frame numbers follow
@@ -299,6 +320,15 @@ void extract_video(Extractor& x, const std::string& path, std::size_t input, std
   }
   if (!video.isOpened()) {
     x.fail(path + ": not a readable video; skipped");
+    return;
+  }
+  // Checked once here rather than once per frame.
+  const int width = static_cast<int>(video.get(cv::CAP_PROP_FRAME_WIDTH));
+  const int height = static_cast<int>(video.get(cv::CAP_PROP_FRAME_HEIGHT));
+  if (width > 0 && height > 0 && (width != x.width() || height != x.height())) {
+    x.fail(path + ": video is " + std::to_string(width) + "x" + std::to_string(height) +
+           " but the calibration is for " + std::to_string(x.width()) + "x" +
+           std::to_string(x.height()) + "; skipped");
     return;
   }
   const double count = video.get(cv::CAP_PROP_FRAME_COUNT);
@@ -543,6 +573,7 @@ int main(int argc, char** argv) {
     const std::string& input = options.inputs[i];
     const std::size_t number = i + 1, inputs = options.inputs.size();
     const std::string name = fs::path(input).filename().string();
+    x.start_input(input);
     std::error_code ec;
     if (!fs::exists(input, ec)) {
       // Not known to be a frame at all: takes no frame number.
