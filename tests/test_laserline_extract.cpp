@@ -426,8 +426,18 @@ TEST_F(LaserlineExtract, LcmLogOfImageMessages) {
       write_event(log, "LASERLINE_IMAGE", encode(m), utime += 33'333);
     }
   }
+  // The recording was cut short in the middle of a last event.
+  const auto complete = fs::file_size(log_path);
+  std::ofstream(log_path, std::ios::binary | std::ios::app)
+      .write("\xED\xA1\xDA\x01\x00\x00\x00\x00\x00\x00\x00\x09", 12);
+  ASSERT_EQ(fs::file_size(log_path), complete + 12);
+
   const RunResult r = extract(log_path);
   EXPECT_EQ(r.exit_code, 1) << "the truncated frame is a failure: " << r.out;
+  EXPECT_NE(r.out.find(log_path + ": the last 12 bytes are not a complete event (recording cut "
+                                  "short?); ignored\n"),
+            std::string::npos)
+      << r.out;
   EXPECT_NE(r.out.find(log_path + " event 4 (LASERLINE_IMAGE): laserline.image_t cannot be "
                                   "decoded; skipped"),
             std::string::npos)

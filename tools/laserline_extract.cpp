@@ -441,7 +441,9 @@ void extract_log(Extractor& x, const std::string& path, std::size_t input, std::
   std::int64_t n = 0;
   laserline::image_t message;
   cv::Mat image;
+  long complete_bytes = 0;  // end of the last complete event
   while (const lcm::LogEvent* event = log.readNextEvent()) {
+    complete_bytes = std::ftell(log.getFilePtr());
     if (message_hash(event->data, event->datalen) != laserline::image_t::getHash()) continue;
     const std::string where =
         path + " event " + std::to_string(event->eventnum) + " (" + event->channel + ")";
@@ -457,6 +459,14 @@ void extract_log(Extractor& x, const std::string& path, std::size_t input, std::
     }
     x.progress().update(input, inputs, name, static_cast<double>(n) / static_cast<double>(images),
                         x.frames());
+  }
+  // A recording cut short ends in part of an event, which LCM's reader drops without a word.
+  std::error_code ec;
+  const auto size = fs::file_size(path, ec);
+  if (!ec && complete_bytes >= 0 && static_cast<std::uintmax_t>(complete_bytes) < size) {
+    x.fail(path + ": the last " +
+           std::to_string(size - static_cast<std::uintmax_t>(complete_bytes)) +
+           " bytes are not a complete event (recording cut short?); ignored");
   }
 }
 
