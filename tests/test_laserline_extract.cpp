@@ -374,11 +374,12 @@ TEST_F(LaserlineExtract, LcmLogOfImageMessages) {
       m.size = static_cast<std::int32_t>(m.data.size());
       write_event(log, "LASERLINE_IMAGE", encode(m), utime += 33'333);
     }
-    // A profile on its own channel: not a frame.
-    {
+    // Profiles on their own channel: not frames, but they give the laser state of the image
+    // with the same sequence number (image_t has none); frame 2 was exposed with the laser off.
+    for (int k : {0, 2}) {
       laserline::profile_t p;
-      p.sequence = 0;
-      p.laser_on = true;
+      p.sequence = k;
+      p.laser_on = k != 2;
       p.detector = "maxvalue";
       p.num_points = 0;
       write_event(log, "LASERLINE_PROFILE", encode(p), utime += 10);
@@ -438,8 +439,12 @@ TEST_F(LaserlineExtract, LcmLogOfImageMessages) {
                                   "short?); ignored\n"),
             std::string::npos)
       << r.out;
-  EXPECT_NE(r.out.find(log_path + " event 4 (LASERLINE_IMAGE): laserline.image_t cannot be "
+  EXPECT_NE(r.out.find(log_path + " event 5 (LASERLINE_IMAGE): laserline.image_t cannot be "
                                   "decoded; skipped"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("laserline-extract: 1 of the processed frames were exposed with the laser "
+                       "off (from the log's profiles)\n"),
             std::string::npos)
       << r.out;
   const Csv csv = read_csv(path("points.csv"));

@@ -195,6 +195,7 @@ class Extractor {
       std::exit(1);
     }
     ++processed_;
+    laser_off_frames_ += laser_on ? 0 : 1;
     if (!options_.overlay_dir.empty()) write_overlay(index, where);
   }
 
@@ -219,6 +220,7 @@ class Extractor {
 
   std::int64_t frames() const { return next_frame_; }
   std::int64_t processed() const { return processed_; }
+  std::int64_t laser_off_frames() const { return laser_off_frames_; }
   std::int64_t failures() const { return failures_; }
   std::int64_t points_written() const { return points_written_; }
   std::int64_t valid_written() const { return valid_written_; }
@@ -285,7 +287,7 @@ class Extractor {
   FILE* csv_;
   Progress progress_;
   cv::Mat mono_, overlay_;
-  std::int64_t next_frame_ = 0, processed_ = 0, failures_ = 0;
+  std::int64_t next_frame_ = 0, processed_ = 0, failures_ = 0, laser_off_frames_ = 0;
   std::int64_t points_written_ = 0, valid_written_ = 0, overflowed_frames_ = 0;
   static constexpr int kShownPerInput = 10;
   std::string input_;
@@ -641,6 +643,12 @@ int main(int argc, char** argv) {
                static_cast<long long>(x.processed()), options.detector.c_str(),
                static_cast<long long>(x.points_written()),
                static_cast<long long>(x.valid_written()), options.output.c_str(), problems.c_str());
+  if (x.laser_off_frames() > 0) {
+    std::fprintf(stderr,
+                 "laserline-extract: %lld of the processed frames were exposed with the laser off "
+                 "(from the log's profiles)\n",
+                 static_cast<long long>(x.laser_off_frames()));
+  }
   if (x.overflowed_frames() > 0) {
     std::fprintf(stderr, "laserline-extract: %lld frames had more points than the detector keeps\n",
                  static_cast<long long>(x.overflowed_frames()));
