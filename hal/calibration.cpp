@@ -1,7 +1,9 @@
 #include "hal/calibration.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <sstream>
 
 namespace laserline::hal {
 
@@ -19,19 +21,141 @@ std::array<double, 4> LaserMount::plane_coefficients() const {
   return {0.0, 1.0, -t, baseline_m};
 }
 
-Calibration read_calibration(YamlMap& map) {
-  Calibration cal;
-  YamlMap cam = map.map("camera");
-  cal.camera.width = static_cast<int>(cam.integer("width", cal.camera.width, 16, 16384));
-  cal.camera.height = static_cast<int>(cam.integer("height", cal.camera.height, 16, 16384));
-  cal.camera.fx = cam.number("fx", cal.camera.fx, 1.0, 1e6);
-  cal.camera.fy = cam.number("fy", cal.camera.fy, 1.0, 1e6);
-  cal.camera.cx = cam.number("cx", (cal.camera.width - 1) / 2.0, -1e5, 1e5);
-  cal.camera.cy = cam.number("cy", (cal.camera.height - 1) / 2.0, -1e5, 1e5);
+namespace {
+
+// The keys of laserline's own layout: camera: {width, height, fx, fy, cx, cy, distortion}.
+void read_native_camera(YamlMap& cam, CameraIntrinsics& c) {
+  c.width = static_cast<int>(cam.integer("width", c.width, 16, 16384));
+  c.height = static_cast<int>(cam.integer("height", c.height, 16, 16384));
+  c.fx = cam.number("fx", c.fx, 1.0, 1e6);
+  c.fy = cam.number("fy", c.fy, 1.0, 1e6);
+  c.cx = cam.number("cx", (c.width - 1) / 2.0, -1e5, 1e5);
+  c.cy = cam.number("cy", (c.height - 1) / 2.0, -1e5, 1e5);
   std::vector<double> dist = cam.numbers("distortion", {4, 5});
   for (std::size_t i = 0; i < dist.size(); ++i)
-    cal.camera.distortion[i] = dist[i];
-  cam.finish();
+    c.distortion[i] = dist[i];
+}
+
+struct OpenCvMatrix {
+  int rows = 0;
+  int cols = 0;
+  std::vector<double> data;
+};
+
+// A matrix as cv::FileStorage writes it: `!!opencv-matrix {rows, cols, dt, data: [...]}` (the tag
+// is optional, so a hand-written mapping works too). Only single-channel numeric types.
+OpenCvMatrix read_opencv_matrix(YamlMap& parent, const std::string& key) {
+  if (!parent.has(key)) parent.fail(key, "is required");
+  YamlMap m = parent.map(key);
+  OpenCvMatrix result;
+  result.rows = static_cast<int>(m.required_integer("rows", 1, 64));
+  result.cols = static_cast<int>(m.required_integer("cols", 1, 64));
+  m.choice("dt", "d", {"d", "f", "i", "u", "s", "w"});
+  if (!m.has("data")) m.fail("data", "is required");
+  result.data = m.numbers("data", {static_cast<std::size_t>(result.rows * result.cols)});
+  m.finish();
+  return result;
+}
+
+// What OpenCV's calibration samples write besides the camera model; read past, not used.
+const std::vector<std::string> kOpenCvInformationalKeys = {"calibration_time",
+                                                           "nframes",
+                                                           "nr_of_frames",
+                                                           "board_width",
+                                                           "board_height",
+                                                           "square_size",
+                                                           "aspectRatio",
+                                                           "fix_aspect_ratio",
+                                                           "flags",
+                                                           "avg_reprojection_error",
+                                                           "per_view_reprojection_errors",
+                                                           "extrinsic_parameters",
+                                                           "image_points",
+                                                           "grid_points"};
+
+// OpenCV's calibration layout (samples/cpp/calibration.cpp, cv::FileStorage): image_width,
+// image_height, camera_matrix (3x3) and distortion_coefficients (k1 k2 p1 p2 [k3 [k4 k5 k6 ...]]).
+void read_opencv_camera(YamlMap& cam, CameraIntrinsics& c) {
+  // The size is required here: a camera matrix is only valid for the image size it was
+  // calibrated at, and the native defaults belong to another camera.
+  c.width = static_cast<int>(cam.required_integer("image_width", 16, 16384));
+  c.height = static_cast<int>(cam.required_integer("image_height", 16, 16384));
+
+  const OpenCvMatrix k = read_opencv_matrix(cam, "camera_matrix");
+  const std::string k_data = "camera_matrix";
+  if (k.rows != 3 || k.cols != 3) {
+    cam.fail(k_data, "must be 3x3, got " + std::to_string(k.rows) + "x" + std::to_string(k.cols));
+  }
+  // [fx s cx; 0 fy cy; 0 0 1]: anything else is not a pinhole camera matrix.
+  if (k.data[3] != 0.0 || k.data[6] != 0.0 || k.data[7] != 0.0 || k.data[8] != 1.0) {
+    cam.fail(k_data, "is not a camera matrix [fx 0 cx; 0 fy cy; 0 0 1]");
+  }
+  if (k.data[1] != 0.0) cam.fail(k_data, "has a skew (element 0,1): not supported, must be 0");
+  auto in_range = [&](double value, const char* name, double min, double max) {
+    if (!(value >= min && value <= max)) {
+      std::ostringstream problem;
+      problem << name << " must be between " << min << " and " << max << ", got " << value;
+      cam.fail(k_data, problem.str());
+    }
+    return value;
+  };
+  c.fx = in_range(k.data[0], "fx", 1.0, 1e6);
+  c.cx = in_range(k.data[2], "cx", -1e5, 1e5);
+  c.fy = in_range(k.data[4], "fy", 1.0, 1e6);
+  c.cy = in_range(k.data[5], "cy", -1e5, 1e5);
+
+  c.distortion = {};
+  if (cam.has("distortion_coefficients")) {
+    const OpenCvMatrix d = read_opencv_matrix(cam, "distortion_coefficients");
+    const std::size_t n = d.data.size();
+    if ((d.rows != 1 && d.cols != 1) || (n != 4 && n != 5 && n != 8 && n != 12 && n != 14)) {
+      cam.fail("distortion_coefficients",
+               "must be a 1xN or Nx1 vector with N = 4, 5, 8, 12 or 14, got " +
+                   std::to_string(d.rows) + "x" + std::to_string(d.cols));
+    }
+    // The rational, thin-prism and tilt terms (k4 and later) are not part of laserline's model:
+    // accepted only when zero, as OpenCV writes them when they were not estimated.
+    for (std::size_t i = 5; i < n; ++i) {
+      if (d.data[i] != 0.0) {
+        cam.fail("distortion_coefficients",
+                 "coefficient " + std::to_string(i) +
+                     " (k4 and later: rational, thin-prism or tilt model) is not supported, must "
+                     "be 0");
+      }
+    }
+    for (std::size_t i = 0; i < std::min<std::size_t>(n, 5); ++i)
+      c.distortion[i] = d.data[i];
+  } else {
+    cam.node("distortion_coefficients");  // absent or null: no distortion
+  }
+  if (cam.integer("fisheye_model", 0, 0, 1) != 0) {
+    cam.fail("fisheye_model", "the fisheye model is not supported");
+  }
+  for (const auto& key : kOpenCvInformationalKeys)
+    cam.node(key);
+}
+
+}  // namespace
+
+Calibration read_calibration(YamlMap& map) {
+  Calibration cal;
+  if (map.has("camera_matrix")) {
+    // The mapping itself is OpenCV's calibration output (possibly with a laser section added).
+    if (map.has("camera")) {
+      map.fail("camera",
+               "give the camera either as a camera section or in OpenCV's layout (camera_matrix, "
+               "...), not both");
+    }
+    read_opencv_camera(map, cal.camera);
+  } else {
+    YamlMap cam = map.map("camera");
+    if (cam.has("camera_matrix")) {
+      read_opencv_camera(cam, cal.camera);
+    } else {
+      read_native_camera(cam, cal.camera);
+    }
+    cam.finish();
+  }
 
   YamlMap laser = map.map("laser");
   cal.laser.baseline_m = laser.number("baseline_m", cal.laser.baseline_m, 1e-3, 10.0);

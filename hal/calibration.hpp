@@ -37,7 +37,11 @@ struct Calibration {
 };
 
 // Reads `camera:` and `laser:` sections from a mapping (a calibration file, or the calibration
-// section of the daemon's configuration). Throws ConfigError naming the key.
+// section of the daemon's configuration). Throws ConfigError naming the key. The camera may also
+// be given in OpenCV's calibration layout (image_width, image_height, camera_matrix,
+// distortion_coefficients as cv::FileStorage writes them), either inside `camera:` or at the top
+// of the mapping, so that the output of OpenCV's calibration sample is a calibration file as is
+// (its `%YAML:1.0` header included) once a `laser:` section is added.
 Calibration read_calibration(YamlMap& map);
 Calibration load_calibration_file(const std::string& path);
 

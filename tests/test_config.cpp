@@ -149,6 +149,27 @@ TEST(Config, CalibrationFromAFileRelativeToTheConfig) {
   std::filesystem::remove_all(dir);
 }
 
+// The calibration section may use OpenCV's calibration layout; it reaches the detector geometry.
+TEST(Config, CalibrationInOpenCvLayout) {
+  const DaemonConfig config = parse_config(
+      hal::load_yaml_text(
+          "calibration:\n"
+          "  image_width: 640\n"
+          "  image_height: 480\n"
+          "  camera_matrix: !!opencv-matrix\n"
+          "    {rows: 3, cols: 3, dt: d, data: [700, 0, 320.5, 0, 710, 240.5, 0, 0, 1]}\n"
+          "  laser: {baseline_m: 0.1}\n",
+          "test.yaml"),
+      "test.yaml");
+  EXPECT_EQ(config.detector_options.geometry.width, 640);
+  EXPECT_DOUBLE_EQ(config.detector_options.geometry.fy, 710);
+  EXPECT_DOUBLE_EQ(config.detector_options.geometry.cx, 320.5);
+  EXPECT_DOUBLE_EQ(config.detector_options.geometry.laser_plane[3], 0.1);
+  EXPECT_EQ(error_of("calibration:\n  image_width: 640\n  image_height: 480\n"
+                     "  camera_matrix: {rows: 3, cols: 3, dt: d, data: [700, 0, 320]}\n"),
+            "test.yaml:4: calibration.camera_matrix.data: must have 9 numbers, got 3");
+}
+
 TEST(Config, UnreadableAndInvalidYaml) {
   try {
     load_config_file("/nonexistent/laserline.yaml");

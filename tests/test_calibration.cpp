@@ -1,0 +1,213 @@
+// Calibration files: laserline's own layout and OpenCV's calibration layout, including a file
+// written by cv::FileStorage itself.
+#include "hal/calibration.hpp"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <opencv2/core.hpp>
+#include <string>
+
+namespace laserline::hal {
+namespace {
+
+class CalibrationFile : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           ("laserline_calibration_" + std::to_string(getpid()));
+    std::filesystem::create_directories(dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+
+  std::string write(const std::string& name, const std::string& text) {
+    const std::string path = (dir_ / name).string();
+    std::ofstream(path) << text;
+    return path;
+  }
+  // The one-line error of loading `text` as a calibration file, or "" when it loads.
+  std::string error_of(const std::string& text) {
+    const std::string path = write("calib.yaml", text);
+    try {
+      load_calibration_file(path);
+    } catch (const ConfigError& e) {
+      const std::string what = e.what();
+      EXPECT_EQ(what.find('\n'), std::string::npos) << what;
+      // Reported relative to the file name so the expectations below stay readable.
+      return what.rfind(path, 0) == 0 ? "calib.yaml" + what.substr(path.size()) : what;
+    }
+    return "";
+  }
+
+  std::filesystem::path dir_;
+};
+
+TEST_F(CalibrationFile, NativeLayout) {
+  const Calibration c = load_calibration_file(
+      write("native.yaml",
+            "camera: {width: 1280, height: 1024, fx: 1400, fy: 1410, cx: 639.5, cy: 511.5,\n"
+            "         distortion: [0.1, -0.2, 0.001, 0.002, 0.05]}\n"
+            "laser: {baseline_m: 0.25, angle_deg: 80, sheet_width_m: 0.003}\n"));
+  EXPECT_EQ(c.camera.width, 1280);
+  EXPECT_EQ(c.camera.height, 1024);
+  EXPECT_DOUBLE_EQ(c.camera.fy, 1410);
+  EXPECT_DOUBLE_EQ(c.camera.distortion[4], 0.05);
+  EXPECT_DOUBLE_EQ(c.laser.angle_deg, 80);
+  EXPECT_FALSE(c.laser.plane.has_value());
+}
+
+// The layout of OpenCV's calibration sample, written by cv::FileStorage (with its `%YAML:1.0`
+// header), plus the laser section laserline needs, also written by cv::FileStorage.
+TEST_F(CalibrationFile, WrittenByOpenCvFileStorage) {
+  const std::string path = (dir_ / "opencv.yml").string();
+  {
+    cv::FileStorage fs(path, cv::FileStorage::WRITE);
+    ASSERT_TRUE(fs.isOpened());
+    const cv::Mat k = (cv::Mat_<double>(3, 3) << 1402.5, 0, 641.25, 0, 1398.75, 509.5, 0, 0, 1);
+    const cv::Mat d = (cv::Mat_<double>(5, 1) << -0.12, 0.034, 0.0011, -0.0007, 0.0021);
+    const cv::Mat extrinsics = cv::Mat::zeros(2, 6, CV_64F);
+    fs << "calibration_time"
+       << "Sun Nov 22 22:00:00 2026";
+    fs << "nframes" << 2 << "image_width" << 1280 << "image_height" << 1024;
+    fs << "board_width" << 9 << "board_height" << 6 << "square_size" << 0.025f;
+    fs << "flags" << 0 << "camera_matrix" << k << "distortion_coefficients" << d;
+    fs << "avg_reprojection_error" << 0.21;
+    fs << "per_view_reprojection_errors" << cv::Mat((cv::Mat_<float>(2, 1) << 0.2f, 0.22f));
+    fs << "extrinsic_parameters" << extrinsics;
+    fs << "laser"
+       << "{"
+       << "baseline_m" << 0.3 << "angle_deg" << 75.0 << "sheet_width_m" << 0.002 << "}";
+  }
+  std::ifstream in(path);
+  std::string first_line;
+  std::getline(in, first_line);
+  ASSERT_EQ(first_line, "%YAML:1.0") << "not the header this test is about";
+
+  const Calibration c = load_calibration_file(path);
+  EXPECT_EQ(c.camera.width, 1280);
+  EXPECT_EQ(c.camera.height, 1024);
+  EXPECT_DOUBLE_EQ(c.camera.fx, 1402.5);
+  EXPECT_DOUBLE_EQ(c.camera.fy, 1398.75);
+  EXPECT_DOUBLE_EQ(c.camera.cx, 641.25);
+  EXPECT_DOUBLE_EQ(c.camera.cy, 509.5);
+  const std::array<double, 5> expected{-0.12, 0.034, 0.0011, -0.0007, 0.0021};
+  for (std::size_t i = 0; i < expected.size(); ++i)
+    EXPECT_DOUBLE_EQ(c.camera.distortion[i], expected[i]) << i;
+  EXPECT_DOUBLE_EQ(c.laser.baseline_m, 0.3);
+  EXPECT_DOUBLE_EQ(c.laser.angle_deg, 75.0);
+  EXPECT_DOUBLE_EQ(c.laser.sheet_width_m, 0.002);
+}
+
+// Float matrices and the 8-coefficient vector OpenCV writes with CALIB_RATIONAL_MODEL off.
+TEST_F(CalibrationFile, OpenCvFloatMatrixAndEightZeroTailedCoefficients) {
+  const std::string path = (dir_ / "float.yml").string();
+  {
+    cv::FileStorage fs(path, cv::FileStorage::WRITE);
+    fs << "image_width" << 640 << "image_height" << 480;
+    fs << "camera_matrix" << cv::Mat((cv::Mat_<float>(3, 3) << 700, 0, 320, 0, 700, 240, 0, 0, 1));
+    fs << "distortion_coefficients"
+       << cv::Mat((cv::Mat_<float>(1, 8) << 0.5f, -0.25f, 0, 0, 0.125f, 0, 0, 0));
+  }
+  const Calibration c = load_calibration_file(path);
+  EXPECT_EQ(c.camera.width, 640);
+  EXPECT_DOUBLE_EQ(c.camera.fx, 700);
+  EXPECT_DOUBLE_EQ(c.camera.cy, 240);
+  EXPECT_DOUBLE_EQ(c.camera.distortion[0], 0.5);
+  EXPECT_DOUBLE_EQ(c.camera.distortion[4], 0.125);
+  EXPECT_DOUBLE_EQ(c.laser.baseline_m, LaserMount{}.baseline_m) << "laser takes its defaults";
+}
+
+TEST_F(CalibrationFile, OpenCvLayoutInsideTheCameraSection) {
+  const Calibration c = load_calibration_file(
+      write("nested.yaml",
+            "camera:\n"
+            "  image_width: 800\n"
+            "  image_height: 600\n"
+            "  camera_matrix: !!opencv-matrix\n"
+            "    rows: 3\n"
+            "    cols: 3\n"
+            "    dt: d\n"
+            "    data: [ 900., 0., 399.5, 0., 905., 299.5, 0., 0., 1. ]\n"
+            "  distortion_coefficients: {rows: 1, cols: 4, dt: d, data: [0.01, 0.02, 0.003, "
+            "0.004]}\n"
+            "laser: {baseline_m: 0.2, plane: [0, 1, -0.2, 0.2]}\n"));
+  EXPECT_EQ(c.camera.width, 800);
+  EXPECT_DOUBLE_EQ(c.camera.fy, 905);
+  EXPECT_DOUBLE_EQ(c.camera.cx, 399.5);
+  EXPECT_DOUBLE_EQ(c.camera.distortion[3], 0.004);
+  EXPECT_DOUBLE_EQ(c.camera.distortion[4], 0.0);
+  ASSERT_TRUE(c.laser.plane.has_value());
+  EXPECT_DOUBLE_EQ((*c.laser.plane)[2], -0.2);
+}
+
+TEST_F(CalibrationFile, OpenCvLayoutErrorsNameFileLineAndKey) {
+  const std::string k =
+      "  camera_matrix: {rows: 3, cols: 3, dt: d, data: [1400, 0, 639.5, 0, "
+      "1400, 511.5, 0, 0, 1]}\n";
+  const std::string size = "  image_width: 1280\n  image_height: 1024\n";
+  EXPECT_EQ(error_of("camera:\n" + size + k), "");
+  EXPECT_EQ(error_of("camera:\n  image_width: 1280\n" + k),
+            "calib.yaml:2: camera.image_height: is required");
+  EXPECT_EQ(error_of("camera:\n" + size +
+                     "  camera_matrix: {rows: 3, cols: 3, dt: d, data: [1, 2, 3]}\n"),
+            "calib.yaml:4: camera.camera_matrix.data: must have 9 numbers, got 3");
+  EXPECT_EQ(error_of("camera:\n" + size +
+                     "  camera_matrix: {rows: 2, cols: 3, dt: d, data: [1, 0, 3, 0, 1, 3]}\n"),
+            "calib.yaml:4: camera.camera_matrix: must be 3x3, got 2x3");
+  EXPECT_EQ(error_of("camera:\n" + size +
+                     "  camera_matrix: {rows: 3, cols: 3, dt: d, data: [1400, 2, 639.5, 0, 1400, "
+                     "511.5, 0, 0, 1]}\n"),
+            "calib.yaml:4: camera.camera_matrix: has a skew (element 0,1): not supported, must "
+            "be 0");
+  EXPECT_EQ(error_of("camera:\n" + size +
+                     "  camera_matrix: {rows: 3, cols: 3, dt: d, data: [1400, 0, 639.5, 0, 1400, "
+                     "511.5, 0, 0, 2]}\n"),
+            "calib.yaml:4: camera.camera_matrix: is not a camera matrix [fx 0 cx; 0 fy cy; 0 0 "
+            "1]");
+  EXPECT_EQ(error_of("camera:\n" + size +
+                     "  camera_matrix: {rows: 3, cols: 3, dt: d, data: [0, 0, 639.5, 0, 1400, "
+                     "511.5, 0, 0, 1]}\n"),
+            "calib.yaml:4: camera.camera_matrix: fx must be between 1 and 1e+06, got 0");
+  EXPECT_EQ(error_of("camera:\n" + size + k +
+                     "  distortion_coefficients: {rows: 1, cols: 8, dt: d, data: [0, 0, 0, 0, 0, "
+                     "0.1, 0, 0]}\n"),
+            "calib.yaml:5: camera.distortion_coefficients: coefficient 5 (k4 and later: "
+            "rational, thin-prism or tilt model) is not supported, must be 0");
+  EXPECT_EQ(error_of("camera:\n" + size + k +
+                     "  distortion_coefficients: {rows: 2, cols: 3, dt: d, data: [0, 0, 0, 0, 0, "
+                     "0]}\n"),
+            "calib.yaml:5: camera.distortion_coefficients: must be a 1xN or Nx1 vector with N = "
+            "4, 5, 8, 12 or 14, got 2x3");
+  EXPECT_EQ(error_of("camera:\n" + size + k +
+                     "  distortion_coefficients: {rows: 1, cols: 5, dt: 3f, data: [0, 0, 0, 0, "
+                     "0]}\n"),
+            "calib.yaml:5: camera.distortion_coefficients.dt: must be one of d, f, i, u, s, w, "
+            "got '3f'");
+  EXPECT_EQ(error_of("camera:\n" + size + k + "  fisheye_model: 1\n"),
+            "calib.yaml:5: camera.fisheye_model: the fisheye model is not supported");
+  // Native and OpenCV keys do not mix: the OpenCV layout lists its own keys.
+  const std::string mixed = error_of("camera:\n" + size + k + "  fx: 1400\n");
+  EXPECT_EQ(mixed.rfind("calib.yaml:5: camera.fx: unknown key (expected one of: ", 0), 0u) << mixed;
+  EXPECT_NE(mixed.find("camera_matrix"), std::string::npos) << mixed;
+  // At the top level, together with a camera section.
+  EXPECT_EQ(error_of(size.substr(2, 18) + "image_height: 1024\ncamera_matrix: {rows: 3, cols: 3, "
+                                          "dt: d, data: [1400, 0, 639.5, 0, 1400, 511.5, 0, 0, "
+                                          "1]}\ncamera: {fx: 1}\n"),
+            "calib.yaml:4: camera: give the camera either as a camera section or in OpenCV's "
+            "layout (camera_matrix, ...), not both");
+}
+
+TEST_F(CalibrationFile, NativeErrorsUnchanged) {
+  EXPECT_EQ(error_of("camera: {fx: 0}\n"),
+            "calib.yaml:1: camera.fx: must be between 1 and 1e+06, got 0");
+  EXPECT_EQ(error_of("camera:\n  distortion: [1, 2]\n"),
+            "calib.yaml:2: camera.distortion: must have 4 or 5 numbers, got 2");
+  EXPECT_EQ(error_of("laser:\n  angel_deg: 80\n"),
+            "calib.yaml:2: laser.angel_deg: unknown key (expected one of: angle_deg, baseline_m, "
+            "plane, sheet_width_m)");
+}
+
+}  // namespace
+}  // namespace laserline::hal

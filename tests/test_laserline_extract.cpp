@@ -1,0 +1,654 @@
+// laserline-extract run as the real executable on frames rendered by the simulated scanner and
+// written as PNG files, folders, videos and LCM logs; its CSV is checked against the simulator's
+// exact ground truth.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <laserline/image_t.hpp>
+#include <laserline/profile_t.hpp>
+#include <lcm/lcm-cpp.hpp>
+
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+#include <span>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "hal/sim/sim_scene.hpp"
+
+namespace laserline {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct RunResult {
+  int exit_code = -1;
+  std::string out;  // stdout and stderr together
+};
+
+RunResult run_command(const std::string& command) {
+  RunResult r;
+  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
+  if (pipe == nullptr) return r;
+  std::array<char, 4096> buffer{};
+  while (std::fgets(buffer.data(), buffer.size(), pipe) != nullptr)
+    r.out += buffer.data();
+  const int status = pclose(pipe);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+struct CsvPoint {
+  int u = 0;
+  double v = 0;
+  double snr_db = 0;
+  int segment = 0;
+  int valid = 0;
+};
+
+struct Csv {
+  std::string header;
+  std::map<long, std::vector<CsvPoint>> frames;
+  std::size_t rows = 0;
+};
+
+Csv read_csv(const std::string& path) {
+  Csv csv;
+  std::ifstream in(path);
+  std::getline(in, csv.header);
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream fields(line);
+    long frame = 0;
+    CsvPoint p;
+    char c1 = 0, c2 = 0, c3 = 0, c4 = 0, c5 = 0;
+    fields >> frame >> c1 >> p.u >> c2 >> p.v >> c3 >> p.snr_db >> c4 >> p.segment >> c5 >> p.valid;
+    EXPECT_TRUE(fields && c1 == ',' && c5 == ',') << "bad CSV line: " << line;
+    csv.frames[frame].push_back(p);
+    ++csv.rows;
+  }
+  return csv;
+}
+
+// How one frame's points compare with the simulator's truth.
+struct Accuracy {
+  std::size_t truth_columns = 0;  // columns where the laser is visible
+  std::size_t found = 0;          // of those, columns with a valid point
+  std::size_t outside = 0;        // valid points farther than the tolerance (or where no laser)
+  double max_error = 0;
+  double sum_sq = 0;
+  double rms() const { return found > 0 ? std::sqrt(sum_sq / static_cast<double>(found)) : NAN; }
+  double recall() const {
+    return truth_columns > 0 ? static_cast<double>(found) / static_cast<double>(truth_columns) : 0;
+  }
+};
+
+Accuracy compare(const std::vector<CsvPoint>& points, const hal::SimGroundTruth& truth,
+                 double tolerance_px) {
+  Accuracy a;
+  for (float row : truth.row)
+    a.truth_columns += std::isfinite(row) ? 1 : 0;
+  for (const auto& p : points) {
+    if (p.valid != 1) continue;
+    if (p.u < 0 || p.u >= static_cast<int>(truth.row.size()) || !std::isfinite(truth.row[p.u])) {
+      ++a.outside;
+      continue;
+    }
+    const double error = std::abs(p.v - truth.row[p.u]);
+    if (error > tolerance_px) {
+      ++a.outside;
+      continue;
+    }
+    ++a.found;
+    a.max_error = std::max(a.max_error, error);
+    a.sum_sq += error * error;
+  }
+  return a;
+}
+
+constexpr int kWidth = 320;
+constexpr int kHeight = 256;
+constexpr double kTolerancePx = 0.5;
+
+hal::SimSceneOptions scene_options() {
+  hal::SimSceneOptions o;
+  o.calibration.camera.width = kWidth;
+  o.calibration.camera.height = kHeight;
+  o.calibration.camera.fx = o.calibration.camera.fy = 350;
+  o.calibration.camera.cx = 159.5;
+  o.calibration.camera.cy = 127.5;
+  o.seed = 7;
+  o.tilt_y_deg = 8;
+  o.texture_contrast = 0.3;
+  return o;
+}
+
+cv::Mat render(hal::SimScene& scene, std::uint64_t sequence) {
+  cv::Mat image(kHeight, kWidth, CV_8UC1);
+  scene.render(sequence, true,
+               std::span<std::uint8_t>(image.data, static_cast<std::size_t>(kWidth) * kHeight));
+  return image;
+}
+
+hal::SimGroundTruth truth_of(const hal::SimScene& scene, std::uint64_t sequence) {
+  hal::SimGroundTruth truth;
+  scene.ground_truth(sequence, true, truth);
+  return truth;
+}
+
+class LaserlineExtract : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("laserline_extract_" + std::to_string(getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    // The calibration as OpenCV's calibration sample writes it, laser section added, all
+    // written by cv::FileStorage: the tool reads that layout as is.
+    calib_ = path("calib.yml");
+    cv::FileStorage fs(calib_, cv::FileStorage::WRITE);
+    const auto& c = options_.calibration.camera;
+    fs << "image_width" << c.width << "image_height" << c.height;
+    fs << "camera_matrix"
+       << cv::Mat((cv::Mat_<double>(3, 3) << c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1));
+    fs << "distortion_coefficients" << cv::Mat::zeros(5, 1, CV_64F);
+    const auto& l = options_.calibration.laser;
+    fs << "laser"
+       << "{"
+       << "baseline_m" << l.baseline_m << "angle_deg" << l.angle_deg << "sheet_width_m"
+       << l.sheet_width_m << "}";
+  }
+  void TearDown() override {
+    if (!HasFailure()) fs::remove_all(dir_);
+  }
+
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+
+  RunResult extract(const std::string& args, const std::string& detector = "maxvalue") {
+    return run_command(std::string(LASERLINE_EXTRACT_PATH) + " --calib " + calib_ + " --detector " +
+                       detector + " --output " + path("points.csv") + " " + args);
+  }
+
+  // Every frame in `expected` (CSV frame -> scene sequence) is found within the tolerance.
+  void expect_frames_match(const Csv& csv, const std::map<long, std::uint64_t>& expected,
+                           const hal::SimScene& scene, double tolerance_px = kTolerancePx) {
+    for (const auto& [frame, sequence] : expected) {
+      ASSERT_TRUE(csv.frames.count(frame)) << "frame " << frame << " missing from the CSV";
+      const Accuracy a = compare(csv.frames.at(frame), truth_of(scene, sequence), tolerance_px);
+      std::printf(
+          "frame %ld (scene frame %llu): %zu/%zu columns within %.2f px, rms %.3f px, "
+          "max %.3f px, %zu outside\n",
+          frame, static_cast<unsigned long long>(sequence), a.found, a.truth_columns, tolerance_px,
+          a.rms(), a.max_error, a.outside);
+      EXPECT_GT(a.truth_columns, static_cast<std::size_t>(kWidth * 0.9));
+      EXPECT_GE(a.recall(), 0.99) << "frame " << frame;
+      EXPECT_EQ(a.outside, 0u) << "frame " << frame;
+    }
+  }
+
+  hal::SimSceneOptions options_ = scene_options();
+  fs::path dir_;
+  std::string calib_;
+};
+
+TEST_F(LaserlineExtract, MonoPngFolderAndFilesInInputOrder) {
+  hal::SimScene scene(options_);
+  fs::create_directories(dir_ / "seq");
+  // Written out of order: the folder is read sorted by name.
+  for (int k : {2, 0, 1}) {
+    ASSERT_TRUE(cv::imwrite(path("seq/img_" + std::to_string(k) + ".png"), render(scene, k)));
+  }
+  std::ofstream(path("seq/notes.txt")) << "not an image, ignored\n";
+  RunResult r = extract(path("seq"));
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_EQ(r.out.find('\r'), std::string::npos) << "no progress bar when not on a terminal";
+  EXPECT_NE(r.out.find("3 frames from 1 inputs, 3 processed with maxvalue"), std::string::npos)
+      << r.out;
+  Csv csv = read_csv(path("points.csv"));
+  EXPECT_EQ(csv.header, "frame,u,v,snr_db,segment,valid");
+  EXPECT_EQ(csv.frames.size(), 3u);
+  expect_frames_match(csv, {{0, 0}, {1, 1}, {2, 2}}, scene);
+
+  // Files on the command line: frame numbers follow the argument order.
+  r = extract(path("seq/img_2.png") + " " + path("seq/img_0.png"));
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  csv = read_csv(path("points.csv"));
+  EXPECT_EQ(csv.frames.size(), 2u);
+  expect_frames_match(csv, {{0, 2}, {1, 0}}, scene);
+}
+
+// The laser is green: only the green channel counts. Red and blue carry a bright stripe
+// elsewhere that wins under any grey conversion (0.299 R + 0.587 G + 0.114 B) but is absent
+// from green.
+TEST_F(LaserlineExtract, ColourPngUsesTheGreenChannel) {
+  options_.laser_peak = 120;
+  options_.texture_contrast = 0.2;
+  hal::SimScene scene(options_);
+  const cv::Mat green = render(scene, 0);
+  const hal::SimGroundTruth truth = truth_of(scene, 0);
+  cv::Mat red_blue = cv::Mat::zeros(kHeight, kWidth, CV_8UC1);
+  red_blue.rowRange(200, 205).setTo(255);
+  for (int u = 0; u < kWidth; ++u)
+    ASSERT_LT(truth.row[u], 180.0f) << "the stripe must be away from the laser";
+  cv::Mat bgr;
+  cv::merge(std::vector<cv::Mat>{red_blue, green, red_blue}, bgr);
+  ASSERT_TRUE(cv::imwrite(path("colour.png"), bgr));
+  const RunResult r = extract(path("colour.png"));
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  expect_frames_match(read_csv(path("points.csv")), {{0, 0}}, scene);
+}
+
+// Real green-laser images clip: the core saturates white in every channel, only the fringes
+// stay green. Also as a 16-bit PNG, which must give exactly the 8-bit result.
+TEST_F(LaserlineExtract, SaturatedColourAndSixteenBit) {
+  options_.laser_peak = 2500;  // core far above 255: a flat top several pixels wide
+  options_.noise_sigma = 1.0;
+  hal::SimScene scene(options_);
+  const cv::Mat green = render(scene, 0);
+  int clipped_columns = 0;
+  for (int u = 0; u < kWidth; ++u) {
+    int run = 0;
+    for (int v = 0; v < kHeight; ++v)
+      run += green.at<std::uint8_t>(v, u) == 255 ? 1 : 0;
+    clipped_columns += run >= 3 ? 1 : 0;
+  }
+  ASSERT_GT(clipped_columns, kWidth * 9 / 10) << "the scene must clip";
+  cv::Mat white_core;
+  cv::compare(green, 255, white_core, cv::CMP_EQ);  // 255 where clipped, 0 elsewhere
+  cv::Mat bgr;
+  cv::merge(std::vector<cv::Mat>{white_core, green, white_core}, bgr);
+  ASSERT_TRUE(cv::imwrite(path("clipped.png"), bgr));
+  cv::Mat sixteen;
+  green.convertTo(sixteen, CV_16U, 257.0);
+  ASSERT_TRUE(cv::imwrite(path("clipped16.png"), sixteen));
+  ASSERT_TRUE(cv::imwrite(path("clipped8.png"), green));
+
+  RunResult r = extract(path("clipped.png"));
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  expect_frames_match(read_csv(path("points.csv")), {{0, 0}}, scene);
+
+  r = extract(path("clipped8.png") + " " + path("clipped16.png"));
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  const Csv csv = read_csv(path("points.csv"));
+  ASSERT_EQ(csv.frames.size(), 2u);
+  ASSERT_EQ(csv.frames.at(0).size(), csv.frames.at(1).size());
+  for (std::size_t i = 0; i < csv.frames.at(0).size(); ++i) {
+    EXPECT_EQ(csv.frames.at(0)[i].u, csv.frames.at(1)[i].u);
+    EXPECT_EQ(csv.frames.at(0)[i].v, csv.frames.at(1)[i].v) << "column " << csv.frames.at(0)[i].u;
+  }
+}
+
+// Lossless FFV1 in Matroska: the decoded frames are the rendered ones, so the 0.5 px bound
+// holds as for PNG. Debian's OpenCV writes it through FFmpeg.
+TEST_F(LaserlineExtract, Video) {
+  hal::SimScene scene(options_);
+  const std::string video = path("scan.mkv");
+  {
+    cv::VideoWriter writer(video, cv::CAP_FFMPEG, cv::VideoWriter::fourcc('F', 'F', 'V', '1'), 30,
+                           cv::Size(kWidth, kHeight), false);
+    ASSERT_TRUE(writer.isOpened()) << "this OpenCV cannot write FFV1 video";
+    for (int k = 0; k < 4; ++k)
+      writer.write(render(scene, k));
+  }
+  const RunResult r = extract(video);
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  const Csv csv = read_csv(path("points.csv"));
+  EXPECT_EQ(csv.frames.size(), 4u);
+  expect_frames_match(csv, {{0, 0}, {1, 1}, {2, 2}, {3, 3}}, scene);
+}
+
+// Motion JPEG, the codec most cameras and recorders write: lossy, so the points are checked
+// within the same bound on a scene whose texture JPEG keeps well.
+TEST_F(LaserlineExtract, MotionJpegVideo) {
+  hal::SimScene scene(options_);
+  const std::string video = path("scan.avi");
+  {
+    cv::VideoWriter writer(video, cv::CAP_FFMPEG, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 30,
+                           cv::Size(kWidth, kHeight), false);
+    ASSERT_TRUE(writer.isOpened()) << "this OpenCV cannot write MJPG video";
+    writer.set(cv::VIDEOWRITER_PROP_QUALITY, 100);
+    for (int k = 0; k < 2; ++k)
+      writer.write(render(scene, k));
+  }
+  const RunResult r = extract(video);
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  expect_frames_match(read_csv(path("points.csv")), {{0, 0}, {1, 1}}, scene);
+}
+
+laserline::image_t image_message(const cv::Mat& image, std::int64_t sequence) {
+  laserline::image_t m;
+  m.utime = 1'700'000'000'000'000 + sequence * 33'333;
+  m.sequence = sequence;
+  m.width = image.cols;
+  m.height = image.rows;
+  m.compression = laserline::image_t::COMPRESSION_NONE;
+  return m;
+}
+
+void write_event(lcm::LogFile& log, const std::string& channel,
+                 const std::vector<std::uint8_t>& data, std::int64_t utime) {
+  lcm::LogEvent event;
+  event.timestamp = utime;
+  event.channel = channel;
+  event.datalen = static_cast<std::int32_t>(data.size());
+  event.data = const_cast<std::uint8_t*>(data.data());
+  ASSERT_EQ(log.writeEvent(&event), 0);
+}
+
+template <typename Message>
+std::vector<std::uint8_t> encode(const Message& m) {
+  std::vector<std::uint8_t> data(static_cast<std::size_t>(m.getEncodedSize()));
+  EXPECT_EQ(m.encode(data.data(), 0, static_cast<int>(data.size())), static_cast<int>(data.size()));
+  return data;
+}
+
+// A log as laserlined and lcm-logger record it: image_t frames (8-bit with row padding,
+// 16-bit little and big endian, PNG-compressed), profile_t messages between them, and one
+// image_t whose payload is cut short.
+TEST_F(LaserlineExtract, LcmLogOfImageMessages) {
+  hal::SimScene scene(options_);
+  const std::string log_path = path("dive.lcmlog");
+  {
+    lcm::LogFile log(log_path, "w");
+    ASSERT_TRUE(log.good());
+    std::int64_t utime = 1'700'000'000'000'000;
+    // Frame 0: 8-bit grey, rows padded to 384 bytes.
+    {
+      const cv::Mat image = render(scene, 0);
+      laserline::image_t m = image_message(image, 0);
+      m.pixelformat = laserline::image_t::PIXEL_FORMAT_GRAY;
+      m.row_stride = 384;
+      m.data.assign(static_cast<std::size_t>(m.row_stride) * kHeight, 0xAB);
+      for (int v = 0; v < kHeight; ++v)
+        std::memcpy(m.data.data() + static_cast<std::size_t>(v) * m.row_stride, image.ptr(v),
+                    kWidth);
+      m.size = static_cast<std::int32_t>(m.data.size());
+      write_event(log, "LASERLINE_IMAGE", encode(m), utime += 33'333);
+    }
+    // Profiles on their own channel: not frames, but they give the laser state of the image
+    // with the same sequence number (image_t has none); frame 2 was exposed with the laser off.
+    for (int k : {0, 2}) {
+      laserline::profile_t p;
+      p.sequence = k;
+      p.laser_on = k != 2;
+      p.detector = "maxvalue";
+      p.num_points = 0;
+      write_event(log, "LASERLINE_PROFILE", encode(p), utime += 10);
+    }
+    // Frames 1 and 2: 16-bit little and big endian.
+    for (int k : {1, 2}) {
+      const cv::Mat image = render(scene, k);
+      laserline::image_t m = image_message(image, k);
+      m.pixelformat = k == 1
+                          ? static_cast<std::int32_t>(laserline::image_t::PIXEL_FORMAT_LE_GRAY16)
+                          : static_cast<std::int32_t>(laserline::image_t::PIXEL_FORMAT_BE_GRAY16);
+      m.row_stride = kWidth * 2;
+      for (int v = 0; v < kHeight; ++v) {
+        for (int u = 0; u < kWidth; ++u) {
+          const std::uint16_t value =
+              static_cast<std::uint16_t>(image.at<std::uint8_t>(v, u) * 257);
+          const std::uint8_t lo = value & 0xFF, hi = value >> 8;
+          m.data.push_back(k == 1 ? lo : hi);
+          m.data.push_back(k == 1 ? hi : lo);
+        }
+      }
+      m.size = static_cast<std::int32_t>(m.data.size());
+      write_event(log, "LASERLINE_IMAGE", encode(m), utime += 33'333);
+    }
+    // Frame 3: cut short (the hash says image_t, the payload is truncated).
+    {
+      laserline::image_t m = image_message(render(scene, 3), 3);
+      m.pixelformat = laserline::image_t::PIXEL_FORMAT_GRAY;
+      m.row_stride = kWidth;
+      m.data.assign(static_cast<std::size_t>(kWidth) * kHeight, 0);
+      m.size = static_cast<std::int32_t>(m.data.size());
+      std::vector<std::uint8_t> data = encode(m);
+      data.resize(100);
+      write_event(log, "LASERLINE_IMAGE", data, utime += 33'333);
+    }
+    // Frame 4: PNG-compressed.
+    {
+      const cv::Mat image = render(scene, 4);
+      laserline::image_t m = image_message(image, 4);
+      m.pixelformat = laserline::image_t::PIXEL_FORMAT_GRAY;
+      m.row_stride = kWidth;
+      m.compression = laserline::image_t::COMPRESSION_PNG;
+      ASSERT_TRUE(cv::imencode(".png", image, m.data));
+      m.size = static_cast<std::int32_t>(m.data.size());
+      write_event(log, "LASERLINE_IMAGE", encode(m), utime += 33'333);
+    }
+  }
+  // The recording was cut short in the middle of a last event.
+  const auto complete = fs::file_size(log_path);
+  std::ofstream(log_path, std::ios::binary | std::ios::app)
+      .write("\xED\xA1\xDA\x01\x00\x00\x00\x00\x00\x00\x00\x09", 12);
+  ASSERT_EQ(fs::file_size(log_path), complete + 12);
+
+  const RunResult r = extract(log_path);
+  EXPECT_EQ(r.exit_code, 1) << "the truncated frame is a failure: " << r.out;
+  EXPECT_NE(r.out.find(log_path + ": the last 12 bytes are not a complete event (recording cut "
+                                  "short?); ignored\n"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find(log_path + " event 5 (LASERLINE_IMAGE): laserline.image_t cannot be "
+                                  "decoded; skipped"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("laserline-extract: 1 of the processed frames were exposed with the laser "
+                       "off (from the log's profiles)\n"),
+            std::string::npos)
+      << r.out;
+  const Csv csv = read_csv(path("points.csv"));
+  EXPECT_EQ(csv.frames.count(3), 0u);
+  expect_frames_match(csv, {{0, 0}, {1, 1}, {2, 2}, {4, 4}}, scene);
+}
+
+TEST_F(LaserlineExtract, CorruptImageBetweenGoodOnesKeepsTheOthers) {
+  hal::SimScene scene(options_);
+  fs::create_directories(dir_ / "seq");
+  ASSERT_TRUE(cv::imwrite(path("seq/a0.png"), render(scene, 0)));
+  ASSERT_TRUE(cv::imwrite(path("seq/a2.png"), render(scene, 2)));
+  std::vector<std::uint8_t> png;
+  ASSERT_TRUE(cv::imencode(".png", render(scene, 1), png));
+  png.resize(png.size() / 3);  // truncated: the signature is right, the data is not
+  std::ofstream(path("seq/a1.png"), std::ios::binary)
+      .write(reinterpret_cast<const char*>(png.data()), static_cast<std::streamsize>(png.size()));
+
+  const RunResult r = extract(path("seq"));
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("laserline-extract: " + path("seq/a1.png") +
+                       ": not a readable image (corrupt or unsupported format); skipped\n"),
+            std::string::npos)
+      << r.out;
+  const Csv csv = read_csv(path("points.csv"));
+  EXPECT_EQ(csv.frames.count(1), 0u);
+  expect_frames_match(csv, {{0, 0}, {2, 2}}, scene);
+}
+
+TEST_F(LaserlineExtract, MissingAndWrongSizeInputsAreNamedAndSkipped) {
+  hal::SimScene scene(options_);
+  ASSERT_TRUE(cv::imwrite(path("good.png"), render(scene, 0)));
+  ASSERT_TRUE(cv::imwrite(path("small.png"), cv::Mat(120, 160, CV_8UC1, cv::Scalar(10))));
+  std::ofstream(path("garbage.avi")) << std::string(5000, 'x');
+  const RunResult r = extract(path("nothere.png") + " " + path("small.png") + " " +
+                              path("garbage.avi") + " " + path("good.png"));
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("laserline-extract: " + path("nothere.png") +
+                       ": no such file or folder; skipped\n"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(
+      r.out.find("laserline-extract: " + path("small.png") +
+                 ": image is 160x120 but the calibration " + calib_ + " is for 320x256; skipped\n"),
+      std::string::npos)
+      << r.out;
+  EXPECT_NE(
+      r.out.find("laserline-extract: " + path("garbage.avi") + ": not a readable video; skipped\n"),
+      std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("3 problems"), std::string::npos) << r.out;
+  // The missing path and the unreadable video take no frame number (it is not known to be a frame);
+  // the wrong-size image does.
+  const Csv csv = read_csv(path("points.csv"));
+  EXPECT_EQ(csv.frames.size(), 1u);
+  expect_frames_match(csv, {{1, 0}}, scene);
+}
+
+// A video of the wrong size is one line, not one per frame; many bad frames in one input are
+// counted beyond the first ten lines.
+TEST_F(LaserlineExtract, RepeatedProblemsDoNotFloodTheTerminal) {
+  {
+    cv::VideoWriter writer(path("small.mkv"), cv::CAP_FFMPEG,
+                           cv::VideoWriter::fourcc('F', 'F', 'V', '1'), 30, cv::Size(160, 128),
+                           false);
+    ASSERT_TRUE(writer.isOpened());
+    for (int k = 0; k < 5; ++k)
+      writer.write(cv::Mat(128, 160, CV_8UC1, cv::Scalar(k)));
+  }
+  fs::create_directories(dir_ / "small");
+  for (int k = 0; k < 12; ++k) {
+    ASSERT_TRUE(cv::imwrite(path("small/s" + std::to_string(k + 10) + ".png"),
+                            cv::Mat(20, 20, CV_8UC1, cv::Scalar(0))));
+  }
+  const RunResult r = extract(path("small.mkv") + " " + path("small"));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.out.find("laserline-extract: " + path("small.mkv") +
+                       ": video is 160x128 but the calibration is for 320x256; skipped\n"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find(path("small/s19.png") + ": image is 20x20"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find(path("small/s20.png")), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("laserline-extract: " + path("small") +
+                       ": further problems in this input are counted, not shown\n"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("12 frames from 2 inputs, 0 processed with maxvalue, 0 points written "
+                       "(0 valid) to " +
+                       path("points.csv") + ", 13 problems (see above)"),
+            std::string::npos)
+      << r.out;
+  std::size_t lines = 0;
+  for (char c : r.out)
+    lines += c == '\n';
+  EXPECT_EQ(lines, 13u) << r.out;  // video, 10 images, "further problems", summary
+}
+
+TEST_F(LaserlineExtract, OverlaysAndAllCandidates) {
+  hal::SimScene scene(options_);
+  ASSERT_TRUE(cv::imwrite(path("f.png"), render(scene, 0)));
+  RunResult r = extract("--overlay-dir " + path("overlays") + " " + path("f.png"));
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const Csv valid_only = read_csv(path("points.csv"));
+  const cv::Mat overlay = cv::imread(path("overlays/frame_000000.png"), cv::IMREAD_COLOR);
+  ASSERT_FALSE(overlay.empty()) << r.out;
+  EXPECT_EQ(overlay.cols, kWidth);
+  EXPECT_EQ(overlay.rows, kHeight);
+  ASSERT_FALSE(valid_only.frames.at(0).empty());
+  int green = 0;
+  for (const auto& p : valid_only.frames.at(0)) {
+    const auto px = overlay.at<cv::Vec3b>(static_cast<int>(std::lround(p.v)), p.u);
+    green += px[1] > px[0] + 40 && px[1] > px[2] + 40 ? 1 : 0;
+  }
+  EXPECT_GT(green, static_cast<int>(valid_only.frames.at(0).size() * 9 / 10))
+      << "accepted points are drawn green";
+
+  r = extract("--all-candidates " + path("f.png"));
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const Csv all = read_csv(path("points.csv"));
+  for (const auto& p : valid_only.frames.at(0))
+    EXPECT_EQ(p.valid, 1) << "without --all-candidates only accepted points";
+  std::size_t valid_in_all = 0;
+  for (const auto& p : all.frames.at(0))
+    valid_in_all += p.valid == 1 ? 1 : 0;
+  EXPECT_EQ(valid_in_all, valid_only.frames.at(0).size());
+  EXPECT_GE(all.frames.at(0).size(), valid_only.frames.at(0).size());
+}
+
+TEST_F(LaserlineExtract, ProgressBarOnlyOnATerminal) {
+  if (std::system("script --version >/dev/null 2>&1") != 0) GTEST_SKIP() << "no script(1)";
+  hal::SimScene scene(options_);
+  ASSERT_TRUE(cv::imwrite(path("f.png"), render(scene, 0)));
+  // script(1) gives the tool a terminal.
+  const RunResult r = run_command("script -qec '" + std::string(LASERLINE_EXTRACT_PATH) +
+                                  " --calib " + calib_ + " --detector maxvalue --output " +
+                                  path("points.csv") + " " + path("f.png") + "' /dev/null");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("\r["), std::string::npos) << r.out;
+}
+
+TEST_F(LaserlineExtract, BadArgumentsAndConfiguration) {
+  RunResult r = run_command(std::string(LASERLINE_EXTRACT_PATH) + " --frobnicate");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.out.rfind("laserline-extract: unknown argument '--frobnicate'\nusage:", 0), 0u)
+      << r.out;
+  r = run_command(std::string(LASERLINE_EXTRACT_PATH) + " --calib " + calib_ +
+                  " --detector maxvalue --output " + path("p.csv"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.out.rfind("laserline-extract: no INPUT given\nusage:", 0), 0u) << r.out;
+  r = run_command(std::string(LASERLINE_EXTRACT_PATH) + " --calib");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.out.rfind("laserline-extract: --calib: missing value\nusage:", 0), 0u) << r.out;
+  r = run_command(std::string(LASERLINE_EXTRACT_PATH) + " --help");
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_EQ(r.out.rfind("usage: laserline-extract", 0), 0u) << r.out;
+  EXPECT_NE(r.out.find("maxvalue"), std::string::npos) << "lists the detectors: " << r.out;
+
+  r = extract("x.png", "nosuchdetector");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.out.rfind("laserline-extract: --detector: unknown detector 'nosuchdetector' (one "
+                        "of: maxvalue",
+                        0),
+            0u)
+      << r.out;
+
+  std::ofstream(path("bad.yaml")) << "detector:\n  maxvalue: {threshold: 0}\n";
+  r = extract("--config " + path("bad.yaml") + " x.png");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.out, "laserline-extract: " + path("bad.yaml") +
+                       ":2: detector.maxvalue.threshold: must be between 1 and 255, got 0\n");
+
+  std::ofstream(path("file")) << "a file, not a folder\n";
+  r = extract("--overlay-dir " + path("file/overlays") + " x.png");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(
+      r.out.rfind(
+          "laserline-extract: --overlay-dir " + path("file/overlays") + ": cannot be created: ", 0),
+      0u)
+      << r.out;
+
+  std::ofstream(path("badcalib.yaml")) << "camera: {fx: -1}\n";
+  r = run_command(std::string(LASERLINE_EXTRACT_PATH) + " --calib " + path("badcalib.yaml") +
+                  " --detector maxvalue --output " + path("p.csv") + " x.png");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.out, "laserline-extract: " + path("badcalib.yaml") +
+                       ":1: camera.fx: must be between 1 and 1e+06, got -1\n");
+}
+
+// The configuration's detector options reach the detector: a threshold above the laser's peak
+// leaves no point.
+TEST_F(LaserlineExtract, ConfigurationOptionsAreUsed) {
+  options_.ambient = 10;
+  options_.laser_peak = 60;
+  options_.texture_contrast = 0;
+  hal::SimScene scene(options_);
+  ASSERT_TRUE(cv::imwrite(path("f.png"), render(scene, 0)));
+  std::ofstream(path("high.yaml")) << "detector:\n  maxvalue: {threshold: 250}\n";
+  RunResult r = extract("--config " + path("high.yaml") + " " + path("f.png"));
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_EQ(read_csv(path("points.csv")).rows, 0u);
+  r = extract(path("f.png"));
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  expect_frames_match(read_csv(path("points.csv")), {{0, 0}}, scene);
+}
+
+}  // namespace
+}  // namespace laserline

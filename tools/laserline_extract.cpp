@@ -1,0 +1,657 @@
+// laserline-extract: runs a laserline detector over recorded frames (image files, folders of
+// images, videos, LCM logs of laserline.image_t) and writes the laser points to a CSV file, with
+// an optional overlay PNG per frame. Same calibration, configuration and detectors as laserlined.
+//
+// Single-threaded. Every frame's points are written and flushed before the next frame is read,
+// so an interruption or a bad input never loses what was already extracted.
+#include <unistd.h>
+#include <laserline/image_t.hpp>
+#include <laserline/profile_t.hpp>
+#include <lcm/lcm-cpp.hpp>
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <opencv2/core.hpp>
+#include <opencv2/core/utils/logger.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "daemon/config.hpp"
+#include "hal/calibration.hpp"
+#include "pipeline/detector.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using laserline::hal::ConfigError;
+
+constexpr const char* kUsage =
+    "usage: laserline-extract --calib FILE [--config FILE] --detector NAME [--overlay-dir DIR]\n"
+    "                         [--all-candidates] --output points.csv INPUT...\n"
+    "  --calib FILE       calibration (camera and laser); images must have its size\n"
+    "  --config FILE      laserlined configuration whose detector options are used\n"
+    "                     (default: the built-in configuration)\n"
+    "  --detector NAME    detector to run (see the list below)\n"
+    "  --overlay-dir DIR  write DIR/frame_NNNNNN.png per frame: the grey image the detector saw\n"
+    "                     with its points (accepted green, rejected red)\n"
+    "  --all-candidates   also write rejected candidates (valid = 0)\n"
+    "  --output FILE      CSV: frame,u,v,snr_db,segment,valid\n"
+    "  INPUT              image files, folders of images (sorted by name), videos (.avi .mp4\n"
+    "                     .mkv .mov ...), LCM logs of laserline.image_t messages\n"
+    "Colour frames: the green channel (the laser's colour) is used; 16-bit frames are scaled\n"
+    "to 8 bit. Exit status: 0 all frames processed, 1 some input or frame failed (the others\n"
+    "are still written), 2 bad arguments, configuration or calibration.\n";
+
+constexpr const char* kImageExtensions[] = {
+    ".png", ".jpg", ".jpeg", ".jpe",  ".tif", ".tiff", ".bmp", ".dib", ".pgm", ".ppm",
+    ".pbm", ".pnm", ".pxm",  ".webp", ".jp2", ".ras",  ".sr",  ".exr", ".hdr", ".pic"};
+constexpr const char* kVideoExtensions[] = {".avi", ".mp4",  ".m4v", ".mov", ".mkv",  ".webm",
+                                            ".mpg", ".mpeg", ".wmv", ".ogv", ".mjpg", ".mjpeg",
+                                            ".flv", ".ts",   ".mts", ".3gp", ".h264", ".h265"};
+
+std::string lower_extension(const fs::path& path) {
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext;
+}
+
+template <std::size_t N>
+bool has_extension(const fs::path& path, const char* const (&extensions)[N]) {
+  const std::string ext = lower_extension(path);
+  return std::any_of(std::begin(extensions), std::end(extensions),
+                     [&](const char* e) { return ext == e; });
+}
+
+// LCM log files start every event with this sync word (big-endian), the first at offset 0.
+bool is_lcm_log(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  unsigned char magic[4] = {};
+  if (!in.read(reinterpret_cast<char*>(magic), 4)) return false;
+  return magic[0] == 0xED && magic[1] == 0xA1 && magic[2] == 0xDA && magic[3] == 0x01;
+}
+
+// The fingerprint LCM puts in front of every encoded message.
+std::int64_t message_hash(const void* data, std::int32_t size) {
+  if (size < 8) return 0;
+  const auto* b = static_cast<const unsigned char*>(data);
+  std::uint64_t h = 0;
+  for (int i = 0; i < 8; ++i)
+    h = (h << 8) | b[i];
+  return static_cast<std::int64_t>(h);
+}
+
+// A progress line on stderr, only when stderr is a terminal (never in logs or pipes).
+class Progress {
+ public:
+  Progress() : enabled_(isatty(STDERR_FILENO) == 1) {}
+
+  void update(std::size_t input, std::size_t inputs, const std::string& name, double fraction,
+              std::int64_t frames) {
+    if (!enabled_) return;
+    const auto now = std::chrono::steady_clock::now();
+    if (now - last_ < std::chrono::milliseconds(100) && fraction < 1.0) return;
+    last_ = now;
+    constexpr int kWidth = 30;
+    fraction = std::clamp(fraction, 0.0, 1.0);
+    const int filled = static_cast<int>(fraction * kWidth);
+    std::string bar(static_cast<std::size_t>(filled), '#');
+    bar.resize(kWidth, '.');
+    std::fprintf(stderr, "\r[%s] %3d%% input %zu/%zu %s, %lld frames\033[K", bar.c_str(),
+                 static_cast<int>(fraction * 100.0), input, inputs, name.c_str(),
+                 static_cast<long long>(frames));
+    shown_ = true;
+  }
+  // Prints one line, keeping the progress line out of its way.
+  void message(const std::string& line) {
+    clear();
+    std::fprintf(stderr, "%s\n", line.c_str());
+  }
+  void clear() {
+    if (shown_) std::fputs("\r\033[K", stderr);
+    shown_ = false;
+  }
+
+ private:
+  bool enabled_;
+  bool shown_ = false;
+  std::chrono::steady_clock::time_point last_{};
+};
+
+struct Options {
+  std::string calib, config, detector, overlay_dir, output;
+  bool all_candidates = false;
+  std::vector<std::string> inputs;
+};
+
+// Runs the detector on frames and writes what it finds; counts what failed.
+class Extractor {
+ public:
+  Extractor(const Options& options, const laserline::hal::Calibration& calibration,
+            std::unique_ptr<laserline::pipeline::Detector> detector, FILE* csv)
+      : options_(options),
+        width_(calibration.camera.width),
+        height_(calibration.camera.height),
+        detector_(std::move(detector)),
+        profile_(detector_->max_points(width_, height_)),
+        csv_(csv) {}
+
+  Progress& progress() { return progress_; }
+
+  // The input that messages are about from now on.
+  void start_input(const std::string& input) {
+    input_ = input;
+    input_failures_ = 0;
+  }
+
+  int width() const { return width_; }
+  int height() const { return height_; }
+
+  // Frames after this are not a continuation of the frames before (another video, log or
+  // folder): detectors that use earlier frames start afresh.
+  void start_sequence() { detector_->reset(width_, height_); }
+
+  // One frame, as read (8 or 16 bit; 1 to 4 channels). `where` names it in messages.
+  void frame(const cv::Mat& raw, const std::string& where, bool laser_on) {
+    const std::int64_t index = next_frame_++;
+    std::string problem;
+    if (!to_mono8(raw, mono_, problem)) {
+      fail(where + ": " + problem + "; skipped");
+      return;
+    }
+    if (mono_.cols != width_ || mono_.rows != height_) {
+      fail(where + ": image is " + std::to_string(mono_.cols) + "x" + std::to_string(mono_.rows) +
+           " but the calibration " + options_.calib + " is for " + std::to_string(width_) + "x" +
+           std::to_string(height_) + "; skipped");
+      return;
+    }
+    const laserline::pipeline::ImageView view{mono_.data, mono_.cols, mono_.rows,
+                                              static_cast<int>(mono_.step[0])};
+    detector_->detect(view, {static_cast<std::uint64_t>(index), laser_on}, profile_);
+    if (profile_.overflowed()) ++overflowed_frames_;
+    for (const auto& p : profile_.points()) {
+      if (!p.valid && !options_.all_candidates) continue;
+      std::fprintf(csv_, "%lld,%d,%.4f,%.2f,%d,%d\n", static_cast<long long>(index), p.u, p.v,
+                   p.snr_db, p.segment, p.valid ? 1 : 0);
+      ++points_written_;
+      valid_written_ += p.valid ? 1 : 0;
+    }
+    if (std::fflush(csv_) != 0 || std::ferror(csv_) != 0) {
+      progress_.message("laserline-extract: " + options_.output +
+                        ": write failed: " + std::strerror(errno));
+      std::exit(1);
+    }
+    ++processed_;
+    laser_off_frames_ += laser_on ? 0 : 1;
+    if (!options_.overlay_dir.empty()) write_overlay(index, where);
+  }
+
+  // A frame that could not be read at all: it keeps its frame number.
+  void unreadable_frame(const std::string& message) {
+    ++next_frame_;
+    fail(message);
+  }
+
+  // A problem with an input as a whole (or an overlay): reported, counted, processing goes on.
+  // A long video or log with a problem in every frame must not bury the rest: after
+  // kShownPerInput lines for one input the others are only counted.
+  void fail(const std::string& message) {
+    ++failures_;
+    ++input_failures_;
+    if (input_failures_ <= kShownPerInput) progress_.message("laserline-extract: " + message);
+    if (input_failures_ == kShownPerInput + 1) {
+      progress_.message("laserline-extract: " + input_ +
+                        ": further problems in this input are counted, not shown");
+    }
+  }
+
+  std::int64_t frames() const { return next_frame_; }
+  std::int64_t processed() const { return processed_; }
+  std::int64_t laser_off_frames() const { return laser_off_frames_; }
+  std::int64_t failures() const { return failures_; }
+  std::int64_t points_written() const { return points_written_; }
+  std::int64_t valid_written() const { return valid_written_; }
+  std::int64_t overflowed_frames() const { return overflowed_frames_; }
+
+ private:
+  // The laser is green (535 nm): colour frames give their green channel (OpenCV orders BGR).
+  static bool to_mono8(const cv::Mat& raw, cv::Mat& out, std::string& problem) {
+    if (raw.empty()) {
+      problem = "empty image";
+      return false;
+    }
+    if (raw.depth() != CV_8U && raw.depth() != CV_16U) {
+      problem = "unsupported pixel type (only 8 and 16 bit unsigned integers)";
+      return false;
+    }
+    cv::Mat channel;
+    const int channels = raw.channels();
+    if (channels == 1) {
+      channel = raw;
+    } else if (channels == 2) {
+      cv::extractChannel(raw, channel, 0);  // grey + alpha
+    } else if (channels == 3 || channels == 4) {
+      cv::extractChannel(raw, channel, 1);
+    } else {
+      problem = "unsupported number of channels (" + std::to_string(channels) + ")";
+      return false;
+    }
+    if (channel.depth() == CV_16U) {
+      channel.convertTo(out, CV_8U, 255.0 / 65535.0);  // full 16-bit range onto 0..255
+    } else {
+      out = channel;
+    }
+    return true;
+  }
+
+  void write_overlay(std::int64_t index, const std::string& where) {
+    cv::cvtColor(mono_, overlay_, cv::COLOR_GRAY2BGR);
+    constexpr int kShift = 4;  // sub-pixel drawing: coordinates in 1/16 px
+    for (const auto& p : profile_.points()) {
+      if (!std::isfinite(p.v)) continue;
+      const cv::Point centre(static_cast<int>(std::lround(p.u * 16.0)),
+                             static_cast<int>(std::lround(p.v * 16.0)));
+      const cv::Scalar colour = p.valid ? cv::Scalar(0, 255, 0) : cv::Scalar(0, 0, 255);
+      // Half a pixel: the point marks the centre and leaves the line's flanks visible.
+      cv::circle(overlay_, centre, 1 << (kShift - 1), colour, cv::FILLED, cv::LINE_AA, kShift);
+    }
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%06lld.png", static_cast<long long>(index));
+    const std::string path = (fs::path(options_.overlay_dir) / name).string();
+    bool written = false;
+    try {
+      written = cv::imwrite(path, overlay_);
+    } catch (const cv::Exception&) {
+      written = false;
+    }
+    if (!written) fail(path + ": overlay of " + where + " could not be written");
+  }
+
+  const Options& options_;
+  int width_, height_;
+  std::unique_ptr<laserline::pipeline::Detector> detector_;
+  laserline::pipeline::Profile profile_;
+  FILE* csv_;
+  Progress progress_;
+  cv::Mat mono_, overlay_;
+  std::int64_t next_frame_ = 0, processed_ = 0, failures_ = 0, laser_off_frames_ = 0;
+  std::int64_t points_written_ = 0, valid_written_ = 0, overflowed_frames_ = 0;
+  static constexpr int kShownPerInput = 10;
+  std::string input_;
+  int input_failures_ = 0;
+};
+
+// An image file: one frame, counted even when it cannot be read so that frame numbers follow
+// the list of files.
+void extract_image(Extractor& x, const std::string& path) {
+  cv::Mat image;
+  try {
+    image = cv::imread(path, cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception&) {
+    image.release();
+  }
+  if (image.empty()) {
+    if (access(path.c_str(), R_OK) != 0) {
+      x.unreadable_frame(path + ": cannot be read: " + std::strerror(errno) + "; skipped");
+    } else {
+      x.unreadable_frame(path + ": not a readable image (corrupt or unsupported format); skipped");
+    }
+    return;
+  }
+  x.frame(image, path, true);
+}
+
+void extract_video(Extractor& x, const std::string& path, std::size_t input, std::size_t inputs) {
+  cv::VideoCapture video;
+  try {
+    video.open(path, cv::CAP_FFMPEG);
+  } catch (const cv::Exception&) {
+  }
+  if (!video.isOpened()) {
+    x.fail(path + ": not a readable video; skipped");
+    return;
+  }
+  // Checked once here rather than once per frame.
+  const int width = static_cast<int>(video.get(cv::CAP_PROP_FRAME_WIDTH));
+  const int height = static_cast<int>(video.get(cv::CAP_PROP_FRAME_HEIGHT));
+  if (width > 0 && height > 0 && (width != x.width() || height != x.height())) {
+    x.fail(path + ": video is " + std::to_string(width) + "x" + std::to_string(height) +
+           " but the calibration is for " + std::to_string(x.width()) + "x" +
+           std::to_string(x.height()) + "; skipped");
+    return;
+  }
+  const double count = video.get(cv::CAP_PROP_FRAME_COUNT);
+  cv::Mat frame;
+  std::int64_t n = 0;
+  const std::string name = fs::path(path).filename().string();
+  while (true) {
+    bool got = false;
+    try {
+      got = video.read(frame);
+    } catch (const cv::Exception&) {
+      got = false;
+    }
+    if (!got) break;
+    x.frame(frame, path + " frame " + std::to_string(n), true);
+    ++n;
+    x.progress().update(input, inputs, name, count > 0 ? static_cast<double>(n) / count : 0.0,
+                        x.frames());
+  }
+  if (n == 0) x.fail(path + ": no frame could be decoded");
+}
+
+// Raw or compressed pixels of an image_t, as an OpenCV image (owning its pixels).
+bool image_from_message(const laserline::image_t& m, cv::Mat& out, std::string& problem) {
+  using laserline::image_t;
+  if (m.width <= 0 || m.height <= 0) {
+    problem = "invalid size " + std::to_string(m.width) + "x" + std::to_string(m.height);
+    return false;
+  }
+  if (m.compression == image_t::COMPRESSION_PNG || m.compression == image_t::COMPRESSION_JPEG) {
+    try {
+      out = cv::imdecode(m.data, cv::IMREAD_UNCHANGED);
+    } catch (const cv::Exception&) {
+      out.release();
+    }
+    if (out.empty()) problem = "compressed data cannot be decoded";
+    return !out.empty();
+  }
+  if (m.compression != image_t::COMPRESSION_NONE) {
+    problem = "unknown compression " + std::to_string(m.compression);
+    return false;
+  }
+  int type = 0, bytes_per_pixel = 0;
+  if (m.pixelformat == image_t::PIXEL_FORMAT_GRAY) {
+    type = CV_8UC1;
+    bytes_per_pixel = 1;
+  } else if (m.pixelformat == image_t::PIXEL_FORMAT_LE_GRAY16 ||
+             m.pixelformat == image_t::PIXEL_FORMAT_BE_GRAY16) {
+    type = CV_16UC1;
+    bytes_per_pixel = 2;
+  } else {
+    problem = "unsupported pixel format " + std::to_string(m.pixelformat);
+    return false;
+  }
+  const std::int64_t row_bytes = static_cast<std::int64_t>(m.width) * bytes_per_pixel;
+  if (m.row_stride < row_bytes || static_cast<std::int64_t>(m.row_stride) * m.height >
+                                      static_cast<std::int64_t>(m.data.size())) {
+    problem = "row_stride " + std::to_string(m.row_stride) + " and height " +
+              std::to_string(m.height) + " do not fit " + std::to_string(m.data.size()) +
+              " bytes of data";
+    return false;
+  }
+  cv::Mat(m.height, m.width, type, const_cast<std::uint8_t*>(m.data.data()),
+          static_cast<std::size_t>(m.row_stride))
+      .copyTo(out);
+  if (m.pixelformat == image_t::PIXEL_FORMAT_BE_GRAY16) {
+    for (int v = 0; v < out.rows; ++v) {
+      auto* row = out.ptr<std::uint16_t>(v);
+      for (int u = 0; u < out.cols; ++u)
+        row[u] = static_cast<std::uint16_t>((row[u] >> 8) | (row[u] << 8));
+    }
+  }
+  return true;
+}
+
+// An LCM log: every laserline.image_t message (on any channel) is a frame, in log order. The
+// laser state of a frame comes from the profile_t of the same sequence number in the same log
+// (image_t does not carry it); without one the laser is taken as on.
+void extract_log(Extractor& x, const std::string& path, std::size_t input, std::size_t inputs) {
+  std::map<std::int64_t, bool> laser_on_by_sequence;
+  std::int64_t images = 0;
+  {
+    lcm::LogFile log(path, "r");
+    if (!log.good()) {
+      x.fail(path + ": cannot be opened as an LCM log: " + std::strerror(errno) + "; skipped");
+      return;
+    }
+    while (const lcm::LogEvent* event = log.readNextEvent()) {
+      const std::int64_t hash = message_hash(event->data, event->datalen);
+      if (hash == laserline::image_t::getHash()) {
+        ++images;
+      } else if (hash == laserline::profile_t::getHash()) {
+        laserline::profile_t profile;
+        if (profile.decode(event->data, 0, event->datalen) >= 0) {
+          laser_on_by_sequence[profile.sequence] = profile.laser_on;
+        }
+      }
+    }
+  }
+  if (images == 0) {
+    x.fail(path + ": the LCM log holds no laserline.image_t message");
+    return;
+  }
+  lcm::LogFile log(path, "r");
+  if (!log.good()) {
+    x.fail(path + ": cannot be opened as an LCM log: " + std::strerror(errno) + "; skipped");
+    return;
+  }
+  const std::string name = fs::path(path).filename().string();
+  std::int64_t n = 0;
+  laserline::image_t message;
+  cv::Mat image;
+  long complete_bytes = 0;  // end of the last complete event
+  while (const lcm::LogEvent* event = log.readNextEvent()) {
+    complete_bytes = std::ftell(log.getFilePtr());
+    if (message_hash(event->data, event->datalen) != laserline::image_t::getHash()) continue;
+    const std::string where =
+        path + " event " + std::to_string(event->eventnum) + " (" + event->channel + ")";
+    ++n;
+    std::string problem;
+    if (message.decode(event->data, 0, event->datalen) < 0) {
+      x.unreadable_frame(where + ": laserline.image_t cannot be decoded; skipped");
+    } else if (!image_from_message(message, image, problem)) {
+      x.unreadable_frame(where + ": " + problem + "; skipped");
+    } else {
+      const auto state = laser_on_by_sequence.find(message.sequence);
+      x.frame(image, where, state == laser_on_by_sequence.end() || state->second);
+    }
+    x.progress().update(input, inputs, name, static_cast<double>(n) / static_cast<double>(images),
+                        x.frames());
+  }
+  // A recording cut short ends in part of an event, which LCM's reader drops without a word.
+  std::error_code ec;
+  const auto size = fs::file_size(path, ec);
+  if (!ec && complete_bytes >= 0 && static_cast<std::uintmax_t>(complete_bytes) < size) {
+    x.fail(path + ": the last " +
+           std::to_string(size - static_cast<std::uintmax_t>(complete_bytes)) +
+           " bytes are not a complete event (recording cut short?); ignored");
+  }
+}
+
+[[noreturn]] void usage_error(const std::string& line) {
+  std::fprintf(stderr, "laserline-extract: %s\n%s", line.c_str(), kUsage);
+  std::exit(2);
+}
+
+[[noreturn]] void fatal(const std::string& line) {
+  std::fprintf(stderr, "laserline-extract: %s\n", line.c_str());
+  std::exit(2);
+}
+
+std::string detector_list() {
+  std::string list;
+  for (const auto& name : laserline::pipeline::detector_names())
+    list += (list.empty() ? "" : ", ") + name;
+  return list;
+}
+
+Options parse_arguments(int argc, char** argv) {
+  Options o;
+  bool only_inputs = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (only_inputs || arg.empty() || arg[0] != '-' || arg == "-") {
+      o.inputs.push_back(arg);
+      continue;
+    }
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) usage_error(arg + ": missing value");
+      return argv[++i];
+    };
+    if (arg == "--calib") {
+      o.calib = value();
+    } else if (arg == "--config") {
+      o.config = value();
+    } else if (arg == "--detector") {
+      o.detector = value();
+    } else if (arg == "--overlay-dir") {
+      o.overlay_dir = value();
+    } else if (arg == "--output") {
+      o.output = value();
+    } else if (arg == "--all-candidates") {
+      o.all_candidates = true;
+    } else if (arg == "--") {
+      only_inputs = true;
+    } else if (arg == "--help" || arg == "-h") {
+      std::printf("%sdetectors: %s\n", kUsage, detector_list().c_str());
+      std::exit(0);
+    } else {
+      usage_error("unknown argument '" + arg + "'");
+    }
+  }
+  if (o.calib.empty()) usage_error("--calib is required");
+  if (o.detector.empty()) usage_error("--detector is required (one of: " + detector_list() + ")");
+  if (o.output.empty()) usage_error("--output is required");
+  if (o.inputs.empty()) usage_error("no INPUT given");
+  return o;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  // OpenCV's own warnings (e.g. a failing decoder) would duplicate our one line per problem.
+  cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);
+  const Options options = parse_arguments(argc, argv);
+
+  const auto names = laserline::pipeline::detector_names();
+  if (std::find(names.begin(), names.end(), options.detector) == names.end()) {
+    fatal("--detector: unknown detector '" + options.detector + "' (one of: " + detector_list() +
+          ")");
+  }
+  laserline::hal::Calibration calibration;
+  laserline::pipeline::DetectorOptions detector_options;
+  try {
+    calibration = laserline::hal::load_calibration_file(options.calib);
+    // The configuration's detector section (thresholds, front-end, motion); its calibration is
+    // replaced by --calib.
+    const laserline::daemon::DaemonConfig config =
+        options.config.empty() ? laserline::daemon::builtin_config()
+                               : laserline::daemon::load_config_file(options.config);
+    detector_options = config.detector_options;
+    detector_options.geometry = laserline::daemon::scanner_geometry(calibration);
+  } catch (const ConfigError& e) {
+    fatal(e.what());
+  }
+  std::unique_ptr<laserline::pipeline::Detector> detector;
+  try {
+    detector = laserline::pipeline::make_detector(options.detector, detector_options);
+  } catch (const std::invalid_argument& e) {
+    fatal("--detector " + options.detector + ": " + e.what());
+  }
+  if (!detector) fatal("--detector: unknown detector '" + options.detector + "'");
+
+  if (!options.overlay_dir.empty()) {
+    std::error_code ec;
+    fs::create_directories(options.overlay_dir, ec);
+    if (ec || !fs::is_directory(options.overlay_dir)) {
+      fatal("--overlay-dir " + options.overlay_dir +
+            ": cannot be created: " + (ec ? ec.message() : std::string("not a directory")));
+    }
+  }
+  FILE* csv = std::fopen(options.output.c_str(), "w");
+  if (csv == nullptr) {
+    fatal("--output " + options.output + ": cannot be written: " + std::strerror(errno));
+  }
+  std::fputs("frame,u,v,snr_db,segment,valid\n", csv);
+  std::fflush(csv);
+
+  Extractor x(options, calibration, std::move(detector), csv);
+  bool in_image_run = false;  // consecutive image arguments are one sequence (a shell glob)
+  for (std::size_t i = 0; i < options.inputs.size(); ++i) {
+    const std::string& input = options.inputs[i];
+    const std::size_t number = i + 1, inputs = options.inputs.size();
+    const std::string name = fs::path(input).filename().string();
+    x.start_input(input);
+    std::error_code ec;
+    if (!fs::exists(input, ec)) {
+      // Not known to be a frame at all: takes no frame number.
+      x.fail(input + ": no such file or folder; skipped");
+      in_image_run = false;
+      continue;
+    }
+    if (fs::is_directory(input, ec)) {
+      std::vector<std::string> files;
+      for (const auto& entry : fs::directory_iterator(input, ec)) {
+        if (entry.is_regular_file(ec) && has_extension(entry.path(), kImageExtensions)) {
+          files.push_back(entry.path().string());
+        }
+      }
+      if (ec) {
+        x.fail(input + ": folder cannot be listed: " + ec.message() + "; skipped");
+        continue;
+      }
+      if (files.empty()) {
+        x.fail(input + ": folder holds no image file; skipped");
+        continue;
+      }
+      std::sort(files.begin(), files.end());
+      x.start_sequence();
+      for (std::size_t k = 0; k < files.size(); ++k) {
+        extract_image(x, files[k]);
+        x.progress().update(number, inputs, name,
+                            static_cast<double>(k + 1) / static_cast<double>(files.size()),
+                            x.frames());
+      }
+      in_image_run = false;
+    } else if (is_lcm_log(input)) {
+      x.start_sequence();
+      extract_log(x, input, number, inputs);
+      in_image_run = false;
+    } else if (has_extension(input, kVideoExtensions)) {
+      x.start_sequence();
+      extract_video(x, input, number, inputs);
+      in_image_run = false;
+    } else {
+      if (!in_image_run) x.start_sequence();
+      in_image_run = true;
+      extract_image(x, input);
+      x.progress().update(number, inputs, name, 1.0, x.frames());
+    }
+  }
+  x.progress().clear();
+  std::fclose(csv);
+  const std::string problems =
+      x.failures() > 0 ? ", " + std::to_string(x.failures()) + " problems (see above)" : "";
+  std::fprintf(stderr,
+               "laserline-extract: %lld frames from %zu inputs, %lld processed with %s, %lld "
+               "points written (%lld valid) to %s%s\n",
+               static_cast<long long>(x.frames()), options.inputs.size(),
+               static_cast<long long>(x.processed()), options.detector.c_str(),
+               static_cast<long long>(x.points_written()),
+               static_cast<long long>(x.valid_written()), options.output.c_str(), problems.c_str());
+  if (x.laser_off_frames() > 0) {
+    std::fprintf(stderr,
+                 "laserline-extract: %lld of the processed frames were exposed with the laser off "
+                 "(from the log's profiles)\n",
+                 static_cast<long long>(x.laser_off_frames()));
+  }
+  if (x.overflowed_frames() > 0) {
+    std::fprintf(stderr, "laserline-extract: %lld frames had more points than the detector keeps\n",
+                 static_cast<long long>(x.overflowed_frames()));
+  }
+  return x.failures() > 0 ? 1 : 0;
+}
