@@ -11,15 +11,18 @@
 #include <benchmark/benchmark.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 #include <vector>
 
+#include "daemon/config.hpp"
 #include "hal/sim/sim_scene.hpp"
 #include "pipeline/frontend.hpp"
 #include "pipeline/frontend_detectors.hpp"
 #include "pipeline/subpixel.hpp"
+#include "tools/evaluation.hpp"
 
 namespace {
 
@@ -27,45 +30,42 @@ using namespace laserline;
 
 constexpr int kWidth = 2048, kHeight = 1536;
 
-// The scanner of the benchmark: the product's default mount on a 2048x1536 camera.
+// The `ambient` scenario of laserline-evaluate at 2048x1536 (a PTU sweeping a wall lit as brightly
+// as the laser), without sway so that the homography between two frames is a pure tilt and exact:
+// H = K R K^-1.
+hal::SimSceneOptions bench_scene() {
+  for (const tools::Scenario& s : tools::standard_scenarios(kWidth, kHeight)) {
+    if (s.name != "ambient") continue;
+    hal::SimSceneOptions scene = s.scene;
+    scene.sway_m = 0;
+    scene.sway_deg = 0;
+    return scene;
+  }
+  std::abort();
+}
+
 pipeline::DetectorOptions bench_options() {
   pipeline::DetectorOptions o;
-  o.geometry.width = kWidth;
-  o.geometry.height = kHeight;
-  o.geometry.fx = o.geometry.fy = 2240.0;
-  o.geometry.cx = (kWidth - 1) / 2.0;
-  o.geometry.cy = (kHeight - 1) / 2.0;
+  o.geometry = daemon::scanner_geometry(bench_scene().calibration);
   return o;
 }
 
-// Two consecutive frames of a PTU scanning a textured wall in bright ambient light, and the
-// homography between them (pure tilt: exact, H = K R K^-1).
+// Two consecutive frames of that scan and the homography between them.
 struct Frames {
   std::vector<std::uint8_t> previous, current;
   pipeline::Homography current_to_previous;
 
   Frames() {
-    const pipeline::DetectorOptions o = bench_options();
-    hal::SimSceneOptions scene;
-    scene.calibration.camera.width = kWidth;
-    scene.calibration.camera.height = kHeight;
-    scene.calibration.camera.fx = scene.calibration.camera.fy = o.geometry.fx;
-    scene.calibration.camera.cx = o.geometry.cx;
-    scene.calibration.camera.cy = o.geometry.cy;
-    scene.ambient = 150;
-    scene.texture_contrast = 0.6;
-    scene.laser_peak = 100;
-    scene.sway_m = 0;
-    scene.sway_deg = 0;
-    scene.scan_rate_deg_s = 10;
+    const hal::SimSceneOptions scene = bench_scene();
     hal::SimScene sim(scene);
     previous.resize(sim.format().bytes());
     current.resize(sim.format().bytes());
     sim.render(10, true, previous);
     sim.render(11, true, current);
     // Tilt of scan_rate / frame_rate about x between the frames.
-    const double a = 10.0 / 30.0 * M_PI / 180.0;
-    const cv::Matx33d k(o.geometry.fx, 0, o.geometry.cx, 0, o.geometry.fy, o.geometry.cy, 0, 0, 1);
+    const double a = scene.scan_rate_deg_s / scene.frame_rate_hz * M_PI / 180.0;
+    const hal::CameraIntrinsics& c = scene.calibration.camera;
+    const cv::Matx33d k(c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1);
     const cv::Matx33d r(1, 0, 0, 0, std::cos(a), -std::sin(a), 0, std::sin(a), std::cos(a));
     const cv::Matx33d h = k * r * k.inv();
     for (int i = 0; i < 9; ++i)

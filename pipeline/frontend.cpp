@@ -215,20 +215,33 @@ inline std::array<std::uint16_t, 4> bilinear_weights(float tx, float ty) {
   return {w00, w01, w10, static_cast<std::uint16_t>(w11)};
 }
 
+// The two rows of the frame a normalised row is interpolated from, and the weight of the lower.
+struct SourceRow {
+  SourceRow(const ImageView& image, float v) {
+    const int last = image.height - 1;
+    const int v0 = std::min(static_cast<int>(v), last);
+    a = image.row(v0);
+    b = image.row(std::min(v0 + 1, last));
+    f = v - static_cast<float>(v0);
+    fb = fixed_weight(f);
+  }
+  const std::uint8_t* a;
+  const std::uint8_t* b;
+  float f;
+  std::uint16_t fb;
+};
+
 }  // namespace
 
 LASERLINE_DENSE_KERNEL
 void Frontend::normalise(const ImageView& current) {
   current_ = current;
   subtracting_ = false;
-  const int last = height_ - 1;
   const std::size_t s = static_cast<std::size_t>(stride_);
   for (int r = 0; r < rows_.rows(); ++r) {
-    const float v = rows_.source_row(r);
-    const int v0 = std::min(static_cast<int>(v), last);
-    const int v1 = std::min(v0 + 1, last);
-    accumulate_row(current.row(v0), current.row(v1), fixed_weight(v - static_cast<float>(v0)),
-                   prefix_.data() + r * s, width_, prefix_.data() + (r + 1) * s);
+    const SourceRow row(current, rows_.source_row(r));
+    accumulate_row(row.a, row.b, row.fb, prefix_.data() + r * s, width_,
+                   prefix_.data() + (r + 1) * s);
   }
 }
 
@@ -239,18 +252,16 @@ void Frontend::normalise_subtracting(const ImageView& current, const ImageView& 
   background_ = background;
   to_background_ = current_to_background;
   subtracting_ = true;
-  const int last = height_ - 1;
   const std::size_t s = static_cast<std::size_t>(stride_);
   for (int r = 0; r < rows_.rows(); ++r) {
     const float v = rows_.source_row(r);
-    const int v0 = std::min(static_cast<int>(v), last);
-    const int v1 = std::min(v0 + 1, last);
-    const float f = v - static_cast<float>(v0);
-    const std::uint8_t* a = current.row(v0);
-    const std::uint8_t* b = current.row(v1);
+    const SourceRow row(current, v);
+    const std::uint8_t* a = row.a;
+    const std::uint8_t* b = row.b;
+    const float f = row.f;
+    const std::uint16_t fb = row.fb;
     const std::int32_t* above = prefix_.data() + r * s;
     std::int32_t* sum = prefix_.data() + (r + 1) * s;
-    const std::uint16_t fb = fixed_weight(f);
     // Along the row the background position is a ratio of linear functions of u: numerators and
     // denominator at u = 0, and their steps per pixel.
     const auto& g = current_to_background.h;

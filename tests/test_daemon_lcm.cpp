@@ -53,6 +53,15 @@ lcm: {url: ")" +
 )";
 }
 
+// The simulated scene a configuration runs, rebuilt for its exact ground truth.
+laserline::hal::SimScene scene_of(const std::string& config_text) {
+  laserline::daemon::DaemonConfig config = laserline::daemon::parse_config(
+      laserline::hal::load_yaml_text(config_text, "test.yaml"), "test.yaml");
+  laserline::hal::YamlMap sim = config.camera_options.map("sim");
+  return laserline::hal::SimScene(
+      laserline::hal::read_sim_options(sim, config.calibration, config.frame_rate_hz));
+}
+
 // Subscribed with plain functions (subscribeFunction): GCC 12's UBSan misreports LCM's
 // member-function-pointer dispatch as a misaligned access.
 struct Received {
@@ -222,11 +231,7 @@ TEST_F(DaemonOverLcm, ProfilesMatchTheSimulatorGroundTruth) {
   }
 
   // Points against the exact ground truth of the same scene, rebuilt from the same file.
-  laserline::daemon::DaemonConfig config = laserline::daemon::parse_config(
-      laserline::hal::load_yaml_text(config_text, "test.yaml"), "test.yaml");
-  laserline::hal::YamlMap sim = config.camera_options.map("sim");
-  laserline::hal::SimScene scene(
-      laserline::hal::read_sim_options(sim, config.calibration, config.frame_rate_hz));
+  laserline::hal::SimScene scene = scene_of(config_text);
   laserline::hal::SimGroundTruth truth;
   std::int64_t points = 0, far = 0, truth_columns = 0;
   double worst = 0, sum_sq = 0;
@@ -290,11 +295,7 @@ TEST_F(DaemonOverLcm, BackgroundDetectorFindsTheLineUnderStrongAmbientLight) {
   const Received rx = run_daemon(config_text, 3.0, SIGTERM);
   ASSERT_GE(rx.profiles.size(), 50u / kSlowdown) << daemon_log();
 
-  laserline::daemon::DaemonConfig config = laserline::daemon::parse_config(
-      laserline::hal::load_yaml_text(config_text, "test.yaml"), "test.yaml");
-  laserline::hal::YamlMap sim = config.camera_options.map("sim");
-  laserline::hal::SimScene scene(
-      laserline::hal::read_sim_options(sim, config.calibration, config.frame_rate_hz));
+  laserline::hal::SimScene scene = scene_of(config_text);
   laserline::hal::SimGroundTruth truth;
   std::int64_t valid = 0, correct = 0, truth_columns = 0;
   for (const auto& p : rx.profiles) {
