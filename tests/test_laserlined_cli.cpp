@@ -66,9 +66,12 @@ TEST_F(LaserlinedCli, BadConfigFailsWithOneLineNamingFileLineAndKey) {
 }
 
 TEST_F(LaserlinedCli, OutOfRangeAndWrongTypeFailBeforeAnythingStarts) {
-  for (const char* text : {"camera: {frame_rate_hz: -5}\n", "laser: {mode: 3}\n",
-                           "calibration: {camera: {width: many}}\n", "lcm: {url: ''}\n",
-                           "camera: {sim: {seed: -1}}\n"}) {
+  for (const char* text :
+       {"camera: {frame_rate_hz: -5}\n", "laser: {mode: 3}\n",
+        "calibration: {camera: {width: many}}\n", "lcm: {url: ''}\n", "camera: {sim: {seed: -1}}\n",
+        // A depth range no row of the image sees: the detector cannot work.
+        "detector: {name: fir, frontend: {min_depth_m: 0.1, max_depth_m: 0.2}}\n",
+        "detector: {name: background, motion: {detect_level: 5}}\n"}) {
     const CliResult r = run("--config " + file("bad.yaml", text));
     EXPECT_EQ(r.exit_code, 2) << text << r.out;
     EXPECT_EQ(lines(r.out), 1u) << text << r.out;
