@@ -28,7 +28,7 @@ struct DaemonConfig {
   int laser_frame_timeout_ms = 300;
   hal::YamlMap laser_options;  // likewise for the laser backend
 
-  std::string detector = "maxvalue";
+  std::string detector = "background";  // the paper's front-end; as in the built-in file
   pipeline::DetectorOptions detector_options;
 
   bool realtime = false;  // SCHED_FIFO per daemon/thread_priorities.hpp, memory locked

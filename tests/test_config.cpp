@@ -28,7 +28,9 @@ TEST(Config, BuiltInDefaultIsValidAndRunsTheSimulator) {
   DaemonConfig config = builtin_config();
   EXPECT_EQ(config.camera_backend, "sim");
   EXPECT_EQ(config.laser_backend, "sim");
-  EXPECT_EQ(config.detector, "maxvalue");
+  EXPECT_EQ(config.detector, "background");
+  EXPECT_EQ(parse_config(YAML::Load("{}"), "empty.yaml").detector, config.detector)
+      << "a file without a detector section gets the built-in one";
   EXPECT_EQ(config.profile_channel, "LASERLINE_PROFILE");
   EXPECT_EQ(config.image_channel, "LASERLINE_IMAGE");
   EXPECT_EQ(config.status_channel, "LASERLINE_STATUS");
