@@ -199,6 +199,38 @@ TEST(MotionEstimator, RecoversKnownHomographyOfRandomTexture) {
   }
 }
 
+// Other option values: no pyramid, deep pyramids, the largest window, a coarse grid.
+TEST(MotionEstimator, WorksWithOtherOptions) {
+  const cv::Mat first = random_texture();
+  struct Case {
+    int levels, detect_level, radius, columns, rows;
+    cv::Matx33d h;
+  };
+  const Case cases[] = {
+      {1, 0, 4, 16, 12, cv::Matx33d(1, 0, 1.3, 0, 1, -0.8, 0, 0, 1)},
+      {5, 3, 7, 12, 9, rotation_about_centre(1.5)},
+      {3, 1, 15, 16, 12, perspective_warp()},
+      {4, 0, 2, 32, 24, cv::Matx33d(1, 0, 7.3, 0, 1, -4.6, 0, 0, 1)},
+  };
+  for (const Case& c : cases) {
+    MotionOptions o;
+    o.pyramid_levels = c.levels;
+    o.detect_level = c.detect_level;
+    o.window_radius = c.radius;
+    o.grid_columns = c.columns;
+    o.grid_rows = c.rows;
+    MotionEstimator estimator(o);
+    const MotionEstimate e = estimate_pair(estimator, first, warp(first, c.h));
+    const double error = max_grid_error(e.previous_to_current, c.h);
+    char name[64];
+    std::snprintf(name, sizeof name, "levels %d detect %d r %d", c.levels, c.detect_level,
+                  c.radius);
+    print(name, e, error);
+    ASSERT_TRUE(e.valid) << name;
+    EXPECT_LT(error, 0.1) << name;
+  }
+}
+
 // Draws a bright horizontal laser line centred on `row`, modulated by the surface brightness as
 // a real line on a textured surface is (the simulator's ambient 40 against a laser peak of 180).
 void draw_laser_line(cv::Mat& image, double row, double sigma_px) {
