@@ -407,6 +407,13 @@ TEST(MotionEstimator, TooSmallImagesAreRefusedByReset) {
   EXPECT_FALSE(estimator.update(view_of(small)).valid);
   EXPECT_FALSE(estimator.update(ImageView{}).valid);
 
+  // A refused reset() leaves nothing half sized: frames of the earlier size are refused too.
+  const cv::Mat textured = random_texture();
+  EXPECT_THROW(estimator.reset(40, 30), std::invalid_argument);
+  EXPECT_FALSE(estimator.update(view_of(textured)).valid);
+  EXPECT_FALSE(estimator.update(view_of(textured)).valid);
+  EXPECT_TRUE(estimator.tracks().empty());
+
   // The smallest size the default options take (a 16x12 grid inside a border of 12 at level 2)
   // works; one pixel less is refused.
   EXPECT_THROW(estimator.reset(159, 144), std::invalid_argument);
