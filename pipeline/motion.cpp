@@ -140,12 +140,12 @@ struct MotionEstimator::State {
   std::array<std::vector<Point>, 2> features;
   std::array<int, 2> feature_count{};
   std::array<std::vector<Point>, 2> rejected;
+  std::array<int, 2> rejected_count{};
+  int reported_rejected = -1;  // index of the rejected list the last update() reports, -1: none
   // Full-size frames are not kept, only the (2r+3)^2 patch around each feature (what the
   // tracker's full-size template needs): patch_bytes per feature.
   std::array<std::vector<std::uint8_t>, 2> patches;
   int patch_bytes = 0;
-  std::array<int, 2> rejected_count{};
-  int reported_rejected = -1;  // index of the rejected list the last update() reports, -1: none
 
   std::vector<FeatureTrack> tracks;
   int track_count = 0;
@@ -162,7 +162,7 @@ struct MotionEstimator::State {
 
   // RANSAC, per tracked pair: full-size coordinates as double, indices of the converged tracks.
   std::vector<double> px, py, cx, cy;
-  std::vector<int> all_index;  // 0..n-1
+  std::vector<int> all_index;  // 0..n-1 in some order (RANSAC shuffles it to draw samples)
   std::vector<int> inlier_index;
   std::vector<std::uint8_t> is_inlier;
   std::vector<std::uint8_t> best_inlier;
@@ -184,7 +184,7 @@ MotionEstimator::MotionEstimator(const MotionOptions& options) : options_(option
   require(options.ransac_iterations >= 1, "ransac_iterations must be >= 1");
   require(std::isfinite(options.inlier_px) && options.inlier_px > 0, "inlier_px must be > 0");
   require(options.min_inliers >= 4, "min_inliers must be >= 4");
-  require(!(options.laser_filter_ratio < 1.0), "laser_filter_ratio must be >= 1");
+  require(options.laser_filter_ratio >= 1.0, "laser_filter_ratio must be >= 1");
   state_ = new State;
 }
 
@@ -200,6 +200,9 @@ void MotionEstimator::reset(int width, int height) {
                                 " must be within 1x1 .. 65535x65535");
   }
   State& s = *state_;
+  // Until this reset() completes, update() refuses every frame (a refused size leaves no half
+  // sized state behind).
+  s.width = s.height = 0;
   s.has_previous = false;
   s.reported_rejected = -1;
   s.track_count = 0;
@@ -243,9 +246,6 @@ void MotionEstimator::reset(int width, int height) {
       }
     }
   }
-  s.width = width;
-  s.height = height;
-
   const int cells = o.grid_columns * o.grid_rows;
   s.patch_bytes = (2 * o.window_radius + 3) * (2 * o.window_radius + 3);
   for (int i = 0; i < 2; ++i) {
@@ -280,6 +280,8 @@ void MotionEstimator::reset(int width, int height) {
   s.inlier_index.assign(cells, 0);
   s.is_inlier.assign(cells, 0);
   s.best_inlier.assign(cells, 0);
+  s.width = width;
+  s.height = height;
 }
 
 std::span<const FeatureTrack> MotionEstimator::tracks() const {

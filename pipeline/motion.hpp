@@ -34,6 +34,7 @@ struct Homography {
     const double w = h[6] * u + h[7] * v + h[8];
     return {(h[0] * u + h[1] * v + h[2]) / w, (h[3] * u + h[4] * v + h[5]) / w};
   }
+  // p_previous ~ inverse() p_current, scaled so that h[8] = 1 where possible; all zero if singular.
   Homography inverse() const;
 };
 

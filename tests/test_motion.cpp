@@ -17,63 +17,8 @@
 #include <string>
 #include <vector>
 
+#include "allocation_counter.hpp"
 #include "hal/sim/sim_scene.hpp"
-
-// ---- Allocation counting (as tests/test_frame_path.cpp does it) --------------------------------
-namespace {
-std::atomic<bool> g_counting{false};
-std::atomic<long> g_allocations{0};
-void count_allocation() {
-  if (g_counting.load(std::memory_order_relaxed))
-    g_allocations.fetch_add(1, std::memory_order_relaxed);
-}
-}  // namespace
-
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-// Sanitizers own malloc; they report every allocation to this hook instead.
-extern "C" int __sanitizer_install_malloc_and_free_hooks(void (*malloc_hook)(const volatile void*,
-                                                                             std::size_t),
-                                                         void (*free_hook)(const volatile void*));
-extern "C" void laserline_motion_malloc_hook(const volatile void*, std::size_t) {
-  count_allocation();
-}
-extern "C" void laserline_motion_free_hook(const volatile void*) {}
-static const int kHooksInstalled = __sanitizer_install_malloc_and_free_hooks(
-    laserline_motion_malloc_hook, laserline_motion_free_hook);
-#else
-// glibc: interpose the C allocator, which operator new (and Eigen's dynamic storage) end up in.
-extern "C" {
-void* __libc_malloc(std::size_t);
-void* __libc_calloc(std::size_t, std::size_t);
-void* __libc_realloc(void*, std::size_t);
-void* __libc_memalign(std::size_t, std::size_t);
-void* malloc(std::size_t size) {
-  count_allocation();
-  return __libc_malloc(size);
-}
-void* calloc(std::size_t n, std::size_t size) {
-  count_allocation();
-  return __libc_calloc(n, size);
-}
-void* realloc(void* p, std::size_t size) {
-  count_allocation();
-  return __libc_realloc(p, size);
-}
-void* memalign(std::size_t alignment, std::size_t size) {
-  count_allocation();
-  return __libc_memalign(alignment, size);
-}
-int posix_memalign(void** out, std::size_t alignment, std::size_t size) {
-  count_allocation();
-  *out = __libc_memalign(alignment, size);
-  return *out != nullptr ? 0 : ENOMEM;
-}
-void* aligned_alloc(std::size_t alignment, std::size_t size) {
-  count_allocation();
-  return __libc_memalign(alignment, size);
-}
-}
-#endif
 
 namespace laserline::pipeline {
 namespace {
@@ -199,6 +144,38 @@ TEST(MotionEstimator, RecoversKnownHomographyOfRandomTexture) {
   }
 }
 
+// Other option values: no pyramid, deep pyramids, the largest window, a coarse grid.
+TEST(MotionEstimator, WorksWithOtherOptions) {
+  const cv::Mat first = random_texture();
+  struct Case {
+    int levels, detect_level, radius, columns, rows;
+    cv::Matx33d h;
+  };
+  const Case cases[] = {
+      {1, 0, 4, 16, 12, cv::Matx33d(1, 0, 1.3, 0, 1, -0.8, 0, 0, 1)},
+      {5, 3, 7, 12, 9, rotation_about_centre(1.5)},
+      {3, 1, 15, 16, 12, perspective_warp()},
+      {4, 0, 2, 32, 24, cv::Matx33d(1, 0, 7.3, 0, 1, -4.6, 0, 0, 1)},
+  };
+  for (const Case& c : cases) {
+    MotionOptions o;
+    o.pyramid_levels = c.levels;
+    o.detect_level = c.detect_level;
+    o.window_radius = c.radius;
+    o.grid_columns = c.columns;
+    o.grid_rows = c.rows;
+    MotionEstimator estimator(o);
+    const MotionEstimate e = estimate_pair(estimator, first, warp(first, c.h));
+    const double error = max_grid_error(e.previous_to_current, c.h);
+    char name[64];
+    std::snprintf(name, sizeof name, "levels %d detect %d r %d", c.levels, c.detect_level,
+                  c.radius);
+    print(name, e, error);
+    ASSERT_TRUE(e.valid) << name;
+    EXPECT_LT(error, 0.1) << name;
+  }
+}
+
 // Draws a bright horizontal laser line centred on `row`, modulated by the surface brightness as
 // a real line on a textured surface is (the simulator's ambient 40 against a laser peak of 180).
 void draw_laser_line(cv::Mat& image, double row, double sigma_px) {
@@ -310,15 +287,14 @@ TEST(MotionEstimator, UpdateDoesNotAllocate) {
   estimator.reset(kWidth, kHeight);
   estimator.update(view_of(first));
 
+  ASSERT_TRUE(testing::allocation_counter_works());
   int valid = 0;
-  g_allocations = 0;
-  g_counting = true;
+  testing::start_counting_allocations();
   for (const cv::Mat* frame : std::initializer_list<const cv::Mat*>{&second, &first, &with_line,
                                                                     &blank, &first, &second}) {
     valid += estimator.update(view_of(*frame)).valid ? 1 : 0;
   }
-  g_counting = false;
-  EXPECT_EQ(g_allocations.load(), 0);
+  EXPECT_EQ(testing::stop_counting_allocations().count, 0);
   EXPECT_GE(valid, 3);
 }
 
@@ -368,6 +344,13 @@ TEST(MotionEstimator, TooSmallImagesAreRefusedByReset) {
   estimator.reset(kWidth, kHeight);
   EXPECT_FALSE(estimator.update(view_of(small)).valid);
   EXPECT_FALSE(estimator.update(ImageView{}).valid);
+
+  // A refused reset() leaves nothing half sized: frames of the earlier size are refused too.
+  const cv::Mat textured = random_texture();
+  EXPECT_THROW(estimator.reset(40, 30), std::invalid_argument);
+  EXPECT_FALSE(estimator.update(view_of(textured)).valid);
+  EXPECT_FALSE(estimator.update(view_of(textured)).valid);
+  EXPECT_TRUE(estimator.tracks().empty());
 
   // The smallest size the default options take (a 16x12 grid inside a border of 12 at level 2)
   // works; one pixel less is refused.
