@@ -70,7 +70,13 @@ FramePath::~FramePath() {
 
 bool FramePath::start(std::string* error) {
   format_ = camera_.format();
-  detector_.reset(format_.width, format_.height);
+  try {
+    detector_.reset(format_.width, format_.height);  // allocates: before any thread runs
+  } catch (const std::exception& e) {
+    // E.g. a camera whose frames are not the size the calibration describes.
+    if (error != nullptr) *error = std::string("detector ") + detector_.name() + ": " + e.what();
+    return false;
+  }
   const std::size_t max_points = detector_.max_points(format_.width, format_.height);
 
   FrameSlot frame_prototype;
