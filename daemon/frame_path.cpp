@@ -17,6 +17,19 @@ namespace {
 
 constexpr std::int64_t kMs = 1'000'000;
 
+// A recording (Camera::paced_by_consumer()) waits for room in a ring instead of dropping; it is
+// not a real-time source, so a short sleep is the right way to wait.
+template <typename T>
+T* claim_waiting(SpscRing<T>& ring, const std::atomic<bool>& stopping) {
+  T* slot = ring.try_claim();
+  while (slot == nullptr && !stopping.load(std::memory_order_relaxed)) {
+    const timespec pause{0, 200'000};
+    nanosleep(&pause, nullptr);
+    slot = ring.try_claim();
+  }
+  return slot;
+}
+
 // Names the thread and, when asked, gives it its real-time priority and CPUs. Returns "" or why
 // the system refused.
 std::string configure_thread(std::thread& thread, const ThreadSpec& spec, bool realtime,
@@ -95,6 +108,8 @@ bool FramePath::start(std::string* error) {
   counters_.last_frame_mono_ns.store(start_mono_ns_, std::memory_order_relaxed);
   stopping_.store(false);
   worker_done_.store(false);
+  source_ended_.store(false);
+  stop_requested_.store(false);
   running_.store(true);
   // Consumers first, so that nothing is produced before someone can take it.
   publisher_thread_ = std::thread([this] { publisher_loop(); });
@@ -115,6 +130,7 @@ bool FramePath::start(std::string* error) {
 
 void FramePath::stop() {
   if (!running_.exchange(false)) return;
+  stop_requested_.store(true);
   stopping_.store(true);
   camera_.stop();
   if (camera_thread_.joinable()) camera_thread_.join();
@@ -161,13 +177,15 @@ void FramePath::camera_loop() {
   hal::FrameInfo overflow_info;
   const std::chrono::milliseconds timeout(config_.grab_timeout_ms);
   std::uint64_t grab_index = 0;
+  const bool lossless = camera_.paced_by_consumer();
   bool frames_flowing = true;  // until a grab fails; the laser stays off until frames return
 
   while (!stopping_.load(std::memory_order_relaxed)) {
     const bool want_laser = frames_flowing && desired_laser(grab_index);
     if (want_laser != laser_.is_on()) switch_laser(want_laser, grab_index);
 
-    FrameSlot* slot = frames_->try_claim();
+    FrameSlot* slot = lossless ? claim_waiting(*frames_, stopping_) : frames_->try_claim();
+    if (lossless && slot == nullptr) break;  // stopping
     std::span<std::uint8_t> pixels =
         slot != nullptr ? std::span<std::uint8_t>(slot->pixels) : std::span<std::uint8_t>(overflow);
     hal::FrameInfo& info = slot != nullptr ? slot->info : overflow_info;
@@ -204,6 +222,9 @@ void FramePath::camera_loop() {
         }
         break;
       case hal::GrabStatus::kStopped:
+        if (!stopping_.load(std::memory_order_relaxed)) {
+          source_ended_.store(true, std::memory_order_release);
+        }
         stopping_.store(true, std::memory_order_relaxed);
         break;
     }
@@ -214,6 +235,7 @@ void FramePath::camera_loop() {
 
 void FramePath::worker_loop() {
   std::int64_t processed = 0;
+  const bool lossless = camera_.paced_by_consumer();
   while (true) {
     if (!frames_->wait(100 * kMs)) {
       if (stopping_.load(std::memory_order_acquire)) break;
@@ -223,7 +245,8 @@ void FramePath::worker_loop() {
     const pipeline::ImageView view{frame->pixels.data(), format_.width, format_.height,
                                    format_.stride};
     if (config_.image_every_n > 0 && processed % config_.image_every_n == 0) {
-      if (ImageSlot* image = images_->try_claim()) {
+      if (ImageSlot* image =
+              lossless ? claim_waiting(*images_, stop_requested_) : images_->try_claim()) {
         image->info = frame->info;
         image->format = format_;
         std::memcpy(image->pixels.data(), frame->pixels.data(), format_.bytes());
@@ -232,7 +255,8 @@ void FramePath::worker_loop() {
         counters_.images_dropped.fetch_add(1, std::memory_order_relaxed);
       }
     }
-    if (ProfileSlot* out = profiles_->try_claim()) {
+    if (ProfileSlot* out =
+            lossless ? claim_waiting(*profiles_, stop_requested_) : profiles_->try_claim()) {
       detector_.detect(view, out->profile);
       out->info = frame->info;
       out->width = format_.width;

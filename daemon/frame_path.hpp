@@ -61,6 +61,8 @@ class FramePath {
   void enforce_laser_safety();
   FramePathSummary summary() const;
   const FramePathCounters& counters() const { return counters_; }
+  // True once the camera ended by itself (a replayed recording reached its end).
+  bool source_ended() const { return source_ended_.load(std::memory_order_acquire); }
 
  private:
   void camera_loop();
@@ -91,6 +93,8 @@ class FramePath {
   std::atomic<bool> running_{false};
   std::atomic<bool> stopping_{false};
   std::atomic<bool> worker_done_{false};
+  std::atomic<bool> source_ended_{false};
+  std::atomic<bool> stop_requested_{false};  // by stop(), unlike stopping_ (also end of source)
   std::int64_t start_mono_ns_ = 0;
 
   // Publisher-thread state for per-period figures.

@@ -192,6 +192,10 @@ int main(int argc, char** argv) {
       break;
     }
     path.enforce_laser_safety();
+    if (path.source_ended()) {
+      reason = "end of recording";
+      break;
+    }
     if (duration_ns > 0 && laserline::hal::monotonic_ns() - start >= duration_ns) break;
   }
   path.stop();

@@ -62,6 +62,8 @@ bool LcmPublisher::publish_profile(const ProfileSlot& slot) {
 bool LcmPublisher::publish_image(const ImageSlot& slot) {
   image_.utime = frame_utime(slot.info);
   image_.sequence = static_cast<std::int64_t>(slot.info.sequence);
+  image_.camera_timestamp_ns = slot.info.camera_ns;
+  image_.laser_on = slot.info.laser_on;
   image_.width = slot.format.width;
   image_.height = slot.format.height;
   image_.row_stride = slot.format.stride;

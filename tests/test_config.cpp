@@ -84,9 +84,21 @@ TEST(Config, ChoicesListTheAlternatives) {
   EXPECT_EQ(error_of("laser:\n  mode: blink\n"),
             "test.yaml:2: laser.mode: must be one of on, alternate, off, got 'blink'");
   EXPECT_EQ(error_of("camera:\n  backend: gige\n"),
-            "test.yaml:2: camera.backend: unknown camera backend 'gige' (available: sim)");
+            "test.yaml:2: camera.backend: unknown camera backend 'gige' (available: sim, lcm)");
   EXPECT_EQ(error_of("laser:\n  backend: gpio\n"),
             "test.yaml:2: laser.backend: unknown laser backend 'gpio' (available: sim)");
+}
+
+TEST(Config, ReplayCameraNeedsAUrl) {
+  EXPECT_EQ(error_of("camera:\n  backend: lcm\n"),
+            "test.yaml: camera.lcm.url: required: file:///path/to/dive.lcmlog (offline) or an "
+            "LCM URL (live)");
+  EXPECT_EQ(error_of("camera:\n  backend: lcm\n  lcm: {url: 'file://'}\n"),
+            "test.yaml:3: camera.lcm.url: file:// needs the path of a log file");
+  EXPECT_EQ(error_of("camera:\n  backend: lcm\n  lcm: {url: 'file:///x.lcmlog', chanel: A}\n"),
+            "test.yaml:3: camera.lcm.chanel: unknown key (expected one of: channel, url)");
+  EXPECT_EQ(error_of("camera:\n  backend: lcm\n  lcm: {url: 'file:///x.lcmlog'}\n"), "")
+      << "the log is opened with the camera, not when the configuration is checked";
 }
 
 TEST(Config, LcmChannelsAndUrl) {
