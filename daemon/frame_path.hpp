@@ -8,6 +8,7 @@
 #include <thread>
 
 #include "daemon/config.hpp"
+#include "daemon/cpu_usage.hpp"
 #include "daemon/frame_slots.hpp"
 #include "daemon/latency.hpp"
 #include "daemon/lcm_publisher.hpp"
@@ -30,6 +31,7 @@ struct FramePathSummary {
   std::int64_t grab_errors = 0;
   std::int64_t publish_errors = 0;
   std::int64_t laser_safety_offs = 0;
+  std::int64_t frames_over_budget = 0;
   LatencySummary latency;   // exposure -> profile published
   LatencySummary pipeline;  // frame arrival -> profile published
 };
@@ -101,6 +103,7 @@ class FramePath {
   std::int64_t last_status_frames_ = 0;
   std::int64_t points_in_period_ = 0;
   std::int64_t profiles_in_period_ = 0;
+  CpuUsage cpu_;
   LatencySummary final_latency_;
   LatencySummary final_pipeline_;
 
