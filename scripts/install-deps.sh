@@ -17,6 +17,8 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   # network namespaces for the LCM tests and the demo
   iproute2 util-linux
+  # the service: systemd-analyze verify/security and systemd-sysusers in the tests, the .deb
+  systemd dpkg-dev
 )
 
 sudo_cmd=()
