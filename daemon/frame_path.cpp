@@ -1,7 +1,9 @@
 #include "daemon/frame_path.hpp"
 
 #include <pthread.h>
+#include <sys/resource.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -98,6 +100,7 @@ bool FramePath::start(std::string* error) {
       PublisherChannels{config_.profile_channel, config_.image_channel, config_.status_channel},
       config_.detector, max_points, format_);
   publisher_->status().camera_backend = config_.camera_backend;
+  encoder_ = std::make_unique<RawFrameEncoder>(config_.raw_frames, format_);
   // Enough room for every frame of a status period at 4x the nominal rate.
   const auto window = static_cast<std::size_t>(
       std::ceil(config_.frame_rate_hz * config_.status_period_s * 4.0) + 64);
@@ -109,15 +112,17 @@ bool FramePath::start(std::string* error) {
   stopping_.store(false);
   worker_done_.store(false);
   source_ended_.store(false);
+  images_done_.store(false);
   stop_requested_.store(false);
   running_.store(true);
   // Consumers first, so that nothing is produced before someone can take it.
   publisher_thread_ = std::thread([this] { publisher_loop(); });
+  image_thread_ = std::thread([this] { image_loop(); });
   worker_thread_ = std::thread([this] { worker_loop(); });
   camera_thread_ = std::thread([this] { camera_loop(); });
   for (auto [thread, spec] :
-       {std::pair{&publisher_thread_, kPublisherThread}, std::pair{&worker_thread_, kWorkerThread},
-        std::pair{&camera_thread_, kCameraThread}}) {
+       {std::pair{&publisher_thread_, kPublisherThread}, std::pair{&image_thread_, kImageThread},
+        std::pair{&worker_thread_, kWorkerThread}, std::pair{&camera_thread_, kCameraThread}}) {
     const std::string problem = configure_thread(*thread, spec, config_.realtime, config_.cpus);
     if (!problem.empty()) {
       stop();
@@ -139,6 +144,8 @@ void FramePath::stop() {
   if (worker_thread_.joinable()) worker_thread_.join();
   profiles_->wake();
   if (publisher_thread_.joinable()) publisher_thread_.join();
+  images_->wake();
+  if (image_thread_.joinable()) image_thread_.join();
 }
 
 bool FramePath::desired_laser(std::uint64_t grab_index) const {
@@ -237,6 +244,12 @@ void FramePath::worker_loop() {
   std::int64_t processed = 0;
   const bool lossless = camera_.paced_by_consumer();
   const auto budget_ns = static_cast<std::int64_t>(1e9 / config_.frame_rate_hz);
+  // Raw frames at most this often (arrival times, so no clock read here).
+  const std::int64_t image_interval_ns =
+      config_.raw_frames.max_rate_hz > 0
+          ? static_cast<std::int64_t>(1e9 / config_.raw_frames.max_rate_hz)
+          : 0;
+  std::int64_t last_image_ns = INT64_MIN / 2;
   while (true) {
     if (!frames_->wait(100 * kMs)) {
       if (stopping_.load(std::memory_order_acquire)) break;
@@ -245,7 +258,10 @@ void FramePath::worker_loop() {
     FrameSlot* frame = frames_->front();
     const pipeline::ImageView view{frame->pixels.data(), format_.width, format_.height,
                                    format_.stride};
-    if (config_.image_every_n > 0 && processed % config_.image_every_n == 0) {
+    const RawFrameOptions& raw = config_.raw_frames;
+    if (raw.every_n > 0 && processed % raw.every_n == 0 &&
+        frame->info.arrival_mono_ns - last_image_ns >= image_interval_ns) {
+      last_image_ns = frame->info.arrival_mono_ns;
       if (ImageSlot* image =
               lossless ? claim_waiting(*images_, stop_requested_) : images_->try_claim()) {
         image->info = frame->info;
@@ -278,6 +294,7 @@ void FramePath::worker_loop() {
   }
   worker_done_.store(true, std::memory_order_release);
   profiles_->wake();
+  images_->wake();
 }
 
 void FramePath::fill_status(std::int64_t now_mono, std::int64_t period_ns) {
@@ -333,14 +350,6 @@ void FramePath::publisher_loop() {
     const std::int64_t wait_ns =
         std::clamp<std::int64_t>(next_status - hal::monotonic_ns(), 0, 100 * kMs);
     profiles_->wait(wait_ns);
-    while (ImageSlot* image = images_->front()) {
-      if (publisher_->publish_image(*image)) {
-        images_published_.fetch_add(1, std::memory_order_relaxed);
-      } else {
-        publish_errors_.fetch_add(1, std::memory_order_relaxed);
-      }
-      images_->pop();
-    }
     while (ProfileSlot* slot = profiles_->front()) {
       if (publisher_->publish_profile(*slot)) {
         const std::int64_t published = hal::monotonic_ns();
@@ -356,7 +365,8 @@ void FramePath::publisher_loop() {
     }
     const std::int64_t now = hal::monotonic_ns();
     const bool finished = worker_done_.load(std::memory_order_acquire) &&
-                          profiles_->front() == nullptr && images_->front() == nullptr;
+                          profiles_->front() == nullptr &&
+                          images_done_.load(std::memory_order_acquire);
     if (now >= next_status || finished) {
       fill_status(now, now - last_status);
       if (!publisher_->publish_status()) publish_errors_.fetch_add(1, std::memory_order_relaxed);
@@ -367,6 +377,24 @@ void FramePath::publisher_loop() {
   }
   final_latency_ = latency_->total();
   final_pipeline_ = pipeline_->total();
+}
+
+void FramePath::image_loop() {
+  setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), kImageThread.nice);
+  while (true) {
+    if (!images_->wait(100 * kMs)) {
+      if (worker_done_.load(std::memory_order_acquire) && images_->front() == nullptr) break;
+      continue;
+    }
+    ImageSlot* image = images_->front();
+    if (publisher_->publish_image(*image, *encoder_)) {
+      images_published_.fetch_add(1, std::memory_order_relaxed);
+    } else {
+      publish_errors_.fetch_add(1, std::memory_order_relaxed);
+    }
+    images_->pop();
+  }
+  images_done_.store(true, std::memory_order_release);
 }
 
 FramePathSummary FramePath::summary() const {

@@ -12,6 +12,7 @@
 #include "daemon/frame_slots.hpp"
 #include "daemon/latency.hpp"
 #include "daemon/lcm_publisher.hpp"
+#include "daemon/raw_frame_encoder.hpp"
 #include "daemon/spsc_ring.hpp"
 #include "hal/camera.hpp"
 #include "hal/laser.hpp"
@@ -70,6 +71,7 @@ class FramePath {
   void camera_loop();
   void worker_loop();
   void publisher_loop();
+  void image_loop();
   bool desired_laser(std::uint64_t grab_index) const;
   void switch_laser(bool on, std::uint64_t for_frame);
   void fill_status(std::int64_t now_mono, std::int64_t period_ns);
@@ -85,6 +87,7 @@ class FramePath {
   std::unique_ptr<SpscRing<ProfileSlot>> profiles_;
   std::unique_ptr<SpscRing<ImageSlot>> images_;
   std::unique_ptr<LcmPublisher> publisher_;
+  std::unique_ptr<RawFrameEncoder> encoder_;
   std::unique_ptr<LatencyStats> latency_;   // exposure -> published
   std::unique_ptr<LatencyStats> pipeline_;  // arrival -> published
 
@@ -96,6 +99,7 @@ class FramePath {
   std::atomic<bool> stopping_{false};
   std::atomic<bool> worker_done_{false};
   std::atomic<bool> source_ended_{false};
+  std::atomic<bool> images_done_{false};
   std::atomic<bool> stop_requested_{false};  // by stop(), unlike stopping_ (also end of source)
   std::int64_t start_mono_ns_ = 0;
 
@@ -110,6 +114,7 @@ class FramePath {
   std::thread camera_thread_;
   std::thread worker_thread_;
   std::thread publisher_thread_;
+  std::thread image_thread_;
 };
 
 }  // namespace laserline::daemon

@@ -1,12 +1,15 @@
 #include "daemon/lcm_camera.hpp"
 
 #include <sys/types.h>
+#include <zlib.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "hal/clock.hpp"
 #include "hal/registry.hpp"
@@ -39,6 +42,8 @@ std::string compression_name(std::int8_t c) {
       return "png";
     case laserline::image_t::COMPRESSION_JPEG:
       return "jpeg";
+    case laserline::image_t::COMPRESSION_ZLIB:
+      return "zlib";
   }
   return std::to_string(c);
 }
@@ -167,26 +172,66 @@ bool LcmCamera::take_frame(const void* data, int size, const std::string& where,
     return skip("pixel format " + std::to_string(image_.pixelformat) +
                 " is not 8-bit grey (PIXEL_FORMAT_GRAY)");
   }
-  if (image_.compression != laserline::image_t::COMPRESSION_NONE) {
-    return skip("compression '" + compression_name(image_.compression) +
-                "' cannot be replayed (record with uncompressed raw frames)");
-  }
   if (image_.width != format_.width || image_.height != format_.height) {
     return skip("frame " + std::to_string(image_.width) + "x" + std::to_string(image_.height) +
                 " differs from the calibrated camera's " + std::to_string(format_.width) + "x" +
                 std::to_string(format_.height));
   }
+  if (image_.downscale > 1 || image_.roi_x != 0 || image_.roi_y != 0) {
+    return skip(
+        "a downscaled or cropped raw frame cannot be replayed (record with "
+        "lcm.image_downscale 1 and no lcm.image_roi)");
+  }
   const std::size_t row_bytes = static_cast<std::size_t>(format_.width);
-  if (image_.row_stride < format_.width ||
-      static_cast<std::size_t>(image_.size) <
-          static_cast<std::size_t>(image_.row_stride) * (format_.height - 1) + row_bytes) {
-    return skip("row stride " + std::to_string(image_.row_stride) + " and " +
-                std::to_string(image_.size) + " bytes do not hold a " +
-                std::to_string(format_.width) + "x" + std::to_string(format_.height) + " frame");
+  const std::uint8_t* pixels = image_.data.data();
+  std::size_t stride = static_cast<std::size_t>(image_.row_stride);
+  std::size_t available = image_.data.size();
+  switch (image_.compression) {
+    case laserline::image_t::COMPRESSION_NONE:
+      break;
+    case laserline::image_t::COMPRESSION_ZLIB: {
+      unpacked_.resize(format_.bytes());
+      uLongf got = static_cast<uLongf>(unpacked_.size());
+      const int z = uncompress(unpacked_.data(), &got, image_.data.data(),
+                               static_cast<uLong>(image_.data.size()));
+      if (z != Z_OK || got != unpacked_.size()) {
+        return skip("zlib data do not unpack to a " + std::to_string(format_.width) + "x" +
+                    std::to_string(format_.height) + " frame (" + zError(z) + ")");
+      }
+      pixels = unpacked_.data();
+      stride = row_bytes;
+      available = got;
+      break;
+    }
+    case laserline::image_t::COMPRESSION_PNG:
+    case laserline::image_t::COMPRESSION_JPEG: {
+      const cv::Mat decoded = cv::imdecode(
+          cv::Mat(1, static_cast<int>(image_.data.size()), CV_8UC1, image_.data.data()),
+          cv::IMREAD_GRAYSCALE);
+      if (decoded.empty() || decoded.cols != format_.width || decoded.rows != format_.height) {
+        return skip(compression_name(image_.compression) + " data do not decode to a " +
+                    std::to_string(format_.width) + "x" + std::to_string(format_.height) +
+                    " frame");
+      }
+      unpacked_.resize(format_.bytes());
+      for (int row = 0; row < format_.height; ++row)
+        std::memcpy(unpacked_.data() + row * row_bytes, decoded.ptr(row), row_bytes);
+      pixels = unpacked_.data();
+      stride = row_bytes;
+      available = unpacked_.size();
+      break;
+    }
+    default:
+      return skip("unknown compression " + std::to_string(image_.compression));
+  }
+  if (stride < row_bytes || available < stride * (format_.height - 1) + row_bytes) {
+    return skip("row stride " + std::to_string(stride) + " and " + std::to_string(available) +
+                " bytes do not hold a " + std::to_string(format_.width) + "x" +
+                std::to_string(format_.height) + " frame");
   }
   for (int row = 0; row < format_.height; ++row) {
     std::memcpy(dst.data() + static_cast<std::size_t>(row) * format_.stride,
-                image_.data.data() + static_cast<std::size_t>(row) * image_.row_stride, row_bytes);
+                pixels + static_cast<std::size_t>(row) * stride, row_bytes);
   }
   // The recorded exposure becomes the frame's exposure, so the replay's profiles carry the
   // original utime; on this host the frame is exposed (as far as latency goes) when it arrives.

@@ -118,7 +118,8 @@ class LcmCamera : public hal::Camera {
   LcmLogReader log_;
   LcmLogReader::Event event_;
   std::unique_ptr<lcm::LCM> lcm_;
-  laserline::image_t image_;  // decode target, reused
+  laserline::image_t image_;            // decode target, reused
+  std::vector<std::uint8_t> unpacked_;  // a compressed frame's pixels
   std::vector<std::string> reported_channels_;
   std::atomic<bool> stopping_{false};
   bool ended_ = false;

@@ -9,11 +9,15 @@ namespace laserline::daemon {
 struct ThreadSpec {
   const char* name;   // as shown by top -H / ps -L (at most 15 characters)
   int fifo_priority;  // SCHED_FIFO priority, 0 = SCHED_OTHER
+  int nice = 0;       // for SCHED_OTHER threads: > 0 yields the CPU to everything else
 };
 
 inline constexpr ThreadSpec kCameraThread{"ll-camera", 60};
 inline constexpr ThreadSpec kWorkerThread{"ll-worker", 50};
 // LCM's publish takes a lock and makes a syscall: this one stays a normal thread.
 inline constexpr ThreadSpec kPublisherThread{"ll-publisher", 0};
+// Raw frames (copy, downscale, compression, a large LCM publish) never delay profiles: their own
+// thread, below everything else.
+inline constexpr ThreadSpec kImageThread{"ll-images", 0, 10};
 
 }  // namespace laserline::daemon

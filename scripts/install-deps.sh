@@ -13,6 +13,7 @@ packages=(
   libopencv-dev
   libeigen3-dev
   libsystemd-dev
+  zlib1g-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # network namespaces for the LCM tests and the demo

@@ -138,6 +138,9 @@ std::vector<std::uint8_t> encode_image(std::int64_t sequence, int width, int hei
   m.row_stride = width;
   m.pixelformat = laserline::image_t::PIXEL_FORMAT_GRAY;
   m.compression = laserline::image_t::COMPRESSION_NONE;
+  m.roi_x = 0;
+  m.roi_y = 0;
+  m.downscale = 1;
   m.size = width * height;
   m.data.resize(static_cast<std::size_t>(m.size));
   for (int i = 0; i < m.size; ++i)
