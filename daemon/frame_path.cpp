@@ -95,8 +95,17 @@ bool FramePath::start(std::string* error) {
   profiles_ = std::make_unique<SpscRing<ProfileSlot>>(config_.profile_slots, profile_prototype);
   ImageSlot image_prototype{{}, format_, std::vector<std::uint8_t>(format_.bytes(), 0)};
   images_ = std::make_unique<SpscRing<ImageSlot>>(config_.image_slots, image_prototype);
+  // A second instance only where it is a second socket; a file:// log must have one writer.
+  if (config_.raw_frames.every_n > 0 && config_.lcm_url.rfind("udpm://", 0) == 0) {
+    image_lcm_ = std::make_unique<lcm::LCM>(config_.lcm_url);
+    if (!image_lcm_->good()) {
+      if (error != nullptr)
+        *error = "lcm.url: cannot open '" + config_.lcm_url + "' for raw frames";
+      return false;
+    }
+  }
   publisher_ = std::make_unique<LcmPublisher>(
-      lcm_,
+      lcm_, image_lcm_.get(),
       PublisherChannels{config_.profile_channel, config_.image_channel, config_.status_channel},
       config_.detector, max_points, format_);
   publisher_->status().camera_backend = config_.camera_backend;
@@ -380,7 +389,12 @@ void FramePath::publisher_loop() {
 }
 
 void FramePath::image_loop() {
-  setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), kImageThread.nice);
+  // SCHED_IDLE: raw frames get only the CPU that nothing else wants, so compression never
+  // competes with the profile publisher; when starved they are dropped and counted.
+  const sched_param idle{};
+  if (pthread_setschedparam(pthread_self(), SCHED_IDLE, &idle) != 0) {
+    setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), kImageThread.nice);
+  }
   while (true) {
     if (!images_->wait(100 * kMs)) {
       if (worker_done_.load(std::memory_order_acquire) && images_->front() == nullptr) break;

@@ -81,6 +81,7 @@ class FramePath {
   hal::Laser& laser_;
   pipeline::Detector& detector_;
   lcm::LCM& lcm_;
+  std::unique_ptr<lcm::LCM> image_lcm_;  // raw frames over UDP: their own socket and lock
   hal::FrameFormat format_;
 
   std::unique_ptr<SpscRing<FrameSlot>> frames_;

@@ -9,9 +9,12 @@ std::int64_t frame_utime(const hal::FrameInfo& info) {
   return info.exposure_wall_ns() / 1000;
 }
 
-LcmPublisher::LcmPublisher(lcm::LCM& lcm, PublisherChannels channels, const std::string& detector,
-                           std::size_t max_points, const hal::FrameFormat& format)
-    : lcm_(lcm), channels_(std::move(channels)) {
+LcmPublisher::LcmPublisher(lcm::LCM& lcm, lcm::LCM* image_lcm, PublisherChannels channels,
+                           const std::string& detector, std::size_t max_points,
+                           const hal::FrameFormat& format)
+    : lcm_(lcm),
+      image_lcm_(image_lcm != nullptr ? *image_lcm : lcm),
+      channels_(std::move(channels)) {
   profile_.detector = detector;
   profile_.points.resize(max_points);
   profile_.num_points = static_cast<std::int32_t>(max_points);
@@ -32,12 +35,12 @@ LcmPublisher::LcmPublisher(lcm::LCM& lcm, PublisherChannels channels, const std:
 }
 
 template <typename Message>
-bool LcmPublisher::publish(const std::string& channel, const Message& message,
+bool LcmPublisher::publish(lcm::LCM& lcm, const std::string& channel, const Message& message,
                            std::vector<std::uint8_t>& buffer) {
   const int size = message.getEncodedSize();
   if (size < 0 || static_cast<std::size_t>(size) > buffer.size()) return false;
   if (message.encode(buffer.data(), 0, size) != size) return false;
-  return lcm_.publish(channel, buffer.data(), static_cast<unsigned>(size)) == 0;
+  return lcm.publish(channel, buffer.data(), static_cast<unsigned>(size)) == 0;
 }
 
 bool LcmPublisher::publish_profile(const ProfileSlot& slot) {
@@ -60,7 +63,7 @@ bool LcmPublisher::publish_profile(const ProfileSlot& slot) {
     std::copy(p.xyz.begin(), p.xyz.end(), out.xyz);
   }
   profile_.num_points = static_cast<std::int32_t>(points.size());
-  return publish(channels_.profile, profile_, buffer_);
+  return publish(lcm_, channels_.profile, profile_, buffer_);
 }
 
 bool LcmPublisher::publish_image(const ImageSlot& slot, RawFrameEncoder& encoder) {
@@ -69,11 +72,11 @@ bool LcmPublisher::publish_image(const ImageSlot& slot, RawFrameEncoder& encoder
   image_.camera_timestamp_ns = slot.info.camera_ns;
   image_.laser_on = slot.info.laser_on;
   if (!encoder.encode(slot, &image_)) return false;
-  return publish(channels_.image, image_, image_buffer_);
+  return publish(image_lcm_, channels_.image, image_, image_buffer_);
 }
 
 bool LcmPublisher::publish_status() {
-  return publish(channels_.status, status_, buffer_);
+  return publish(lcm_, channels_.status, status_, buffer_);
 }
 
 }  // namespace laserline::daemon
