@@ -8,7 +8,9 @@ packages=(
   # build
   build-essential cmake pkg-config git clang-format
   # libraries
-  liblcm-dev liblcm-bin libglib2.0-dev
+  liblcm-dev liblcm-bin liblcm-java libglib2.0-dev
+  # the Java message types (a jar for lcm-spy) and the Python log reader
+  default-jdk-headless python3
   libyaml-cpp-dev
   libopencv-dev
   libeigen3-dev

@@ -40,6 +40,14 @@ expect_file /usr/lib/udev/rules.d/60-laserline.rules
 expect_file /etc/laserline/laserline.yaml
 expect_file /usr/share/laserline/lcmtypes/laserline_profile_t.lcm
 expect_file /usr/include/laserline/profile_t.hpp
+expect_file /usr/include/laserline_profile_t.h
+expect_file /usr/lib/x86_64-linux-gnu/liblaserline-lcmtypes.a
+expect_file /usr/lib/python3/dist-packages/laserline/profile_t.py
+expect_file /usr/share/java/laserline-lcmtypes.jar
+expect_file /usr/bin/laserline-log-reader
+expect_file /usr/bin/laserline-example-subscriber
+/usr/bin/python3 -c 'import laserline; laserline.profile_t.decode(laserline.profile_t().encode())' ||
+  fail "the installed Python types do not work with the system python3"
 grep -qx /etc/laserline/laserline.yaml /var/lib/dpkg/info/laserline.conffiles ||
   fail "/etc/laserline/laserline.yaml is not a conffile"
 
