@@ -44,6 +44,7 @@ Result run(const Variant& v, double seconds) {
   config.raw_frames.every_n = config.image_every_n;
   config.raw_frames.max_rate_hz = 10;
   config.raw_frames.compression = v.compression;
+  config.raw_frames.downscale = 1;  // full 1280x1024 frames
   config.realtime = g_realtime;
   laserline::daemon::Backends backends = laserline::daemon::create_backends(config);
   std::string error;

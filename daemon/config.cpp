@@ -115,10 +115,10 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
       lcm.fail("image_roi", "width and height must be > 0");
     }
   }
-  raw.downscale = static_cast<int>(lcm.integer("image_downscale", 1, 1, 4));
+  raw.downscale = static_cast<int>(lcm.integer("image_downscale", raw.downscale, 1, 4));
   if (raw.downscale == 3) lcm.fail("image_downscale", "must be 1, 2 or 4, got 3");
   const std::string compression =
-      lcm.choice("image_compression", "none", {"none", "zlib", "png", "jpeg"});
+      lcm.choice("image_compression", "jpeg", {"none", "zlib", "png", "jpeg"});
   raw.compression = compression == "zlib"   ? ImageCompression::kZlib
                     : compression == "png"  ? ImageCompression::kPng
                     : compression == "jpeg" ? ImageCompression::kJpeg

@@ -389,19 +389,19 @@ void FramePath::publisher_loop() {
 }
 
 void FramePath::image_loop() {
-  // SCHED_IDLE: raw frames get only the CPU that nothing else wants, so compression never
-  // competes with the profile publisher; when starved they are dropped and counted.
-  const sched_param idle{};
-  if (pthread_setschedparam(pthread_self(), SCHED_IDLE, &idle) != 0) {
-    setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), kImageThread.nice);
-  }
+  // Nice rather than SCHED_IDLE: an idle-class thread on a busy machine can take seconds to
+  // finish one frame, and stop() waits for it.
+  setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), kImageThread.nice);
   while (true) {
     if (!images_->wait(100 * kMs)) {
       if (worker_done_.load(std::memory_order_acquire) && images_->front() == nullptr) break;
       continue;
     }
     ImageSlot* image = images_->front();
-    if (publisher_->publish_image(*image, *encoder_)) {
+    if (stop_requested_.load(std::memory_order_relaxed)) {
+      // Stopping: frames still queued are not worth delaying the exit for.
+      counters_.images_dropped.fetch_add(1, std::memory_order_relaxed);
+    } else if (publisher_->publish_image(*image, *encoder_)) {
       images_published_.fetch_add(1, std::memory_order_relaxed);
     } else {
       publish_errors_.fetch_add(1, std::memory_order_relaxed);

@@ -20,7 +20,7 @@ inline constexpr ThreadSpec kWorkerThread{"ll-worker", 50};
 // zlib raw frames at 10 Hz +141% over no raw frames as a normal thread, +12% at FIFO 20.
 inline constexpr ThreadSpec kPublisherThread{"ll-publisher", 20};
 // Raw frames (copy, downscale, compression, a large LCM publish) never delay profiles: their own
-// thread, SCHED_IDLE (nice 10 where that is refused), below everything else.
+// thread, nice 10, below everything else.
 inline constexpr ThreadSpec kImageThread{"ll-images", 0, 10};
 
 }  // namespace laserline::daemon

@@ -33,7 +33,7 @@ grep -q "^LASERLINE_PROFILE: $published profiles, sequence 0\.\.$((published - 1
   "$dir/reader.out" || fail "reader did not count $published profiles"
 grep -q "^LASERLINE_STATUS: .* messages; last: camera stopped, $published frames processed" \
   "$dir/reader.out" || fail "reader did not decode the last status"
-grep -q "^LASERLINE_IMAGE: .* raw frames, last 320x256 (zlib)" "$dir/reader.out" ||
+grep -q "^LASERLINE_IMAGE: .* raw frames, last 160x128 (zlib)" "$dir/reader.out" ||
   fail "reader did not decode the raw frames"
 rows=$(($(wc -l <"$dir/points.csv") - 1))
 [ "$rows" -gt $((published * 100)) ] || fail "only $rows points in the CSV"

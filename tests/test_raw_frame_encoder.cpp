@@ -68,6 +68,7 @@ TEST(RawFrameEncoder, LosslessCompressionsGiveTheFrameBack) {
                          std::pair{ImageCompression::kZlib, laserline::image_t::COMPRESSION_ZLIB},
                          std::pair{ImageCompression::kPng, laserline::image_t::COMPRESSION_PNG}}) {
     RawFrameOptions o;
+    o.downscale = 1;
     o.compression = c;
     const laserline::image_t m = encode(o, slot);
     EXPECT_EQ(m.compression, code);
@@ -84,6 +85,7 @@ TEST(RawFrameEncoder, LosslessCompressionsGiveTheFrameBack) {
 TEST(RawFrameEncoder, JpegIsCloseAndSmaller) {
   const ImageSlot slot = test_frame();
   RawFrameOptions o;
+  o.downscale = 1;
   o.compression = ImageCompression::kJpeg;
   o.jpeg_quality = 95;
   const laserline::image_t m = encode(o, slot);
@@ -136,6 +138,7 @@ TEST(RawFrameEncoder, CompressedRecordingsReplayExactly) {
     for (ImageCompression c :
          {ImageCompression::kZlib, ImageCompression::kPng, ImageCompression::kNone}) {
       RawFrameOptions o;
+      o.downscale = 1;
       o.compression = c;
       laserline::image_t m = encode(o, slot);
       m.utime = 1;

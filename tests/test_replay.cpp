@@ -359,7 +359,8 @@ TEST_F(Replay, RecordedRunReplaysIdenticallyOfflineTwiceAndLive) {
         "record.yaml",
         scanner_config("  backend: sim\n  frame_rate_hz: 20\n  sim: {seed: 3, distance_m: 1.0, "
                        "tilt_y_deg: 10, noise_sigma: 1.5}",
-                       std::string("{url: \"") + kRecordUrl + "\", image_every_n: 1}"));
+                       std::string("{url: \"") + kRecordUrl +
+                           "\", image_every_n: 1, image_downscale: 1, image_compression: zlib}"));
     Child daemon({LASERLINED_PATH, "--config", rec, "--duration", "3"}, dir_ / "record.out");
     ASSERT_EQ(daemon.wait(30), 0) << daemon.output();
     usleep(300'000);  // the last messages reach the logger
