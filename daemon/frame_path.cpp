@@ -375,7 +375,10 @@ void FramePath::publisher_loop() {
     const std::int64_t now = hal::monotonic_ns();
     const bool finished = worker_done_.load(std::memory_order_acquire) &&
                           profiles_->front() == nullptr &&
-                          images_done_.load(std::memory_order_acquire);
+                          // The last status waits for raw frames at the end of a recording,
+                          // not when stopped: a frame being compressed must not hold it back.
+                          (images_done_.load(std::memory_order_acquire) ||
+                           stop_requested_.load(std::memory_order_relaxed));
     if (now >= next_status || finished) {
       fill_status(now, now - last_status);
       if (!publisher_->publish_status()) publish_errors_.fetch_add(1, std::memory_order_relaxed);
