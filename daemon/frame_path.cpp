@@ -392,8 +392,12 @@ void FramePath::publisher_loop() {
 }
 
 void FramePath::image_loop() {
-  // Nice rather than SCHED_IDLE: an idle-class thread on a busy machine can take seconds to
-  // finish one frame, and stop() waits for it.
+  // Normal scheduling even when the process was started real-time (the unit's
+  // CPUSchedulingPolicy=fifo): a compressing thread at the publisher's FIFO priority would hold
+  // it up. Nice rather than SCHED_IDLE: an idle-class thread on a busy machine can take seconds
+  // to finish one frame, and stop() waits for it.
+  const sched_param normal{};
+  pthread_setschedparam(pthread_self(), SCHED_OTHER, &normal);
   setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), kImageThread.nice);
   while (true) {
     if (!images_->wait(100 * kMs)) {
