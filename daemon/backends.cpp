@@ -1,5 +1,6 @@
 #include "daemon/backends.hpp"
 
+#include "daemon/lcm_camera.hpp"
 #include "hal/registry.hpp"
 
 namespace laserline::daemon {
@@ -16,6 +17,7 @@ std::string join(const std::vector<std::string>& names) {
 }  // namespace
 
 Backends create_backends(DaemonConfig& config) {
+  register_lcm_camera();
   Backends b;
   b.laser = hal::make_laser(config.laser_backend, config.laser_options);
   if (!b.laser) {
@@ -41,6 +43,23 @@ Backends create_backends(DaemonConfig& config) {
                            std::to_string(config.calibration.camera.height) +
                            " differs from the camera's " + std::to_string(format.width) + "x" +
                            std::to_string(format.height));
+  }
+
+  const RawFrameOptions& raw = config.raw_frames;
+  if (raw.roi_width > 0 &&
+      (raw.roi_x + raw.roi_width > format.width || raw.roi_y + raw.roi_height > format.height)) {
+    throw hal::ConfigError(config.source + ": lcm.image_roi: [" + std::to_string(raw.roi_x) + ", " +
+                           std::to_string(raw.roi_y) + ", " + std::to_string(raw.roi_width) + ", " +
+                           std::to_string(raw.roi_height) + "] is not inside the camera's " +
+                           std::to_string(format.width) + "x" + std::to_string(format.height) +
+                           " frame");
+  }
+  const int roi_w = raw.roi_width > 0 ? raw.roi_width : format.width;
+  const int roi_h = raw.roi_height > 0 ? raw.roi_height : format.height;
+  if (roi_w < raw.downscale || roi_h < raw.downscale) {
+    throw hal::ConfigError(
+        config.source + ": lcm.image_downscale: " + std::to_string(raw.downscale) +
+        " leaves no pixel of a " + std::to_string(roi_w) + "x" + std::to_string(roi_h) + " region");
   }
 
   b.detector = pipeline::make_detector(config.detector, config.detector_options);

@@ -150,6 +150,34 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
     if (channel->empty() || channel->size() > 63) lcm.fail(key, "must be 1 to 63 characters");
   }
   c.image_every_n = static_cast<int>(lcm.integer("image_every_n", c.image_every_n, 0, 1000000));
+  RawFrameOptions& raw = c.raw_frames;
+  raw.every_n = c.image_every_n;
+  raw.max_rate_hz = lcm.number("image_max_rate_hz", 0.0, 0.0, 1000.0);
+  if (lcm.has("image_roi")) {
+    const std::vector<double> roi = lcm.numbers("image_roi", {4});
+    for (double v : roi) {
+      if (v < 0 || v != static_cast<int>(v)) {
+        lcm.fail("image_roi", "expected [x, y, width, height] in whole pixels >= 0");
+      }
+    }
+    raw.roi_x = static_cast<int>(roi[0]);
+    raw.roi_y = static_cast<int>(roi[1]);
+    raw.roi_width = static_cast<int>(roi[2]);
+    raw.roi_height = static_cast<int>(roi[3]);
+    if (raw.roi_width == 0 || raw.roi_height == 0) {
+      lcm.fail("image_roi", "width and height must be > 0");
+    }
+  }
+  raw.downscale = static_cast<int>(lcm.integer("image_downscale", raw.downscale, 1, 4));
+  if (raw.downscale == 3) lcm.fail("image_downscale", "must be 1, 2 or 4, got 3");
+  const std::string compression =
+      lcm.choice("image_compression", "jpeg", {"none", "zlib", "png", "jpeg"});
+  raw.compression = compression == "zlib"   ? ImageCompression::kZlib
+                    : compression == "png"  ? ImageCompression::kPng
+                    : compression == "jpeg" ? ImageCompression::kJpeg
+                                            : ImageCompression::kNone;
+  raw.jpeg_quality = static_cast<int>(lcm.integer("image_jpeg_quality", 90, 1, 100));
+  raw.zlib_level = static_cast<int>(lcm.integer("image_zlib_level", 1, 1, 9));
   c.status_period_s = lcm.number("status_period_s", c.status_period_s, 0.05, 3600.0);
   lcm.finish();
 

@@ -12,6 +12,23 @@ namespace laserline::daemon {
 
 enum class LaserMode : std::uint8_t { kOn, kAlternate, kOff };
 
+enum class ImageCompression : std::uint8_t { kNone, kZlib, kPng, kJpeg };
+
+// What goes out on the raw frame channel: which frames, which part, how packed.
+struct RawFrameOptions {
+  int every_n = 30;          // every n-th processed frame; 0 = none
+  double max_rate_hz = 0;    // and at most this often; 0 = no limit
+  int roi_x = 0, roi_y = 0;  // region of interest in full-frame pixels;
+  int roi_width = 0;         // 0 = the whole frame
+  int roi_height = 0;
+  // Defaults: half size, JPEG, about 60 kB a frame: arrives whole at a subscriber with a stock
+  // UDP receive buffer (net.core.rmem_default 208 kB), which a 1.3 MB raw frame does not.
+  int downscale = 2;  // 1, 2 or 4: mean of each downscale x downscale block
+  ImageCompression compression = ImageCompression::kJpeg;
+  int jpeg_quality = 90;
+  int zlib_level = 1;  // fast: the image thread must keep up at full size
+};
+
 struct DaemonConfig {
   std::string source;  // where it was read from (a path, or "built-in default")
 
@@ -42,7 +59,8 @@ struct DaemonConfig {
   std::string profile_channel = "LASERLINE_PROFILE";
   std::string image_channel = "LASERLINE_IMAGE";
   std::string status_channel = "LASERLINE_STATUS";
-  int image_every_n = 30;
+  int image_every_n = 30;  // = raw_frames.every_n, kept for the existing readers
+  RawFrameOptions raw_frames;
   double status_period_s = 1.0;
 };
 

@@ -1,7 +1,9 @@
 #include "daemon/frame_path.hpp"
 
 #include <pthread.h>
+#include <sys/resource.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -16,6 +18,19 @@ namespace laserline::daemon {
 namespace {
 
 constexpr std::int64_t kMs = 1'000'000;
+
+// A recording (Camera::paced_by_consumer()) waits for room in a ring instead of dropping; it is
+// not a real-time source, so a short sleep is the right way to wait.
+template <typename T>
+T* claim_waiting(SpscRing<T>& ring, const std::atomic<bool>& stopping) {
+  T* slot = ring.try_claim();
+  while (slot == nullptr && !stopping.load(std::memory_order_relaxed)) {
+    const timespec pause{0, 200'000};
+    nanosleep(&pause, nullptr);
+    slot = ring.try_claim();
+  }
+  return slot;
+}
 
 // Names the thread and, when asked, gives it its real-time priority and CPUs. Returns "" or why
 // the system refused.
@@ -88,11 +103,21 @@ bool FramePath::start(std::string* error) {
   unpublished_profile_ = pipeline::Profile(max_points);
   ImageSlot image_prototype{{}, format_, std::vector<std::uint8_t>(format_.bytes(), 0)};
   images_ = std::make_unique<SpscRing<ImageSlot>>(config_.image_slots, image_prototype);
+  // A second instance only where it is a second socket; a file:// log must have one writer.
+  if (config_.raw_frames.every_n > 0 && config_.lcm_url.rfind("udpm://", 0) == 0) {
+    image_lcm_ = std::make_unique<lcm::LCM>(config_.lcm_url);
+    if (!image_lcm_->good()) {
+      if (error != nullptr)
+        *error = "lcm.url: cannot open '" + config_.lcm_url + "' for raw frames";
+      return false;
+    }
+  }
   publisher_ = std::make_unique<LcmPublisher>(
-      lcm_,
+      lcm_, image_lcm_.get(),
       PublisherChannels{config_.profile_channel, config_.image_channel, config_.status_channel},
       config_.detector, max_points, format_);
   publisher_->status().camera_backend = config_.camera_backend;
+  encoder_ = std::make_unique<RawFrameEncoder>(config_.raw_frames, format_);
   // Enough room for every frame of a status period at 4x the nominal rate.
   const auto window = static_cast<std::size_t>(
       std::ceil(config_.frame_rate_hz * config_.status_period_s * 4.0) + 64);
@@ -103,14 +128,18 @@ bool FramePath::start(std::string* error) {
   counters_.last_frame_mono_ns.store(start_mono_ns_, std::memory_order_relaxed);
   stopping_.store(false);
   worker_done_.store(false);
+  source_ended_.store(false);
+  images_done_.store(false);
+  stop_requested_.store(false);
   running_.store(true);
   // Consumers first, so that nothing is produced before someone can take it.
   publisher_thread_ = std::thread([this] { publisher_loop(); });
+  image_thread_ = std::thread([this] { image_loop(); });
   worker_thread_ = std::thread([this] { worker_loop(); });
   camera_thread_ = std::thread([this] { camera_loop(); });
   for (auto [thread, spec] :
-       {std::pair{&publisher_thread_, kPublisherThread}, std::pair{&worker_thread_, kWorkerThread},
-        std::pair{&camera_thread_, kCameraThread}}) {
+       {std::pair{&publisher_thread_, kPublisherThread}, std::pair{&image_thread_, kImageThread},
+        std::pair{&worker_thread_, kWorkerThread}, std::pair{&camera_thread_, kCameraThread}}) {
     const std::string problem = configure_thread(*thread, spec, config_.realtime, config_.cpus);
     if (!problem.empty()) {
       stop();
@@ -123,6 +152,7 @@ bool FramePath::start(std::string* error) {
 
 void FramePath::stop() {
   if (!running_.exchange(false)) return;
+  stop_requested_.store(true);
   stopping_.store(true);
   camera_.stop();
   if (camera_thread_.joinable()) camera_thread_.join();
@@ -131,6 +161,8 @@ void FramePath::stop() {
   if (worker_thread_.joinable()) worker_thread_.join();
   profiles_->wake();
   if (publisher_thread_.joinable()) publisher_thread_.join();
+  images_->wake();
+  if (image_thread_.joinable()) image_thread_.join();
 }
 
 bool FramePath::desired_laser(std::uint64_t grab_index) const {
@@ -169,13 +201,15 @@ void FramePath::camera_loop() {
   hal::FrameInfo overflow_info;
   const std::chrono::milliseconds timeout(config_.grab_timeout_ms);
   std::uint64_t grab_index = 0;
+  const bool lossless = camera_.paced_by_consumer();
   bool frames_flowing = true;  // until a grab fails; the laser stays off until frames return
 
   while (!stopping_.load(std::memory_order_relaxed)) {
     const bool want_laser = frames_flowing && desired_laser(grab_index);
     if (want_laser != laser_.is_on()) switch_laser(want_laser, grab_index);
 
-    FrameSlot* slot = frames_->try_claim();
+    FrameSlot* slot = lossless ? claim_waiting(*frames_, stopping_) : frames_->try_claim();
+    if (lossless && slot == nullptr) break;  // stopping
     std::span<std::uint8_t> pixels =
         slot != nullptr ? std::span<std::uint8_t>(slot->pixels) : std::span<std::uint8_t>(overflow);
     hal::FrameInfo& info = slot != nullptr ? slot->info : overflow_info;
@@ -212,6 +246,9 @@ void FramePath::camera_loop() {
         }
         break;
       case hal::GrabStatus::kStopped:
+        if (!stopping_.load(std::memory_order_relaxed)) {
+          source_ended_.store(true, std::memory_order_release);
+        }
         stopping_.store(true, std::memory_order_relaxed);
         break;
     }
@@ -222,6 +259,14 @@ void FramePath::camera_loop() {
 
 void FramePath::worker_loop() {
   std::int64_t processed = 0;
+  const bool lossless = camera_.paced_by_consumer();
+  const auto budget_ns = static_cast<std::int64_t>(1e9 / config_.frame_rate_hz);
+  // Raw frames at most this often (arrival times, so no clock read here).
+  const std::int64_t image_interval_ns =
+      config_.raw_frames.max_rate_hz > 0
+          ? static_cast<std::int64_t>(1e9 / config_.raw_frames.max_rate_hz)
+          : 0;
+  std::int64_t last_image_ns = INT64_MIN / 2;
   while (true) {
     if (!frames_->wait(100 * kMs)) {
       if (stopping_.load(std::memory_order_acquire)) break;
@@ -230,8 +275,12 @@ void FramePath::worker_loop() {
     FrameSlot* frame = frames_->front();
     const pipeline::ImageView view{frame->pixels.data(), format_.width, format_.height,
                                    format_.stride};
-    if (config_.image_every_n > 0 && processed % config_.image_every_n == 0) {
-      if (ImageSlot* image = images_->try_claim()) {
+    const RawFrameOptions& raw = config_.raw_frames;
+    if (raw.every_n > 0 && processed % raw.every_n == 0 &&
+        frame->info.arrival_mono_ns - last_image_ns >= image_interval_ns) {
+      last_image_ns = frame->info.arrival_mono_ns;
+      if (ImageSlot* image =
+              lossless ? claim_waiting(*images_, stop_requested_) : images_->try_claim()) {
         image->info = frame->info;
         image->format = format_;
         std::memcpy(image->pixels.data(), frame->pixels.data(), format_.bytes());
@@ -241,8 +290,17 @@ void FramePath::worker_loop() {
       }
     }
     const pipeline::FrameContext context{frame->info.sequence, frame->info.laser_on};
-    ProfileSlot* out = profiles_->try_claim();
-    detector_.detect(view, context, out ? out->profile : unpublished_profile_);
+    ProfileSlot* out =
+        lossless ? claim_waiting(*profiles_, stop_requested_) : profiles_->try_claim();
+    {
+      const std::int64_t t0 = hal::monotonic_ns();  // vDSO clock read, no syscall
+      detector_.detect(view, context, out ? out->profile : unpublished_profile_);
+      const std::int64_t took = hal::monotonic_ns() - t0;
+      if (took > budget_ns) counters_.frames_over_budget.fetch_add(1, std::memory_order_relaxed);
+      if (took > counters_.processing_max_ns.load(std::memory_order_relaxed)) {
+        counters_.processing_max_ns.store(took, std::memory_order_relaxed);
+      }
+    }
     if (out) {
       out->info = frame->info;
       out->width = format_.width;
@@ -257,6 +315,7 @@ void FramePath::worker_loop() {
   }
   worker_done_.store(true, std::memory_order_release);
   profiles_->wake();
+  images_->wake();
 }
 
 void FramePath::fill_status(std::int64_t now_mono, std::int64_t period_ns) {
@@ -292,6 +351,12 @@ void FramePath::fill_status(std::int64_t now_mono, std::int64_t period_ns) {
   s.latency_p50_ms = static_cast<float>(window.p50_ms);
   s.latency_p99_ms = static_cast<float>(window.p99_ms);
   s.latency_max_ms = static_cast<float>(window.max_ms);
+  s.cpu_percent = static_cast<float>(cpu_.percent_since_last());
+  s.frames_over_budget = counters_.frames_over_budget.load(std::memory_order_relaxed);
+  // The worker only raises it; a racing store may keep one frame's figure a period longer.
+  s.processing_max_ms = static_cast<float>(
+      static_cast<double>(counters_.processing_max_ns.exchange(0, std::memory_order_relaxed)) *
+      1e-6);
   const LatencySummary pipeline = pipeline_->take_window();
   s.pipeline_p50_ms = static_cast<float>(pipeline.p50_ms);
   s.pipeline_p99_ms = static_cast<float>(pipeline.p99_ms);
@@ -306,14 +371,6 @@ void FramePath::publisher_loop() {
     const std::int64_t wait_ns =
         std::clamp<std::int64_t>(next_status - hal::monotonic_ns(), 0, 100 * kMs);
     profiles_->wait(wait_ns);
-    while (ImageSlot* image = images_->front()) {
-      if (publisher_->publish_image(*image)) {
-        images_published_.fetch_add(1, std::memory_order_relaxed);
-      } else {
-        publish_errors_.fetch_add(1, std::memory_order_relaxed);
-      }
-      images_->pop();
-    }
     while (ProfileSlot* slot = profiles_->front()) {
       if (publisher_->publish_profile(*slot)) {
         const std::int64_t published = hal::monotonic_ns();
@@ -329,7 +386,11 @@ void FramePath::publisher_loop() {
     }
     const std::int64_t now = hal::monotonic_ns();
     const bool finished = worker_done_.load(std::memory_order_acquire) &&
-                          profiles_->front() == nullptr && images_->front() == nullptr;
+                          profiles_->front() == nullptr &&
+                          // The last status waits for raw frames at the end of a recording,
+                          // not when stopped: a frame being compressed must not hold it back.
+                          (images_done_.load(std::memory_order_acquire) ||
+                           stop_requested_.load(std::memory_order_relaxed));
     if (now >= next_status || finished) {
       fill_status(now, now - last_status);
       if (!publisher_->publish_status()) publish_errors_.fetch_add(1, std::memory_order_relaxed);
@@ -340,6 +401,33 @@ void FramePath::publisher_loop() {
   }
   final_latency_ = latency_->total();
   final_pipeline_ = pipeline_->total();
+}
+
+void FramePath::image_loop() {
+  // Normal scheduling even when the process was started real-time (the unit's
+  // CPUSchedulingPolicy=fifo): a compressing thread at the publisher's FIFO priority would hold
+  // it up. Nice rather than SCHED_IDLE: an idle-class thread on a busy machine can take seconds
+  // to finish one frame, and stop() waits for it.
+  const sched_param normal{};
+  pthread_setschedparam(pthread_self(), SCHED_OTHER, &normal);
+  setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), kImageThread.nice);
+  while (true) {
+    if (!images_->wait(100 * kMs)) {
+      if (worker_done_.load(std::memory_order_acquire) && images_->front() == nullptr) break;
+      continue;
+    }
+    ImageSlot* image = images_->front();
+    if (stop_requested_.load(std::memory_order_relaxed)) {
+      // Stopping: frames still queued are not worth delaying the exit for.
+      counters_.images_dropped.fetch_add(1, std::memory_order_relaxed);
+    } else if (publisher_->publish_image(*image, *encoder_)) {
+      images_published_.fetch_add(1, std::memory_order_relaxed);
+    } else {
+      publish_errors_.fetch_add(1, std::memory_order_relaxed);
+    }
+    images_->pop();
+  }
+  images_done_.store(true, std::memory_order_release);
 }
 
 FramePathSummary FramePath::summary() const {
@@ -354,6 +442,7 @@ FramePathSummary FramePath::summary() const {
   s.grab_errors = counters_.grab_errors.load();
   s.publish_errors = publish_errors_.load();
   s.laser_safety_offs = counters_.laser_safety_offs.load();
+  s.frames_over_budget = counters_.frames_over_budget.load();
   s.latency = final_latency_;  // complete once stop() returned
   s.pipeline = final_pipeline_;
   return s;

@@ -8,9 +8,11 @@
 #include <thread>
 
 #include "daemon/config.hpp"
+#include "daemon/cpu_usage.hpp"
 #include "daemon/frame_slots.hpp"
 #include "daemon/latency.hpp"
 #include "daemon/lcm_publisher.hpp"
+#include "daemon/raw_frame_encoder.hpp"
 #include "daemon/spsc_ring.hpp"
 #include "hal/camera.hpp"
 #include "hal/laser.hpp"
@@ -30,6 +32,7 @@ struct FramePathSummary {
   std::int64_t grab_errors = 0;
   std::int64_t publish_errors = 0;
   std::int64_t laser_safety_offs = 0;
+  std::int64_t frames_over_budget = 0;
   LatencySummary latency;   // exposure -> profile published
   LatencySummary pipeline;  // frame arrival -> profile published
 };
@@ -61,11 +64,14 @@ class FramePath {
   void enforce_laser_safety();
   FramePathSummary summary() const;
   const FramePathCounters& counters() const { return counters_; }
+  // True once the camera ended by itself (a replayed recording reached its end).
+  bool source_ended() const { return source_ended_.load(std::memory_order_acquire); }
 
  private:
   void camera_loop();
   void worker_loop();
   void publisher_loop();
+  void image_loop();
   bool desired_laser(std::uint64_t grab_index) const;
   void switch_laser(bool on, std::uint64_t for_frame);
   void fill_status(std::int64_t now_mono, std::int64_t period_ns);
@@ -75,6 +81,7 @@ class FramePath {
   hal::Laser& laser_;
   pipeline::Detector& detector_;
   lcm::LCM& lcm_;
+  std::unique_ptr<lcm::LCM> image_lcm_;  // raw frames over UDP: their own socket and lock
   hal::FrameFormat format_;
 
   std::unique_ptr<SpscRing<FrameSlot>> frames_;
@@ -82,6 +89,7 @@ class FramePath {
   pipeline::Profile unpublished_profile_;  // detector output when the profile ring is full
   std::unique_ptr<SpscRing<ImageSlot>> images_;
   std::unique_ptr<LcmPublisher> publisher_;
+  std::unique_ptr<RawFrameEncoder> encoder_;
   std::unique_ptr<LatencyStats> latency_;   // exposure -> published
   std::unique_ptr<LatencyStats> pipeline_;  // arrival -> published
 
@@ -92,18 +100,23 @@ class FramePath {
   std::atomic<bool> running_{false};
   std::atomic<bool> stopping_{false};
   std::atomic<bool> worker_done_{false};
+  std::atomic<bool> source_ended_{false};
+  std::atomic<bool> images_done_{false};
+  std::atomic<bool> stop_requested_{false};  // by stop(), unlike stopping_ (also end of source)
   std::int64_t start_mono_ns_ = 0;
 
   // Publisher-thread state for per-period figures.
   std::int64_t last_status_frames_ = 0;
   std::int64_t points_in_period_ = 0;
   std::int64_t profiles_in_period_ = 0;
+  CpuUsage cpu_;
   LatencySummary final_latency_;
   LatencySummary final_pipeline_;
 
   std::thread camera_thread_;
   std::thread worker_thread_;
   std::thread publisher_thread_;
+  std::thread image_thread_;
 };
 
 }  // namespace laserline::daemon

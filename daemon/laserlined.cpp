@@ -16,7 +16,9 @@
 
 #include "daemon/backends.hpp"
 #include "daemon/config.hpp"
+#include "daemon/cpu_usage.hpp"
 #include "daemon/frame_path.hpp"
+#include "daemon/service_notifier.hpp"
 #include "daemon/thread_priorities.hpp"
 #include "hal/clock.hpp"
 
@@ -89,6 +91,42 @@ Options parse_args(int argc, char** argv) {
   }
   return o;
 }
+
+// How often the human health line goes to stdout (the journal, under systemd).
+constexpr std::int64_t kJournalPeriodNs = 5'000'000'000;
+constexpr std::int64_t kStatusPeriodNs = 1'000'000'000;
+
+// One line of health for people: systemd's STATUS= and, every few seconds, the journal.
+class HealthLine {
+ public:
+  std::string update(const laserline::daemon::FramePath& path, bool laser_on, std::int64_t now_ns) {
+    const auto& c = path.counters();
+    const std::int64_t processed = c.frames_processed.load(std::memory_order_relaxed);
+    const double seconds = static_cast<double>(now_ns - last_ns_) * 1e-9;
+    const double rate =
+        seconds > 0 ? static_cast<double>(processed - last_processed_) / seconds : 0;
+    last_ns_ = now_ns;
+    last_processed_ = processed;
+    char line[320];
+    std::snprintf(
+        line, sizeof line,
+        "camera %s, %.1f frames/s, %lld processed, %lld dropped, %lld over budget, %lld grab "
+        "timeouts, %lld grab errors, laser %s, CPU %.0f%%",
+        laserline::daemon::to_string(c.camera_state.load(std::memory_order_relaxed)), rate,
+        static_cast<long long>(processed),
+        static_cast<long long>(c.frames_dropped.load(std::memory_order_relaxed)),
+        static_cast<long long>(c.frames_over_budget.load(std::memory_order_relaxed)),
+        static_cast<long long>(c.grab_timeouts.load(std::memory_order_relaxed)),
+        static_cast<long long>(c.grab_errors.load(std::memory_order_relaxed)),
+        laser_on ? "on" : "off", cpu_.percent_since_last());
+    return line;
+  }
+
+ private:
+  std::int64_t last_ns_ = laserline::hal::monotonic_ns();
+  std::int64_t last_processed_ = 0;
+  laserline::daemon::CpuUsage cpu_;
+};
 
 }  // namespace
 
@@ -184,6 +222,10 @@ int main(int argc, char** argv) {
   const std::int64_t start = laserline::hal::monotonic_ns();
   const auto duration_ns = static_cast<std::int64_t>(options.duration_s * 1e9);
   const char* reason = "duration elapsed";
+  laserline::daemon::ServiceNotifier notifier;
+  HealthLine health;
+  std::int64_t next_status = start + kStatusPeriodNs;
+  std::int64_t next_journal = start + kJournalPeriodNs;
   while (true) {
     const timespec tick{0, 50'000'000};
     const int sig = sigtimedwait(&stop_signals, nullptr, &tick);
@@ -192,8 +234,30 @@ int main(int argc, char** argv) {
       break;
     }
     path.enforce_laser_safety();
+    // systemd: ready once the camera streams and a frame went through; the watchdog is fed only
+    // while frames keep being processed.
+    const std::int64_t now = laserline::hal::monotonic_ns();
+    const std::int64_t processed = path.counters().frames_processed.load(std::memory_order_relaxed);
+    if (processed > 0) {
+      notifier.ready("streaming, " + std::to_string(processed) + " frames processed");
+    }
+    notifier.progress(processed, now);
+    if (now >= next_status) {
+      const std::string line = health.update(path, backends.laser->is_on(), now);
+      notifier.status(line);
+      if (now >= next_journal) {
+        std::printf("laserlined: %s\n", line.c_str());
+        next_journal = now + kJournalPeriodNs;
+      }
+      next_status = now + kStatusPeriodNs;
+    }
+    if (path.source_ended()) {
+      reason = "end of recording";
+      break;
+    }
     if (duration_ns > 0 && laserline::hal::monotonic_ns() - start >= duration_ns) break;
   }
+  notifier.stopping(std::string("stopping (") + reason + ")");
   path.stop();
   backends.laser->set(false, 0, nullptr);
 

@@ -9,9 +9,12 @@ std::int64_t frame_utime(const hal::FrameInfo& info) {
   return info.exposure_wall_ns() / 1000;
 }
 
-LcmPublisher::LcmPublisher(lcm::LCM& lcm, PublisherChannels channels, const std::string& detector,
-                           std::size_t max_points, const hal::FrameFormat& format)
-    : lcm_(lcm), channels_(std::move(channels)) {
+LcmPublisher::LcmPublisher(lcm::LCM& lcm, lcm::LCM* image_lcm, PublisherChannels channels,
+                           const std::string& detector, std::size_t max_points,
+                           const hal::FrameFormat& format)
+    : lcm_(lcm),
+      image_lcm_(image_lcm != nullptr ? *image_lcm : lcm),
+      channels_(std::move(channels)) {
   profile_.detector = detector;
   profile_.points.resize(max_points);
   profile_.num_points = static_cast<std::int32_t>(max_points);
@@ -20,20 +23,24 @@ LcmPublisher::LcmPublisher(lcm::LCM& lcm, PublisherChannels channels, const std:
   status_.detector = detector;
   status_.camera_state = "starting";
   const std::size_t largest =
-      std::max({static_cast<std::size_t>(profile_.getEncodedSize()),
-                static_cast<std::size_t>(image_.getEncodedSize()), std::size_t{4096}});
+      std::max({static_cast<std::size_t>(profile_.getEncodedSize()), std::size_t{4096}});
   // Room for longer status strings than the ones measured here.
   buffer_.resize(largest + 1024);
+  // A compressed frame may come out a little larger than the raw one.
+  image_buffer_.resize(static_cast<std::size_t>(image_.getEncodedSize()) + format.bytes() / 8 +
+                       4096);
+  image_.data.reserve(format.bytes() + format.bytes() / 8 + 4096);
   profile_.points.clear();
   profile_.num_points = 0;
 }
 
 template <typename Message>
-bool LcmPublisher::publish(const std::string& channel, const Message& message) {
+bool LcmPublisher::publish(lcm::LCM& lcm, const std::string& channel, const Message& message,
+                           std::vector<std::uint8_t>& buffer) {
   const int size = message.getEncodedSize();
-  if (size < 0 || static_cast<std::size_t>(size) > buffer_.size()) return false;
-  if (message.encode(buffer_.data(), 0, size) != size) return false;
-  return lcm_.publish(channel, buffer_.data(), static_cast<unsigned>(size)) == 0;
+  if (size < 0 || static_cast<std::size_t>(size) > buffer.size()) return false;
+  if (message.encode(buffer.data(), 0, size) != size) return false;
+  return lcm.publish(channel, buffer.data(), static_cast<unsigned>(size)) == 0;
 }
 
 bool LcmPublisher::publish_profile(const ProfileSlot& slot) {
@@ -56,26 +63,20 @@ bool LcmPublisher::publish_profile(const ProfileSlot& slot) {
     std::copy(p.xyz.begin(), p.xyz.end(), out.xyz);
   }
   profile_.num_points = static_cast<std::int32_t>(points.size());
-  return publish(channels_.profile, profile_);
+  return publish(lcm_, channels_.profile, profile_, buffer_);
 }
 
-bool LcmPublisher::publish_image(const ImageSlot& slot) {
+bool LcmPublisher::publish_image(const ImageSlot& slot, RawFrameEncoder& encoder) {
   image_.utime = frame_utime(slot.info);
   image_.sequence = static_cast<std::int64_t>(slot.info.sequence);
-  image_.width = slot.format.width;
-  image_.height = slot.format.height;
-  image_.row_stride = slot.format.stride;
-  image_.pixelformat = laserline::image_t::PIXEL_FORMAT_GRAY;
-  image_.compression = laserline::image_t::COMPRESSION_NONE;
-  const std::size_t bytes = std::min(slot.pixels.size(), slot.format.bytes());
-  image_.data.resize(bytes);
-  std::memcpy(image_.data.data(), slot.pixels.data(), bytes);
-  image_.size = static_cast<std::int32_t>(bytes);
-  return publish(channels_.image, image_);
+  image_.camera_timestamp_ns = slot.info.camera_ns;
+  image_.laser_on = slot.info.laser_on;
+  if (!encoder.encode(slot, &image_)) return false;
+  return publish(image_lcm_, channels_.image, image_, image_buffer_);
 }
 
 bool LcmPublisher::publish_status() {
-  return publish(channels_.status, status_);
+  return publish(lcm_, channels_.status, status_, buffer_);
 }
 
 }  // namespace laserline::daemon

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "daemon/frame_slots.hpp"
+#include "daemon/raw_frame_encoder.hpp"
 #include "hal/frame.hpp"
 
 namespace laserline::daemon {
@@ -27,25 +28,32 @@ struct PublisherChannels {
 // is why it is kept off the real-time threads).
 class LcmPublisher {
  public:
-  LcmPublisher(lcm::LCM& lcm, PublisherChannels channels, const std::string& detector,
-               std::size_t max_points, const hal::FrameFormat& format);
+  // `image_lcm`, when given, carries the raw frames: LCM's UDP publish holds one lock while it
+  // sends all fragments of a message, so a megabyte frame on the same instance would hold up
+  // the profile published after it.
+  LcmPublisher(lcm::LCM& lcm, lcm::LCM* image_lcm, PublisherChannels channels,
+               const std::string& detector, std::size_t max_points, const hal::FrameFormat& format);
 
   bool publish_profile(const ProfileSlot& slot);
-  bool publish_image(const ImageSlot& slot);
+  // Thread context: the image thread (its own message and buffer; lcm_publish is thread-safe).
+  bool publish_image(const ImageSlot& slot, RawFrameEncoder& encoder);
   // The caller fills status() and then publishes it.
   laserline::status_t& status() { return status_; }
   bool publish_status();
 
  private:
   template <typename Message>
-  bool publish(const std::string& channel, const Message& message);
+  bool publish(lcm::LCM& lcm, const std::string& channel, const Message& message,
+               std::vector<std::uint8_t>& buffer);
 
   lcm::LCM& lcm_;
+  lcm::LCM& image_lcm_;
   PublisherChannels channels_;
   laserline::profile_t profile_;
   laserline::image_t image_;
   laserline::status_t status_;
-  std::vector<std::uint8_t> buffer_;
+  std::vector<std::uint8_t> buffer_;        // profiles and status (publisher thread)
+  std::vector<std::uint8_t> image_buffer_;  // raw frames (image thread)
 };
 
 // Microseconds since the Unix epoch of a frame's exposure (LCM's utime convention).

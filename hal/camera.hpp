@@ -35,6 +35,11 @@ class Camera {
                           std::chrono::milliseconds timeout) = 0;
 
   virtual void stop() = 0;
+
+  // True for a source that is a recording rather than a live device (a log file): it can wait,
+  // so the frame path waits for room in its rings instead of dropping, and every frame is
+  // processed, which makes a replay deterministic. A live camera cannot wait: false.
+  virtual bool paced_by_consumer() const { return false; }
 };
 
 }  // namespace laserline::hal

@@ -9,11 +9,10 @@ namespace laserline::hal {
 
 namespace {
 
-using CameraFactory = std::function<std::unique_ptr<Camera>(const CameraRequest&)>;
 using LaserFactory = std::function<std::unique_ptr<Laser>(YamlMap&)>;
 
 struct CameraEntry {
-  const char* name;
+  std::string name;
   CameraFactory create;
 };
 struct LaserEntry {
@@ -32,8 +31,8 @@ std::unique_ptr<Camera> create_sim_camera(const CameraRequest& request) {
   return std::make_unique<SimCamera>(options, request.laser, stall);
 }
 
-const std::vector<CameraEntry>& camera_table() {
-  static const std::vector<CameraEntry> table = {
+std::vector<CameraEntry>& camera_table() {
+  static std::vector<CameraEntry> table = {
       {"sim", create_sim_camera},
   };
   return table;
@@ -47,6 +46,13 @@ const std::vector<LaserEntry>& laser_table() {
 }
 
 }  // namespace
+
+void register_camera_backend(const std::string& name, CameraFactory create) {
+  for (const auto& e : camera_table()) {
+    if (e.name == name) return;
+  }
+  camera_table().push_back({name, std::move(create)});
+}
 
 std::vector<std::string> camera_backends() {
   std::vector<std::string> names;

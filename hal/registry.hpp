@@ -1,5 +1,6 @@
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -21,6 +22,13 @@ struct CameraRequest {
   const Calibration* calibration = nullptr;
   const Laser* laser = nullptr;  // the laser the camera sees (the simulator renders it)
 };
+
+using CameraFactory = std::function<std::unique_ptr<Camera>(const CameraRequest&)>;
+
+// Adds a camera backend that lives outside hal/ to the same table: the LCM log replay is chosen
+// by name like any camera, but it needs LCM, which hal/ must not know (it registers from
+// daemon/). Call from the setup thread before make_camera(); a second call for a name is ignored.
+void register_camera_backend(const std::string& name, CameraFactory create);
 
 std::vector<std::string> camera_backends();
 std::vector<std::string> laser_backends();

@@ -8,15 +8,20 @@ packages=(
   # build
   build-essential cmake pkg-config git clang-format
   # libraries
-  liblcm-dev liblcm-bin libglib2.0-dev
+  liblcm-dev liblcm-bin liblcm-java libglib2.0-dev
+  # the Java message types (a jar for lcm-spy) and the Python log reader
+  default-jdk-headless python3
   libyaml-cpp-dev
   libopencv-dev
   libeigen3-dev
   libsystemd-dev
+  zlib1g-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # network namespaces for the LCM tests and the demo
   iproute2 util-linux
+  # the service: systemd-analyze verify/security and systemd-sysusers in the tests, the .deb
+  systemd dpkg-dev
 )
 
 sudo_cmd=()

@@ -86,9 +86,44 @@ TEST(Config, ChoicesListTheAlternatives) {
   EXPECT_EQ(error_of("laser:\n  mode: blink\n"),
             "test.yaml:2: laser.mode: must be one of on, alternate, off, got 'blink'");
   EXPECT_EQ(error_of("camera:\n  backend: gige\n"),
-            "test.yaml:2: camera.backend: unknown camera backend 'gige' (available: sim)");
+            "test.yaml:2: camera.backend: unknown camera backend 'gige' (available: sim, lcm)");
   EXPECT_EQ(error_of("laser:\n  backend: gpio\n"),
             "test.yaml:2: laser.backend: unknown laser backend 'gpio' (available: sim)");
+}
+
+TEST(Config, ReplayCameraNeedsAUrl) {
+  EXPECT_EQ(error_of("camera:\n  backend: lcm\n"),
+            "test.yaml: camera.lcm.url: required: file:///path/to/dive.lcmlog (offline) or an "
+            "LCM URL (live)");
+  EXPECT_EQ(error_of("camera:\n  backend: lcm\n  lcm: {url: 'file://'}\n"),
+            "test.yaml:3: camera.lcm.url: file:// needs the path of a log file");
+  EXPECT_EQ(error_of("camera:\n  backend: lcm\n  lcm: {url: 'file:///x.lcmlog', chanel: A}\n"),
+            "test.yaml:3: camera.lcm.chanel: unknown key (expected one of: channel, url)");
+  EXPECT_EQ(error_of("camera:\n  backend: lcm\n  lcm: {url: 'file:///x.lcmlog'}\n"), "")
+      << "the log is opened with the camera, not when the configuration is checked";
+}
+
+TEST(Config, RawFrameOptions) {
+  EXPECT_EQ(error_of("lcm:\n  image_compression: gzip\n"),
+            "test.yaml:2: lcm.image_compression: must be one of none, zlib, png, jpeg, got 'gzip'");
+  EXPECT_EQ(error_of("lcm:\n  image_downscale: 3\n"),
+            "test.yaml:2: lcm.image_downscale: must be 1, 2 or 4, got 3");
+  EXPECT_EQ(error_of("lcm:\n  image_roi: [0, 0, 0, 10]\n"),
+            "test.yaml:2: lcm.image_roi: width and height must be > 0");
+  EXPECT_EQ(error_of("lcm:\n  image_roi: [1000, 0, 400, 10]\n"),
+            "test.yaml: lcm.image_roi: [1000, 0, 400, 10] is not inside the camera's "
+            "1280x1024 frame");
+  DaemonConfig c = parse_config(
+      hal::load_yaml_text("lcm: {image_every_n: 1, image_max_rate_hz: 10, image_compression: "
+                          "zlib, image_roi: [8, 4, 640, 480], image_downscale: 2}\n",
+                          "test.yaml"),
+      "test.yaml");
+  EXPECT_EQ(c.raw_frames.every_n, 1);
+  EXPECT_EQ(c.raw_frames.max_rate_hz, 10.0);
+  EXPECT_EQ(c.raw_frames.compression, ImageCompression::kZlib);
+  EXPECT_EQ(c.raw_frames.roi_x, 8);
+  EXPECT_EQ(c.raw_frames.roi_height, 480);
+  EXPECT_EQ(c.raw_frames.downscale, 2);
 }
 
 TEST(Config, LcmChannelsAndUrl) {

@@ -3,6 +3,7 @@
 // the points of the same frame drawn on it.
 #include <signal.h>
 #include <time.h>
+#include <zlib.h>
 #include <laserline/image_t.hpp>
 #include <laserline/profile_t.hpp>
 #include <laserline/status_t.hpp>
@@ -123,14 +124,37 @@ bool write_overlay(const Listener& l, const std::string& path) {
     return false;
   }
   const laserline::image_t& img = *l.last_image;
-  if (img.pixelformat != laserline::image_t::PIXEL_FORMAT_GRAY ||
-      img.compression != laserline::image_t::COMPRESSION_NONE ||
-      static_cast<std::int64_t>(img.row_stride) * img.height > img.size) {
-    std::printf("  overlay: not written, the raw frame is not uncompressed 8-bit grey\n");
+  if (img.pixelformat != laserline::image_t::PIXEL_FORMAT_GRAY) {
+    std::printf("  overlay: not written, the raw frame is not 8-bit grey\n");
     return false;
   }
-  cv::Mat gray(img.height, img.width, CV_8UC1, const_cast<std::uint8_t*>(img.data.data()),
-               static_cast<std::size_t>(img.row_stride));
+  cv::Mat gray;
+  if (img.compression == laserline::image_t::COMPRESSION_NONE &&
+      static_cast<std::int64_t>(img.row_stride) * img.height <= img.size) {
+    gray = cv::Mat(img.height, img.width, CV_8UC1, const_cast<std::uint8_t*>(img.data.data()),
+                   static_cast<std::size_t>(img.row_stride));
+  } else if (img.compression == laserline::image_t::COMPRESSION_ZLIB) {
+    gray = cv::Mat(img.height, img.width, CV_8UC1);
+    uLongf got = static_cast<uLongf>(gray.total());
+    if (uncompress(gray.data, &got, img.data.data(), static_cast<uLong>(img.data.size())) != Z_OK ||
+        got != gray.total()) {
+      gray = cv::Mat();
+    }
+  } else if (img.compression == laserline::image_t::COMPRESSION_PNG ||
+             img.compression == laserline::image_t::COMPRESSION_JPEG) {
+    gray = cv::imdecode(cv::Mat(1, static_cast<int>(img.data.size()), CV_8UC1,
+                                const_cast<std::uint8_t*>(img.data.data())),
+                        cv::IMREAD_GRAYSCALE);
+  }
+  if (gray.empty() || gray.cols != img.width || gray.rows != img.height) {
+    std::printf("  overlay: not written, the raw frame (compression %d) does not decode\n",
+                static_cast<int>(img.compression));
+    return false;
+  }
+  // Points are in full-frame pixels; the frame may be a region, downscaled by block means
+  // (a block's centre is at k*i + (k-1)/2).
+  const double k = img.downscale > 1 ? img.downscale : 1;
+  const double x0 = img.roi_x + (k - 1) / 2, y0 = img.roi_y + (k - 1) / 2;
   cv::Mat overlay;
   cv::cvtColor(gray, overlay, cv::COLOR_GRAY2BGR);
   const laserline::profile_t* match = nullptr;
@@ -141,8 +165,8 @@ bool write_overlay(const Listener& l, const std::string& path) {
   if (match != nullptr) {
     constexpr int kShift = 4;  // sub-pixel drawing: coordinates in 1/16 px
     for (const auto& pt : match->points) {
-      const cv::Point centre(static_cast<int>(std::lround(pt.u * 16.0)),
-                             static_cast<int>(std::lround(pt.v * 16.0)));
+      const cv::Point centre(static_cast<int>(std::lround((pt.u - x0) / k * 16.0)),
+                             static_cast<int>(std::lround((pt.v - y0) / k * 16.0)));
       // Valid points red, rejected candidates blue.
       const cv::Scalar colour = pt.valid ? cv::Scalar(0, 0, 255) : cv::Scalar(255, 128, 0);
       // Half a pixel: the point marks the centre and leaves the line's flanks visible.

@@ -1,0 +1,436 @@
+// Replay on a desk: the `lcm` camera backend reading raw frames from an LCM log (offline) or from
+// the network while lcm-logplayer plays one (live).
+//
+// LcmCameraLog.*: the backend alone on logs written here with damage put in on purpose.
+// Replay.*: a sim run of the real laserlined recorded by the real lcm-logger, replayed offline
+// twice (byte-identical profiles, equal to the recorded ones) and live through the real
+// lcm-logplayer (the same profiles, none lost at speed 1). UDP multicast only inside the private
+// network namespace this binary makes for itself.
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/prctl.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <laserline/image_t.hpp>
+#include <laserline/profile_t.hpp>
+#include <lcm/lcm-cpp.hpp>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "daemon/lcm_camera.hpp"
+#include "hal/clock.hpp"
+#include "private_network.hpp"
+
+namespace {
+
+using laserline::daemon::LcmCamera;
+
+std::string g_namespace_problem;
+
+constexpr const char* kRecordUrl = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304";
+constexpr const char* kOutputUrl = "udpm://239.255.76.67:7668?ttl=0&recv_buf_size=4194304";
+
+std::string read_text(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+class TempDir {
+ public:
+  TempDir() {
+    path_ = std::filesystem::temp_directory_path() /
+            ("laserline_replay_" + std::to_string(getpid()) + "_" +
+             ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::create_directories(path_);
+  }
+  ~TempDir() { std::filesystem::remove_all(path_); }
+  std::string operator/(const std::string& name) const { return (path_ / name).string(); }
+
+ private:
+  std::filesystem::path path_;
+};
+
+// A child process that dies with this test (PR_SET_PDEATHSIG), output to a file.
+class Child {
+ public:
+  Child(std::vector<std::string> args, std::string log) : log_(std::move(log)) {
+    std::vector<char*> argv;
+    for (auto& a : args)
+      argv.push_back(a.data());
+    argv.push_back(nullptr);
+    const pid_t parent = getpid();
+    pid_ = fork();
+    if (pid_ == 0) {
+      prctl(PR_SET_PDEATHSIG, SIGKILL);
+      if (getppid() != parent) _exit(127);
+      const int fd = open(log_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      if (fd >= 0) {
+        dup2(fd, 1);
+        dup2(fd, 2);
+      }
+      execv(argv[0], argv.data());
+      _exit(127);
+    }
+  }
+  ~Child() {
+    if (pid_ > 0) {
+      kill(pid_, SIGKILL);
+      waitpid(pid_, nullptr, 0);
+    }
+  }
+  // Waits up to `seconds` for the exit; returns the exit code, or -1 (then it is killed).
+  int wait(double seconds) {
+    const std::int64_t end =
+        laserline::hal::monotonic_ns() + static_cast<std::int64_t>(seconds * 1e9);
+    int status = 0;
+    while (waitpid(pid_, &status, WNOHANG) == 0) {
+      if (laserline::hal::monotonic_ns() > end) {
+        kill(pid_, SIGKILL);
+        waitpid(pid_, nullptr, 0);
+        pid_ = -1;
+        return -1;
+      }
+      usleep(10'000);
+    }
+    pid_ = -1;
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  }
+  int stop(int sig, double seconds) {
+    kill(pid_, sig);
+    return wait(seconds);
+  }
+  std::string output() const { return read_text(log_); }
+  // Waits until the output contains `text`.
+  bool wait_for_output(const std::string& text, double seconds) const {
+    const std::int64_t end =
+        laserline::hal::monotonic_ns() + static_cast<std::int64_t>(seconds * 1e9);
+    while (laserline::hal::monotonic_ns() < end) {
+      if (output().find(text) != std::string::npos) return true;
+      usleep(20'000);
+    }
+    return false;
+  }
+
+ private:
+  pid_t pid_ = -1;
+  std::string log_;
+};
+
+// ---- The backend alone, on logs made here.
+
+constexpr int kW = 16;
+constexpr int kH = 8;
+
+std::vector<std::uint8_t> encode_image(std::int64_t sequence, int width, int height) {
+  laserline::image_t m;
+  m.utime = 1'700'000'000'000'000 + sequence * 50'000;
+  m.sequence = sequence;
+  m.camera_timestamp_ns = sequence * 50'000'000;
+  m.laser_on = sequence % 2 == 0;
+  m.width = width;
+  m.height = height;
+  m.row_stride = width;
+  m.pixelformat = laserline::image_t::PIXEL_FORMAT_GRAY;
+  m.compression = laserline::image_t::COMPRESSION_NONE;
+  m.roi_x = 0;
+  m.roi_y = 0;
+  m.downscale = 1;
+  m.size = width * height;
+  m.data.resize(static_cast<std::size_t>(m.size));
+  for (int i = 0; i < m.size; ++i)
+    m.data[static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(sequence * 7 + i);
+  std::vector<std::uint8_t> bytes(static_cast<std::size_t>(m.getEncodedSize()));
+  m.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+  return bytes;
+}
+
+void write_event(lcm::LogFile& log, const std::string& channel, std::vector<std::uint8_t> data) {
+  lcm::LogEvent e;
+  e.timestamp = 0;
+  e.channel = channel;
+  e.datalen = static_cast<std::int32_t>(data.size());
+  e.data = data.data();
+  ASSERT_EQ(log.writeEvent(&e), 0);
+}
+
+struct Replayed {
+  std::vector<laserline::hal::FrameInfo> frames;
+  std::vector<std::vector<std::uint8_t>> pixels;
+  LcmCamera::Counts counts;
+  std::string errors;
+};
+
+Replayed replay(const std::string& path) {
+  LcmCamera camera({"file://" + path, "LASERLINE_IMAGE", kW, kH});
+  std::string error;
+  Replayed r;
+  EXPECT_TRUE(camera.open(&error)) << error;
+  EXPECT_TRUE(camera.paced_by_consumer()) << "a log file is replayed without dropping";
+  std::vector<std::uint8_t> pixels(static_cast<std::size_t>(kW * kH));
+  laserline::hal::FrameInfo info;
+  ::testing::internal::CaptureStderr();
+  while (camera.grab(pixels, info, std::chrono::milliseconds(100)) ==
+         laserline::hal::GrabStatus::kOk) {
+    r.frames.push_back(info);
+    r.pixels.push_back(pixels);
+  }
+  r.errors = ::testing::internal::GetCapturedStderr();
+  r.counts = camera.counts();
+  return r;
+}
+
+TEST(LcmCameraLog, ReplaysEveryFrameWithItsRecordedTimes) {
+  TempDir dir;
+  const std::string path = dir / "clean.lcmlog";
+  {
+    lcm::LogFile log(path, "w");
+    for (int s = 0; s < 5; ++s)
+      write_event(log, "LASERLINE_IMAGE", encode_image(100 + s, kW, kH));
+  }
+  const Replayed r = replay(path);
+  ASSERT_EQ(r.frames.size(), 5u) << r.errors;
+  for (int s = 0; s < 5; ++s) {
+    const auto& f = r.frames[static_cast<std::size_t>(s)];
+    EXPECT_EQ(f.sequence, static_cast<std::uint64_t>(100 + s));
+    EXPECT_EQ(f.camera_ns, (100 + s) * 50'000'000LL);
+    EXPECT_EQ(f.laser_on, s % 2 == 0);
+    EXPECT_EQ(f.exposure_wall_ns(), (1'700'000'000'000'000 + (100 + s) * 50'000LL) * 1000)
+        << "the profile's utime must be the recorded exposure";
+    EXPECT_EQ(r.pixels[static_cast<std::size_t>(s)][3],
+              static_cast<std::uint8_t>((100 + s) * 7 + 3));
+  }
+  EXPECT_EQ(r.counts.frames_skipped, 0);
+  EXPECT_EQ(r.counts.damaged_regions, 0);
+  EXPECT_NE(r.errors.find("end of log: 5 frames replayed, 0 skipped"), std::string::npos)
+      << r.errors;
+}
+
+TEST(LcmCameraLog, DamageIsReportedWithWhereAndTheRestIsReplayed) {
+  TempDir dir;
+  const std::string path = dir / "damaged.lcmlog";
+  {
+    lcm::LogFile log(path, "w");
+    write_event(log, "LASERLINE_IMAGE", encode_image(0, kW, kH));
+    write_event(log, "SOMEONE_ELSE", {1, 2, 3});
+    write_event(log, "SOMEONE_ELSE", {4, 5, 6});
+    write_event(log, "LASERLINE_IMAGE", encode_image(1, kW + 2, kH));  // wrong size
+    write_event(log, "LASERLINE_IMAGE", {9, 9, 9, 9});                 // not an image_t
+    write_event(log, "LASERLINE_IMAGE", encode_image(2, kW, kH));
+  }
+  const auto garbage_at = static_cast<std::int64_t>(std::filesystem::file_size(path));
+  {
+    std::ofstream out(path, std::ios::app | std::ios::binary);
+    out << std::string(37, 'x');  // a damaged region in the middle
+  }
+  {
+    lcm::LogFile log(path + ".tail", "w");
+    write_event(log, "LASERLINE_IMAGE", encode_image(3, kW, kH));
+    write_event(log, "LASERLINE_IMAGE", encode_image(4, kW, kH));
+  }
+  {
+    // Appends the two events, then both again with the last 10 bytes cut: a damaged tail.
+    const std::string tail = read_text(path + ".tail");
+    std::ofstream out(path, std::ios::app | std::ios::binary);
+    out << tail << tail.substr(0, tail.size() - 10);
+  }
+  const auto tail_event_bytes = static_cast<std::int64_t>(
+      std::filesystem::file_size(path + ".tail") - encode_image(3, kW, kH).size() -
+      std::string("LASERLINE_IMAGE").size() - 28);
+  const Replayed r = replay(path);
+  ASSERT_EQ(r.frames.size(), 5u) << r.errors;
+  EXPECT_EQ(r.frames[0].sequence, 0u);
+  EXPECT_EQ(r.frames[1].sequence, 2u) << "the frame just before the damage is kept";
+  EXPECT_EQ(r.frames[2].sequence, 3u);
+  EXPECT_EQ(r.frames[3].sequence, 4u);
+  EXPECT_EQ(r.frames[4].sequence, 3u) << "the whole event before the damaged tail is kept";
+  EXPECT_EQ(r.counts.frames_skipped, 2);
+  EXPECT_EQ(r.counts.other_events, 2);
+  EXPECT_EQ(r.counts.damaged_regions, 2);
+  // Each problem once, with where it is.
+  EXPECT_NE(r.errors.find("events on channel 'SOMEONE_ELSE' are not replayed"), std::string::npos)
+      << r.errors;
+  EXPECT_EQ(r.errors.find("SOMEONE_ELSE"), r.errors.rfind("SOMEONE_ELSE")) << "reported once";
+  EXPECT_NE(r.errors.find("event 3 at byte"), std::string::npos) << r.errors;
+  EXPECT_NE(r.errors.find("frame 18x8 differs from the calibrated camera's 16x8; frame skipped"),
+            std::string::npos)
+      << r.errors;
+  EXPECT_NE(r.errors.find("not a laserline.image_t (4 bytes"), std::string::npos) << r.errors;
+  EXPECT_NE(
+      r.errors.find("bytes " + std::to_string(garbage_at) + ".." + std::to_string(garbage_at + 36) +
+                    " are damaged (37 bytes, not an LCM log event); skipped, replay resumes "
+                    "at event 0 at byte " +
+                    std::to_string(garbage_at + 37)),
+      std::string::npos)
+      << r.errors;
+  EXPECT_NE(r.errors.find("damaged tail: the last " + std::to_string(tail_event_bytes - 10) +
+                          " bytes (from byte "),
+            std::string::npos)
+      << r.errors;
+  EXPECT_NE(r.errors.find("end of log: 5 frames replayed, 2 skipped, 2 events on other channels, "
+                          "2 damaged regions"),
+            std::string::npos)
+      << r.errors;
+}
+
+TEST(LcmCameraLog, MissingLogIsOneClearLine) {
+  LcmCamera camera({"file:///nonexistent/dive.lcmlog", "LASERLINE_IMAGE", kW, kH});
+  std::string error;
+  EXPECT_FALSE(camera.open(&error));
+  EXPECT_EQ(
+      error,
+      "camera.lcm.url: cannot read log '/nonexistent/dive.lcmlog': No such file or directory");
+}
+
+// ---- Record with lcm-logger, replay offline and live through the real daemon.
+
+// Profile messages of a log, by sequence number (encoded bytes as published).
+std::map<std::int64_t, std::string> profiles_of(const std::string& log_path) {
+  std::map<std::int64_t, std::string> out;
+  lcm::LogFile log(log_path, "r");
+  EXPECT_TRUE(log.good()) << log_path;
+  while (const lcm::LogEvent* e = log.readNextEvent()) {
+    if (e->channel != "LASERLINE_PROFILE") continue;
+    laserline::profile_t p;
+    EXPECT_GE(p.decode(e->data, 0, e->datalen), 0);
+    out[p.sequence] = std::string(static_cast<const char*>(e->data), e->datalen);
+  }
+  return out;
+}
+
+std::size_t events_on(const std::string& log_path, const std::string& channel) {
+  std::size_t n = 0;
+  lcm::LogFile log(log_path, "r");
+  while (const lcm::LogEvent* e = log.readNextEvent())
+    n += e->channel == channel;
+  return n;
+}
+
+// lcm-logger creates its file once it runs; it subscribes right after.
+bool wait_for_file(const std::string& path, double seconds) {
+  const std::int64_t end =
+      laserline::hal::monotonic_ns() + static_cast<std::int64_t>(seconds * 1e9);
+  while (!std::filesystem::exists(path)) {
+    if (laserline::hal::monotonic_ns() > end) return false;
+    usleep(20'000);
+  }
+  usleep(300'000);
+  return true;
+}
+
+std::string scanner_config(const std::string& camera, const std::string& lcm) {
+  return "camera:\n" + camera + R"(
+calibration:
+  camera: {width: 320, height: 256, fx: 350, fy: 350, cx: 159.5, cy: 127.5}
+  laser: {baseline_m: 0.2, angle_deg: 80, sheet_width_m: 0.003}
+detector: {name: maxvalue, maxvalue: {threshold: 60}}
+lcm: )" + lcm +
+         "\n";
+}
+
+class Replay : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!g_namespace_problem.empty()) {
+      GTEST_SKIP() << "no private network namespace: " << g_namespace_problem;
+    }
+  }
+  std::string config(const std::string& name, const std::string& text) {
+    const std::string path = dir_ / name;
+    std::ofstream(path) << text;
+    return path;
+  }
+  TempDir dir_;
+};
+
+TEST_F(Replay, RecordedRunReplaysIdenticallyOfflineTwiceAndLive) {
+  // 1. Record 3 s of the simulated scanner, every raw frame, with the real lcm-logger.
+  const std::string dive = dir_ / "dive.lcmlog";
+  {
+    Child logger({LCM_LOGGER_PATH, "-f", std::string("--lcm-url=") + kRecordUrl, dive},
+                 dir_ / "logger.out");
+    ASSERT_TRUE(wait_for_file(dive, 10)) << logger.output();
+    const std::string rec = config(
+        "record.yaml",
+        scanner_config("  backend: sim\n  frame_rate_hz: 20\n  sim: {seed: 3, distance_m: 1.0, "
+                       "tilt_y_deg: 10, noise_sigma: 1.5}",
+                       std::string("{url: \"") + kRecordUrl +
+                           "\", image_every_n: 1, image_downscale: 1, image_compression: zlib}"));
+    Child daemon({LASERLINED_PATH, "--config", rec, "--duration", "3"}, dir_ / "record.out");
+    ASSERT_EQ(daemon.wait(30), 0) << daemon.output();
+    usleep(300'000);  // the last messages reach the logger
+    ASSERT_EQ(logger.stop(SIGINT, 10), 0) << logger.output();
+  }
+  const std::size_t recorded_frames = events_on(dive, "LASERLINE_IMAGE");
+  const auto recorded = profiles_of(dive);
+  ASSERT_GE(recorded_frames, 20u);
+
+  // 2. Offline, twice, as fast as possible.
+  auto offline = [&](const std::string& name) {
+    const std::string out = dir_ / (name + ".lcmlog");
+    const std::string cfg = config(
+        name + ".yaml", scanner_config("  backend: lcm\n  lcm: {url: \"file://" + dive + "\"}",
+                                       "{url: \"file://" + out + "?mode=w\", image_every_n: 0}"));
+    Child daemon({LASERLINED_PATH, "--config", cfg}, dir_ / (name + ".out"));
+    EXPECT_EQ(daemon.wait(60), 0) << daemon.output();
+    EXPECT_NE(daemon.output().find("stopped (end of recording)"), std::string::npos)
+        << daemon.output();
+    EXPECT_NE(daemon.output().find("end of log: " + std::to_string(recorded_frames) +
+                                   " frames replayed, 0 skipped"),
+              std::string::npos)
+        << daemon.output();
+    return profiles_of(out);
+  };
+  const auto first = offline("offline1");
+  const auto second = offline("offline2");
+  ASSERT_EQ(first.size(), recorded_frames) << "every recorded frame gives one profile";
+  EXPECT_TRUE(first == second) << "two offline replays must give byte-identical profiles";
+  // The original run's profiles (those lcm-logger caught) are the same bytes too.
+  std::size_t compared = 0;
+  for (const auto& [sequence, bytes] : recorded) {
+    const auto it = first.find(sequence);
+    if (it == first.end()) continue;
+    EXPECT_EQ(it->second, bytes) << "sequence " << sequence;
+    ++compared;
+  }
+  EXPECT_GE(compared, recorded_frames * 9 / 10);
+
+  // 3. Live: lcm-logplayer at speed 1 publishes the raw frames; the daemon subscribes and
+  // publishes its profiles on another port, where a second lcm-logger records them.
+  const std::string live_out = dir_ / "live.lcmlog";
+  Child out_logger({LCM_LOGGER_PATH, "-f", std::string("--lcm-url=") + kOutputUrl, live_out},
+                   dir_ / "out_logger.out");
+  ASSERT_TRUE(wait_for_file(live_out, 10)) << out_logger.output();
+  const std::string live_cfg =
+      config("live.yaml",
+             scanner_config(std::string("  backend: lcm\n  lcm: {url: \"") + kRecordUrl + "\"}",
+                            std::string("{url: \"") + kOutputUrl + "\", image_every_n: 0}"));
+  Child daemon({LASERLINED_PATH, "--config", live_cfg}, dir_ / "live.out");
+  ASSERT_TRUE(daemon.wait_for_output("laserlined: running lcm camera", 30)) << daemon.output();
+  Child player({LCM_LOGPLAYER_PATH, "-s", "1", "-e", "^LASERLINE_IMAGE$", "-l", kRecordUrl, dive},
+               dir_ / "player.out");
+  EXPECT_EQ(player.wait(60), 0) << player.output();
+  usleep(500'000);  // the last frames through the daemon
+  EXPECT_EQ(daemon.stop(SIGTERM, 10), 0) << daemon.output();
+  usleep(300'000);
+  ASSERT_EQ(out_logger.stop(SIGINT, 10), 0) << out_logger.output();
+  const auto live = profiles_of(live_out);
+  EXPECT_EQ(live.size(), first.size()) << "no frame lost at speed 1";
+  EXPECT_TRUE(live == first) << "live replay gives the offline replay's profiles";
+  RecordProperty("frames", std::to_string(recorded_frames));
+  RecordProperty("live_profiles", std::to_string(live.size()));
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  // Before any thread exists: unshare(CLONE_NEWUSER) requires a single-threaded process.
+  g_namespace_problem = laserline::test::enter_private_network();
+  ::testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}

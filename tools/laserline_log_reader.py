@@ -1,0 +1,142 @@
+#!/usr/bin/env python3
+"""Read a dive recorded with lcm-logger and summarise or export what laserlined published.
+
+Decodes with the Python types lcm-gen makes from lcmtypes/ (package `laserline`); Debian ships no
+LCM Python module and none is needed: the log format is read here and the generated types decode
+the messages by themselves.
+
+  laserline-log-reader dive.lcmlog                      # summary per channel
+  laserline-log-reader dive.lcmlog --points points.csv  # every profile point as CSV
+  laserline-log-reader dive.lcmlog --types build/default/lcmtypes/python   # types not installed
+
+A damaged region of the log is reported with its byte offsets and skipped; the rest is read.
+"""
+import argparse
+import csv
+import math
+import struct
+import sys
+
+EVENT_MARKER = 0xEDA1DA01
+HEADER = struct.Struct(">IqqII")  # marker, event number, timestamp, channel length, data length
+MAX_CHANNEL = 256
+
+
+def read_events(path, report):
+    """Yields (event number, timestamp, channel, data); damage goes to report(message)."""
+    with open(path, "rb") as f:
+        blob = f.read()
+    pos, good_end = 0, 0
+    marker = struct.pack(">I", EVENT_MARKER)
+    while pos < len(blob):
+        event = None
+        if pos + HEADER.size <= len(blob):
+            magic, number, utime, clen, dlen = HEADER.unpack_from(blob, pos)
+            end = pos + HEADER.size + clen + dlen
+            if magic == EVENT_MARKER and 0 < clen <= MAX_CHANNEL and end <= len(blob):
+                channel = blob[pos + HEADER.size:pos + HEADER.size + clen].decode("utf-8", "replace")
+                event = (number, utime, channel, blob[pos + HEADER.size + clen:end])
+        if event is None:
+            nxt = blob.find(marker, pos + 1)
+            pos = len(blob) if nxt < 0 else nxt
+            continue
+        if pos > good_end:
+            report("%s: bytes %d..%d are damaged (%d bytes); skipped, reading resumes at event %d"
+                   % (path, good_end, pos - 1, pos - good_end, event[0]))
+        yield event
+        pos = good_end = end
+    if good_end < len(blob):
+        report("%s: damaged tail: the last %d bytes (from byte %d) are not a complete event; ignored"
+               % (path, len(blob) - good_end, good_end))
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("log", help="an LCM log file (lcm-logger)")
+    parser.add_argument("--types", help="directory holding the generated `laserline` package")
+    parser.add_argument("--points", metavar="CSV", help="write every profile point to this file")
+    parser.add_argument("--profile-channel", default="LASERLINE_PROFILE")
+    parser.add_argument("--status-channel", default="LASERLINE_STATUS")
+    parser.add_argument("--image-channel", default="LASERLINE_IMAGE")
+    args = parser.parse_args()
+    if args.types:
+        sys.path.insert(0, args.types)
+    try:
+        import laserline
+    except ImportError:
+        sys.exit("laserline-log-reader: the generated Python types (package `laserline`) are not "
+                 "installed; pass --types DIR (e.g. build/default/lcmtypes/python)")
+
+    problems = []
+
+    def report(message):
+        problems.append(message)
+        print("laserline-log-reader: " + message, file=sys.stderr)
+
+    decoders = {args.profile_channel: laserline.profile_t, args.status_channel: laserline.status_t,
+                args.image_channel: laserline.image_t}
+    profiles, statuses, images, other = [], [], [], {}
+    first_utime = last_utime = None
+    points_out = open(args.points, "w", newline="") if args.points else None
+    writer = csv.writer(points_out) if points_out else None
+    if writer:
+        writer.writerow(["sequence", "utime", "u", "v", "snr_db", "segment", "valid", "x", "y", "z"])
+    events = 0
+    try:
+        for number, utime, channel, data in read_events(args.log, report):
+            events += 1
+            first_utime = utime if first_utime is None else first_utime
+            last_utime = utime
+            decoder = decoders.get(channel)
+            if decoder is None:
+                other[channel] = other.get(channel, 0) + 1
+                continue
+            try:
+                msg = decoder.decode(data)
+            except ValueError as e:  # a wrong fingerprint: another type on our channel
+                report("%s: event %d on %s does not decode as %s (%s); skipped"
+                       % (args.log, number, channel, decoder.__name__, e))
+                continue
+            if decoder is laserline.profile_t:
+                profiles.append((msg.sequence, msg.num_points))
+                if writer:
+                    for p in msg.points:
+                        writer.writerow([msg.sequence, msg.utime, p.u, "%.3f" % p.v,
+                                         "%.1f" % p.snr_db, p.segment, int(p.valid)] +
+                                        ["" if math.isnan(c) else "%.5f" % c for c in p.xyz])
+            elif decoder is laserline.status_t:
+                statuses.append(msg)
+            else:
+                images.append((msg.width, msg.height, msg.compression))
+    finally:
+        if points_out:
+            points_out.close()
+
+    seconds = (last_utime - first_utime) * 1e-6 if events else 0.0
+    print("%s: %d events over %.1f s" % (args.log, events, seconds))
+    if profiles:
+        seqs = [s for s, _ in profiles]
+        missing = sum(max(0, b - a - 1) for a, b in zip(seqs, seqs[1:]))
+        mean_points = sum(n for _, n in profiles) / len(profiles)
+        print("%s: %d profiles, sequence %d..%d (%d missing), %.1f points per profile"
+              % (args.profile_channel, len(profiles), seqs[0], seqs[-1], missing, mean_points))
+    else:
+        print("%s: no profiles" % args.profile_channel)
+    if statuses:
+        s = statuses[-1]
+        print("%s: %d messages; last: camera %s, %d frames processed, %d dropped, laser %s, "
+              "CPU %.0f%%" % (args.status_channel, len(statuses), s.camera_state,
+                              s.frames_processed, s.frames_dropped,
+                              "on" if s.laser_on else "off", s.cpu_percent))
+    if images:
+        names = {0: "none", 1: "png", 2: "jpeg", 3: "zlib"}
+        w, h, c = images[-1]
+        print("%s: %d raw frames, last %dx%d (%s)"
+              % (args.image_channel, len(images), w, h, names.get(c, str(c))))
+    for channel, count in sorted(other.items()):
+        print("%s: %d events (not a laserline channel)" % (channel, count))
+    return 1 if problems else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
