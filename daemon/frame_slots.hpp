@@ -46,6 +46,7 @@ struct FramePathCounters {
   std::atomic<std::int64_t> laser_switches{0};
   std::atomic<std::int64_t> laser_errors{0};
   std::atomic<std::int64_t> laser_safety_offs{0};
+  std::atomic<std::int64_t> laser_late_switches{0};
   std::atomic<std::int64_t> last_frame_mono_ns{0};
   std::atomic<CameraState> camera_state{CameraState::kStarting};
 };
