@@ -7,6 +7,7 @@
 #include "hal/gpio_laser.hpp"
 #include "hal/sim/sim_camera.hpp"
 #include "hal/sim/sim_laser.hpp"
+#include "hal/v4l2_camera.hpp"
 
 namespace laserline::hal {
 
@@ -73,10 +74,28 @@ std::unique_ptr<Camera> create_aravis_camera(const CameraRequest& request) {
   return std::make_unique<AravisCamera>(o);
 }
 
+std::unique_ptr<Camera> create_v4l2_camera(const CameraRequest& request) {
+  YamlMap& c = *request.options;
+  V4l2CameraOptions o;
+  o.device = c.string("device", o.device);
+  if (o.device.empty()) c.fail("device", "must name the video device, e.g. /dev/video0");
+  o.pixel_format = c.choice("pixel_format", o.pixel_format, {"GREY", "Y16", "YUYV"});
+  o.width = static_cast<int>(c.integer("width", request.calibration->camera.width, 1, 65535));
+  o.height = static_cast<int>(c.integer("height", request.calibration->camera.height, 1, 65535));
+  o.frame_rate_hz = c.number("frame_rate_hz", 30.0, 0.1, 1000.0);
+  o.buffers = static_cast<int>(c.integer("buffers", o.buffers, 2, 32));
+  o.reconnect_min_ms =
+      static_cast<int>(c.integer("reconnect_min_ms", o.reconnect_min_ms, 10, 60000));
+  o.reconnect_max_ms = static_cast<int>(
+      c.integer("reconnect_max_ms", o.reconnect_max_ms, o.reconnect_min_ms, 600000));
+  return std::make_unique<V4l2Camera>(o);
+}
+
 const std::vector<CameraEntry>& camera_table() {
   static const std::vector<CameraEntry> table = {
       {"sim", create_sim_camera},
       {"aravis", create_aravis_camera},
+      {"v4l2", create_v4l2_camera},
   };
   return table;
 }
