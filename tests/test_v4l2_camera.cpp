@@ -9,6 +9,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <opencv2/videoio.hpp>
+
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -188,6 +190,29 @@ TEST(V4l2, ReconnectsWhenTheDeviceDisappearsAndReturns) {
   EXPECT_GE(check_pattern(pixels, 160, 120), 0);
   EXPECT_GT(info.sequence, before_unplug) << "sequence numbers continue across the reconnect";
   EXPECT_EQ(camera.health().reconnects, 1);
+}
+
+// OpenCV's own V4L2 capture runs against the stand-in too (it opens the device blocking and waits
+// in DQBUF, where this backend polls): the stand-in is not shaped around one client.
+TEST(V4l2, OpenCvCapturesFromTheStandIn) {
+  StandIn device("GREY", 320, 240, 30);
+  if (const std::string problem = device.wait_ready(); !problem.empty()) GTEST_SKIP() << problem;
+  cv::VideoCapture capture(device.device(), cv::CAP_V4L2);
+  ASSERT_TRUE(capture.isOpened());
+  capture.set(cv::CAP_PROP_CONVERT_RGB, 0);
+  int last_first = -1;
+  for (int i = 0; i < 5; ++i) {
+    cv::Mat frame;
+    ASSERT_TRUE(capture.read(frame)) << "frame " << i;
+    ASSERT_EQ(frame.type(), CV_8UC1);
+    ASSERT_EQ(frame.cols, 320);
+    ASSERT_EQ(frame.rows, 240);
+    const std::vector<std::uint8_t> pixels(frame.data, frame.data + frame.total());
+    const int first = check_pattern(pixels, 320, 240);
+    EXPECT_GE(first, 0) << "frame " << i << " is not whole";
+    EXPECT_NE(first, last_first) << "frame " << i << " repeats the previous one";
+    last_first = first;
+  }
 }
 
 }  // namespace

@@ -24,6 +24,8 @@
 
 #include <atomic>
 #include <cerrno>
+#include <chrono>
+#include <condition_variable>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
@@ -61,6 +63,7 @@ struct Device {
   std::deque<unsigned> done;    // filled, in DQBUF order
   bool streaming = false;
   std::uint32_t sequence = 0;
+  std::condition_variable frame_done;
   fuse_pollhandle* poll_handle = nullptr;
   fuse* fs = nullptr;
   std::atomic<bool> running{true};
@@ -93,7 +96,7 @@ int do_ioctl(const char* path, unsigned int cmd, void* /*arg*/, fuse_file_info* 
              unsigned int /*flags*/, void* data) {
   if (std::strcmp(path, kName) != 0) return -ENOTTY;
   Device& d = g_device;
-  std::lock_guard lock(d.mutex);
+  std::unique_lock lock(d.mutex);
   switch (cmd) {
     case VIDIOC_QUERYCAP: {
       auto* cap = static_cast<v4l2_capability*>(data);
@@ -167,7 +170,13 @@ int do_ioctl(const char* path, unsigned int cmd, void* /*arg*/, fuse_file_info* 
       if (b->type != V4L2_BUF_TYPE_VIDEO_CAPTURE || b->memory != V4L2_MEMORY_MMAP) return -EINVAL;
       if (cmd == VIDIOC_DQBUF) {
         if (!d.streaming) return -EINVAL;
-        if (d.done.empty()) return (fi->flags & O_NONBLOCK) != 0 ? -EAGAIN : -EIO;
+        if (d.done.empty() && (fi->flags & O_NONBLOCK) != 0) return -EAGAIN;
+        // Blocking, as a driver's DQBUF is (this FUSE thread waits; others serve meanwhile).
+        if (!d.frame_done.wait_for(lock, std::chrono::seconds(2),
+                                   [&] { return !d.done.empty() || !d.streaming; }) ||
+            !d.streaming) {
+          return -EIO;
+        }
         const unsigned index = d.done.front();
         d.done.pop_front();
         d.buffers[index].state = State::kWithClient;
@@ -190,6 +199,7 @@ int do_ioctl(const char* path, unsigned int cmd, void* /*arg*/, fuse_file_info* 
       const int type = *static_cast<int*>(data);
       if (type != V4L2_BUF_TYPE_VIDEO_CAPTURE) return -EINVAL;
       d.streaming = cmd == VIDIOC_STREAMON;
+      d.frame_done.notify_all();
       if (!d.streaming) {
         d.queued.clear();
         d.done.clear();
@@ -300,6 +310,7 @@ void produce_frames() {
       b.info.flags = V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC | V4L2_BUF_FLAG_TSTAMP_SRC_SOE;
       b.state = State::kDone;
       d.done.push_back(index);
+      d.frame_done.notify_all();
       notify = d.poll_handle;
       d.poll_handle = nullptr;
     }
