@@ -150,6 +150,17 @@ bool AravisCamera::connect(std::string* error) {
   GError* e = nullptr;
   const std::string name = options_.device.empty() ? "the first camera found" : options_.device;
   camera_ = arv_camera_new(options_.device.empty() ? nullptr : options_.device.c_str(), &e);
+  if (camera_ == nullptr && !options_.device.empty()) {
+    // Aravis opens by device id, physical or IP address; a serial number is looked up here.
+    arv_update_device_list();
+    for (unsigned i = 0; i < arv_get_n_devices() && camera_ == nullptr; ++i) {
+      const char* serial = arv_get_device_serial_nbr(i);
+      if (serial != nullptr && options_.device == serial) {
+        g_clear_error(&e);
+        camera_ = arv_camera_new(arv_get_device_id(i), &e);
+      }
+    }
+  }
   if (camera_ == nullptr) {
     const std::string why = take_error(e);
     if (error != nullptr) *error = "device '" + name + "': " + (why.empty() ? "not found" : why);

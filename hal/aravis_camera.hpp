@@ -21,7 +21,7 @@ enum class AravisTrigger : std::uint8_t {
 };
 
 struct AravisCameraOptions {
-  std::string device;  // Aravis device id, serial number or IP address; "" = the first found
+  std::string device;  // device id, serial number or IP address; "" = the first found
   std::string pixel_format = "Mono8";  // Mono8, or Mono12 / Mono16 (delivered as their top 8 bits)
   int width = 0;                       // region of interest; width/height = the calibrated size
   int height = 0;

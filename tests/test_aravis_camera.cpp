@@ -13,6 +13,7 @@
 #include <laserline/status_t.hpp>
 #include <lcm/lcm-cpp.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -171,6 +172,18 @@ TEST_F(AravisTest, StreamsWholeFramesWithBothTimestamps) {
   EXPECT_EQ(status, GrabStatus::kStopped);
 }
 
+TEST_F(AravisTest, OpensByDeviceIdSerialNumberOrAddress) {
+  FakeCamera fake;
+  ASSERT_TRUE(fake.wait_ready());
+  for (const char* name : {"Aravis-Fake-GV01", "GV01", "127.0.0.1", ""}) {
+    AravisCameraOptions o = options(320, 240, 30);
+    o.device = name;
+    AravisCamera camera(o);
+    std::string error;
+    EXPECT_TRUE(camera.open(&error)) << "'" << name << "': " << error;
+  }
+}
+
 TEST_F(AravisTest, MissingCameraOrImpossibleFormatIsAClearError) {
   {
     AravisCamera camera(options(640, 480, 30));
@@ -240,22 +253,23 @@ struct DaemonRun {
   std::filesystem::path lcm_log;
 };
 
-DaemonRun start_daemon(const std::string& name, const std::string& laser_mode, double seconds) {
+constexpr const char* kFakeCameraAt1280 =
+    "camera: {backend: aravis, device: \"127.0.0.1\", frame_rate_hz: 1000, packet_size: 1400,"
+    " timeout_ms: 200, lost_after_ms: 500}\n"
+    "calibration: {camera: {width: 1280, height: 1024, fx: 1400, fy: 1400}}\n";
+
+DaemonRun start_daemon(const std::string& name, const std::string& camera_and_calibration,
+                       const std::string& laser_mode, double seconds) {
   DaemonRun run;
   run.output = g_dir / (name + ".out");
   run.pins = g_dir / (name + ".pins");
   run.lcm_log = g_dir / (name + ".lcm");
   const auto config = g_dir / (name + ".yaml");
-  std::ofstream(config)
-      << "camera: {backend: aravis, device: \"127.0.0.1\", frame_rate_hz: 1000,"
-         " packet_size: 1400, timeout_ms: 200, lost_after_ms: 500}\n"
-         "calibration: {camera: {width: 1280, height: 1024, fx: 1400, fy: 1400}}\n"
-         "laser: {backend: gpiod, chip: gpiochip0, line: 0, mode: "
-      << laser_mode
-      << "}\n"
-         "pipeline: {frame_slots: 64}\n"
-         "lcm: {url: \"file://"
-      << run.lcm_log.string() << "?mode=w\", image_every_n: 0, status_period_s: 0.5}\n";
+  std::ofstream(config) << camera_and_calibration
+                        << "laser: {backend: gpiod, chip: gpiochip0, line: 0, mode: " << laser_mode
+                        << "}\npipeline: {frame_slots: 64}\nlcm: {url: \"file://"
+                        << run.lcm_log.string()
+                        << "?mode=w\", image_every_n: 0, status_period_s: 0.5}\n";
   run.pid =
       spawn({LASERLINED_PATH, "--config", config.string(), "--duration", std::to_string(seconds)},
             {std::string("LD_PRELOAD=") + GPIOCHIP_SHIM_PATH,
@@ -301,7 +315,7 @@ std::vector<PinEvent> pin_events(const std::filesystem::path& path) {
 TEST_F(AravisTest, DaemonSixtySecondsAtTheFakeCamerasRate) {
   FakeCamera fake;
   ASSERT_TRUE(fake.wait_ready());
-  DaemonRun run = start_daemon("sixty", "alternate", 60);
+  DaemonRun run = start_daemon("sixty", kFakeCameraAt1280, "alternate", 60);
   const int status = wait_exit(run.pid);
   const std::string out = read_text(run.output);
   ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << out;
@@ -329,7 +343,7 @@ TEST_F(AravisTest, DaemonSixtySecondsAtTheFakeCamerasRate) {
 TEST_F(AravisTest, DaemonReconnectsAfterTheCameraIsKilledAndLaserIsOffMeanwhile) {
   auto fake = std::make_unique<FakeCamera>();
   ASSERT_TRUE(fake->wait_ready());
-  DaemonRun run = start_daemon("restart", "on", 10);
+  DaemonRun run = start_daemon("restart", kFakeCameraAt1280, "on", 10);
   // Wait for frames (the laser goes on with the first one), then pull the plug.
   bool streaming = false;
   for (int i = 0; i < 200 && !streaming; ++i) {
@@ -372,6 +386,62 @@ TEST_F(AravisTest, DaemonReconnectsAfterTheCameraIsKilledAndLaserIsOffMeanwhile)
   const auto all = statuses(run.lcm_log);
   ASSERT_FALSE(all.empty());
   EXPECT_GE(all.back().camera_reconnects, 1);
+}
+
+// Simulated laser frames served over the real GigE path by our own fake camera, whose laser is
+// the stand-in pin's real level at each exposure: the daemon's per-frame laser state is checked
+// against the light in the image.
+TEST_F(AravisTest, DaemonLaserStateMatchesTheLightInFramesOverGigE) {
+  const auto pins = g_dir / "scanner.pins";  // the daemon's pin log (start_daemon's name)
+  const pid_t scanner = spawn({FAKE_GIGE_SCANNER_PATH, "--serial", "LL01", "--width", "640",
+                               "--height", "480", "--pins", pins.string()},
+                              {}, g_dir / "scanner.out");
+  bool ready = false;
+  for (int i = 0; i < 100 && !ready; ++i) {
+    ready = read_text(g_dir / "scanner.out").find("ready") != std::string::npos;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_TRUE(ready) << read_text(g_dir / "scanner.out");
+  std::filesystem::remove(pins);
+  DaemonRun run = start_daemon(
+      "scanner",
+      "camera: {backend: aravis, device: LL01, frame_rate_hz: 50, packet_size: 1400}\n"
+      "calibration: {camera: {width: 640, height: 480, fx: 704, fy: 704, cx: 319.5, cy: 239.5}}\n"
+      "detector: {name: maxvalue, maxvalue: {threshold: 100}}\n",
+      "alternate", 4);
+  const int status = wait_exit(run.pid);
+  kill(scanner, SIGTERM);
+  wait_exit(scanner);
+  const std::string out = read_text(run.output);
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << out;
+
+  int frames = 0, lit = 0, matches = 0, claimed_on = 0;
+  lcm::LogFile log(run.lcm_log.string(), "r");
+  ASSERT_TRUE(log.good());
+  while (const lcm::LogEvent* event = log.readNextEvent()) {
+    if (event->channel != "LASERLINE_PROFILE") continue;
+    laserline::profile_t p;
+    ASSERT_GT(p.decode(event->data, 0, static_cast<int>(event->datalen)), 0);
+    int valid = 0;
+    for (const auto& point : p.points)
+      valid += point.valid ? 1 : 0;
+    const bool light = valid > 640 / 4;  // the line crosses most columns when the laser is on
+    ++frames;
+    lit += light;
+    claimed_on += p.laser_on;
+    matches += light == p.laser_on;
+  }
+  const auto all = statuses(run.lcm_log);
+  ASSERT_FALSE(all.empty());
+  std::printf(
+      "simulated scanner over GigE, alternate at 50 Hz: %d frames, %d claimed on, %d lit; "
+      "claimed state matches the light in %d (%.1f %%); %lld flagged late\n",
+      frames, claimed_on, lit, matches, 100.0 * matches / std::max(frames, 1),
+      static_cast<long long>(all.back().laser_late_switches));
+  EXPECT_GT(frames, 50) << out;
+  EXPECT_GT(lit, frames / 4) << "the laser line never showed";
+  EXPECT_LT(lit, frames * 3 / 4) << "the laser line never went off";
+  EXPECT_GT(matches, frames * 8 / 10);
 }
 
 }  // namespace

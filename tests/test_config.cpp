@@ -83,10 +83,11 @@ TEST(Config, ChoicesListTheAlternatives) {
             "test.yaml:2: detector.name: must be one of maxvalue, got 'magic'");
   EXPECT_EQ(error_of("laser:\n  mode: blink\n"),
             "test.yaml:2: laser.mode: must be one of on, alternate, off, got 'blink'");
-  EXPECT_EQ(error_of("camera:\n  backend: gige\n"),
-            "test.yaml:2: camera.backend: unknown camera backend 'gige' (available: sim)");
+  EXPECT_EQ(
+      error_of("camera:\n  backend: gige\n"),
+      "test.yaml:2: camera.backend: unknown camera backend 'gige' (available: sim, aravis, v4l2)");
   EXPECT_EQ(error_of("laser:\n  backend: gpio\n"),
-            "test.yaml:2: laser.backend: unknown laser backend 'gpio' (available: sim)");
+            "test.yaml:2: laser.backend: unknown laser backend 'gpio' (available: sim, gpiod)");
 }
 
 TEST(Config, LcmChannelsAndUrl) {
