@@ -22,6 +22,7 @@
 #include "hal/clock.hpp"
 #include "hal/gpio_laser.hpp"
 #include "hal/registry.hpp"
+#include "thread_allocations.hpp"
 
 namespace {
 
@@ -94,6 +95,15 @@ TEST_F(GpioLaserTest, OpensOffSwitchesWithRecordsAndLeavesOff) {
     ASSERT_TRUE(laser.set(false, 43, &record));
     EXPECT_FALSE(record.on);
     ASSERT_TRUE(laser.set(true, 44, nullptr));
+    {
+      laserline::test::ThreadAllocationCount probe_count;
+      void* volatile probe = std::malloc(64);
+      std::free(probe);
+      ASSERT_EQ(probe_count.count(), 1) << "the allocation counter does not count";
+    }
+    laserline::test::ThreadAllocationCount allocations;
+    laser.set(true, 45, &record);  // no change: the same ioctl, no edge
+    EXPECT_EQ(allocations.count(), 0) << "switching the laser allocated";
   }  // destroyed while on
   const auto events = pins();
   ASSERT_EQ(events.size(), 6u) << describe(events);

@@ -12,6 +12,7 @@
 #include <opencv2/videoio.hpp>
 
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -20,6 +21,7 @@
 
 #include "hal/clock.hpp"
 #include "hal/v4l2_camera.hpp"
+#include "thread_allocations.hpp"
 
 namespace {
 
@@ -142,6 +144,18 @@ TEST_P(V4l2Test, CapturesVerifiedFramesWithMonotonicTimestamps) {
     last_first = first;
   }
   EXPECT_EQ(camera.health().reconnects, 0);
+
+  // Steady state: poll, DQBUF, copy, QBUF allocate nothing.
+  {
+    laserline::test::ThreadAllocationCount probe_count;
+    void* volatile probe = std::malloc(64);
+    std::free(probe);
+    ASSERT_EQ(probe_count.count(), 1) << "the allocation counter does not count";
+  }
+  laserline::test::ThreadAllocationCount allocations;
+  for (int i = 0; i < 10; ++i)
+    ASSERT_EQ(camera.grab(pixels, info, std::chrono::milliseconds(1000)), GrabStatus::kOk);
+  EXPECT_EQ(allocations.count(), 0);
 }
 
 INSTANTIATE_TEST_SUITE_P(Formats, V4l2Test, ::testing::Values("GREY", "Y16", "YUYV"));
