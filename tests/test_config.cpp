@@ -174,3 +174,33 @@ TEST(Config, ErrorsAreOneLine) {
 
 }  // namespace
 }  // namespace laserline::daemon
+
+namespace laserline::daemon {
+namespace {
+
+// The hardware backends validate their own keys when created, before any device is opened.
+TEST(Config, HardwareBackendOptionsAreValidatedWithoutHardware) {
+  const std::string size = "calibration: {camera: {width: 640, height: 480}}\n";
+  EXPECT_EQ(error_of(size + "camera: {backend: aravis, device: GV01, trigger: software,"
+                            " features: {Gamma: 1.0}, packet_size: -1}\n"),
+            "");
+  EXPECT_EQ(error_of(size + "camera:\n  backend: aravis\n  pixel_format: RGB8\n"),
+            "test.yaml:4: camera.pixel_format: must be one of Mono8, Mono12, Mono16, got 'RGB8'");
+  EXPECT_EQ(error_of(size + "camera:\n  backend: aravis\n  features: [Gamma]\n"),
+            "test.yaml:4: camera.features: must be a mapping of GenICam feature: value");
+  EXPECT_EQ(error_of(size + "camera:\n  backend: aravis\n  trigger: sometimes\n"),
+            "test.yaml:4: camera.trigger: must be one of free, software, line, got 'sometimes'");
+  EXPECT_EQ(
+      error_of(size + "camera:\n  backend: v4l2\n  device: /dev/video3\n  pixel_format: MJPG\n"),
+      "test.yaml:5: camera.pixel_format: must be one of GREY, Y16, YUYV, got 'MJPG'");
+  EXPECT_EQ(error_of(size + "camera:\n  backend: v4l2\n  width: 320\n"),
+            "test.yaml: calibration.camera: size 640x480 differs from the camera's 320x480");
+  EXPECT_EQ(error_of("laser:\n  backend: gpiod\n  chip: gpiochip0\n  line: -3\n"),
+            "test.yaml:4: laser.line: offset must be 0..511, got -3");
+  EXPECT_EQ(error_of("laser:\n  backend: gpiod\n  chip: gpiochip0\n  line: 3\n  pin: 4\n"),
+            "test.yaml:5: laser.pin: unknown key (expected one of: active_low, backend, chip, "
+            "consumer, frame_timeout_ms, line, mode)");
+}
+
+}  // namespace
+}  // namespace laserline::daemon
