@@ -133,6 +133,8 @@ bool FramePath::desired_laser(std::uint64_t grab_index) const {
       return false;
     case LaserMode::kAlternate:
       return grab_index % 2 == 0;
+    case LaserMode::kPattern:
+      return config_.laser_pattern[grab_index % config_.laser_pattern.size()];
   }
   return false;
 }

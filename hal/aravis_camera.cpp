@@ -191,7 +191,7 @@ bool AravisCamera::connect(std::string* error) {
     disconnect();
     return false;
   }
-  last_frame_mono_ns_ = monotonic_ns();
+  silent_ns_ = 0;
   // The camera may count frames from anywhere after a reconnect: sequence numbers continue
   // from ours instead.
   have_frame_id_ = false;
@@ -292,8 +292,9 @@ GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
   while (true) {
     if (stopped_.load(std::memory_order_acquire)) return GrabStatus::kStopped;
     const std::int64_t now = monotonic_ns();
-    const bool silent_too_long = options_.trigger != AravisTrigger::kLine &&
-                                 now - last_frame_mono_ns_ > options_.lost_after_ms * kMs;
+    // Only the time spent waiting in vain counts: frames queue up while the caller is away.
+    const bool silent_too_long =
+        options_.trigger != AravisTrigger::kLine && silent_ns_ > options_.lost_after_ms * kMs;
     if (control_lost_.load(std::memory_order_acquire) || silent_too_long) {
       disconnect();
       other_errors_.fetch_add(1, std::memory_order_relaxed);
@@ -303,7 +304,11 @@ GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
     if (now >= deadline) return GrabStatus::kTimeout;
     const std::int64_t wait_us = std::min<std::int64_t>(kWaitSliceUs, (deadline - now) / 1000 + 1);
     ArvBuffer* buffer = arv_stream_timeout_pop_buffer(stream_, static_cast<guint64>(wait_us));
-    if (buffer == nullptr) continue;
+    if (buffer == nullptr) {
+      silent_ns_ += monotonic_ns() - now;
+      continue;
+    }
+    silent_ns_ = 0;
 
     const std::int64_t arrival_mono = monotonic_ns();
     const std::int64_t arrival_wall = wall_ns();
@@ -317,7 +322,6 @@ GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
       } else {
         count_bad_buffer(status);
       }
-      last_frame_mono_ns_ = arrival_mono;
       arv_stream_push_buffer(stream_, buffer);
       update_stream_statistics();
       continue;
@@ -364,7 +368,6 @@ GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
     info.exposure_mono_ns = camera_ns + offset_ns_;
     info.arrival_mono_ns = arrival_mono;
     info.arrival_wall_ns = arrival_wall;
-    last_frame_mono_ns_ = arrival_mono;
     update_stream_statistics();
     return GrabStatus::kOk;
   }

@@ -55,8 +55,9 @@ struct AravisCameraOptions {
 // camera_ns + offset: it is late by the shortest transfer delay seen (readout + network), which
 // is constant for a given format. Cameras with PTP should run it; the mapping is the same.
 //
-// Loss: a camera is lost when Aravis emits "control-lost" (heartbeat failed) or when no frame
-// came for lost_after_ms in free-run/software trigger. grab() then tears the stream down and
+// Loss: a camera is lost when Aravis emits "control-lost" (heartbeat failed) or when grab() waited
+// lost_after_ms in all without any frame (free-run/software trigger; frames queued while the
+// caller was away count as frames). grab() then tears the stream down and
 // returns kError; later calls try to reconnect with exponential backoff (reconnect_min_ms
 // doubling up to reconnect_max_ms) and re-apply the whole configuration. Reconnecting allocates
 // (Aravis objects): that happens only on this recovery path, never while frames flow.
@@ -99,7 +100,7 @@ class AravisCamera final : public Camera {
   std::atomic<bool> stopped_{false};
 
   // Camera-thread state.
-  std::int64_t last_frame_mono_ns_ = 0;
+  std::int64_t silent_ns_ = 0;  // time spent waiting for a frame since the last one
   std::int64_t next_reconnect_mono_ns_ = 0;
   int reconnect_delay_ms_ = 0;
   std::int64_t offset_ns_ = 0;  // host monotonic - camera time, tracked

@@ -82,7 +82,7 @@ TEST(Config, ChoicesListTheAlternatives) {
   EXPECT_EQ(error_of("detector:\n  name: magic\n"),
             "test.yaml:2: detector.name: must be one of maxvalue, got 'magic'");
   EXPECT_EQ(error_of("laser:\n  mode: blink\n"),
-            "test.yaml:2: laser.mode: must be one of on, alternate, off, got 'blink'");
+            "test.yaml:2: laser.mode: must be one of on, alternate, off, pattern, got 'blink'");
   EXPECT_EQ(
       error_of("camera:\n  backend: gige\n"),
       "test.yaml:2: camera.backend: unknown camera backend 'gige' (available: sim, aravis, v4l2)");
@@ -195,6 +195,15 @@ TEST(Config, HardwareBackendOptionsAreValidatedWithoutHardware) {
       "test.yaml:5: camera.pixel_format: must be one of GREY, Y16, YUYV, got 'MJPG'");
   EXPECT_EQ(error_of(size + "camera:\n  backend: v4l2\n  width: 320\n"),
             "test.yaml: calibration.camera: size 640x480 differs from the camera's 320x480");
+  EXPECT_EQ(error_of("laser:\n  mode: pattern\n"),
+            "test.yaml:2: laser.pattern: required with mode: pattern, e.g. \"110\" (on, on, off, "
+            "repeated)");
+  EXPECT_EQ(
+      error_of("laser:\n  mode: pattern\n  pattern: 1x0\n"),
+      "test.yaml:3: laser.pattern: must be 1 to 1024 characters 0 (off) or 1 (on), got '1x0'");
+  EXPECT_EQ(error_of("laser:\n  mode: on\n  pattern: \"10\"\n"),
+            "test.yaml:3: laser.pattern: only used with mode: pattern");
+  EXPECT_EQ(error_of("laser:\n  mode: pattern\n  pattern: \"110\"\n"), "");
   EXPECT_EQ(error_of("laser:\n  backend: gpiod\n  chip: gpiochip0\n  line: -3\n"),
             "test.yaml:4: laser.line: offset must be 0..511, got -3");
   EXPECT_EQ(error_of("laser:\n  backend: gpiod\n  chip: gpiochip0\n  line: 3\n  pin: 4\n"),

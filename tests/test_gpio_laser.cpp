@@ -315,6 +315,42 @@ TEST_F(GpioLaserTest, DaemonAlternateSwitchesOncePerFrame) {
   EXPECT_NE(out.find("came after their frame's exposure began"), std::string::npos) << out;
 }
 
+TEST_F(GpioLaserTest, DaemonPatternModeSwitchesWhereThePatternChanges) {
+  const auto lcm_log = g_dir / "pattern.lcm";
+  Daemon d = start_daemon(daemon_config("mode: pattern, pattern: \"110\"", "", lcm_log), log_, "2");
+  const int status = wait_status(d.pid);
+  const std::string out = read_text(d.output);
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << out;
+  const auto events = pins();
+  expect_left_off(events);
+  std::vector<bool> claimed;
+  lcm::LogFile log(lcm_log.string(), "r");
+  ASSERT_TRUE(log.good());
+  while (const lcm::LogEvent* event = log.readNextEvent()) {
+    if (event->channel != "LASERLINE_PROFILE") continue;
+    laserline::profile_t p;
+    ASSERT_GT(p.decode(event->data, 0, static_cast<int>(event->datalen)), 0);
+    claimed.push_back(p.laser_on);
+  }
+  ASSERT_GT(claimed.size(), 30u) << out;
+  // Frame i asks for on when i % 3 != 2; the pin changes exactly where the pattern does.
+  std::vector<int> expected_levels;
+  bool level = false;
+  for (std::size_t i = 0; i < claimed.size(); ++i) {
+    const bool want = i % 3 != 2;
+    EXPECT_EQ(claimed[i], want) << "frame " << i;
+    if (want != level) expected_levels.push_back(want ? 1 : 0);
+    level = want;
+  }
+  std::vector<int> levels;
+  for (const auto& e : events)
+    if (e.event == "set") levels.push_back(e.level);
+  ASSERT_GE(levels.size(), expected_levels.size()) << describe(events);
+  ASSERT_LE(levels.size(), expected_levels.size() + 2) << describe(events);  // as in alternate
+  levels.resize(expected_levels.size());
+  EXPECT_EQ(levels, expected_levels);
+}
+
 TEST_F(GpioLaserTest, DaemonLeavesLaserOffOnSigterm) {
   Daemon d = start_daemon(daemon_config("mode: on", "", g_dir / "term.lcm"), log_, "");
   ASSERT_TRUE(wait_for_laser_on(log_)) << read_text(d.output);
