@@ -203,6 +203,37 @@ TEST_F(AravisTest, GrabbingAllocatesNothingOnTheCallingThread) {
   EXPECT_EQ(allocations.count(), 0);
 }
 
+// With the software trigger the daemon owns the exposure clock: each grab() triggers exactly one
+// exposure (after the laser was set), and no frame comes without one.
+TEST_F(AravisTest, SoftwareTriggerGivesOneFramePerGrab) {
+  FakeCamera fake;
+  ASSERT_TRUE(fake.wait_ready());
+  AravisCameraOptions o = options(320, 240, 30);
+  o.trigger = laserline::hal::AravisTrigger::kSoftware;
+  AravisCamera camera(o);
+  std::string error;
+  ASSERT_TRUE(camera.open(&error)) << error;
+  std::vector<std::uint8_t> pixels(camera.format().bytes());
+  FrameInfo info;
+  std::uint64_t last = 0;
+  std::int64_t last_camera_ns = 0;
+  for (int i = 0; i < 10; ++i) {
+    ASSERT_EQ(camera.grab(pixels, info, std::chrono::milliseconds(2000)), GrabStatus::kOk);
+    if (i > 0) {
+      EXPECT_EQ(info.sequence, last + 1);
+    }
+    if (i == 6) {
+      // Exposed when grab() asked, after the idle time: not a frame queued during it.
+      EXPECT_GE(info.camera_ns - last_camera_ns, 300'000'000);
+    }
+    last = info.sequence;
+    last_camera_ns = info.camera_ns;
+    // Idle: a free-running camera would deliver several frames meanwhile; a triggered one none.
+    std::this_thread::sleep_for(std::chrono::milliseconds(i == 5 ? 300 : 0));
+  }
+  EXPECT_EQ(camera.health().reconnects, 0);
+}
+
 TEST_F(AravisTest, OpensByDeviceIdSerialNumberOrAddress) {
   FakeCamera fake;
   ASSERT_TRUE(fake.wait_ready());
