@@ -506,7 +506,8 @@ TEST_F(AravisTest, DaemonLaserStateMatchesTheLightInFramesOverGigE) {
       "claimed state matches the light in %d (%.1f %%); %lld flagged late\n",
       frames, claimed_on, lit, matches, 100.0 * matches / std::max(frames, 1),
       static_cast<long long>(all.back().laser_late_switches));
-  EXPECT_GT(frames, 50) << out;
+  // Sanitized, the scanner renders (and the daemon runs) several times slower.
+  EXPECT_GT(frames, kSanitized ? 20 : 50) << out;
   EXPECT_GT(lit, frames / 4) << "the laser line never showed";
   EXPECT_LT(lit, frames * 3 / 4) << "the laser line never went off";
   EXPECT_GT(matches, frames * 8 / 10);
