@@ -104,10 +104,26 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
 
   hal::YamlMap laser = root.map("laser");
   c.laser_backend = laser.string("backend", c.laser_backend);
-  const std::string mode = laser.choice("mode", "on", {"on", "alternate", "off"});
-  c.laser_mode = mode == "on"    ? LaserMode::kOn
-                 : mode == "off" ? LaserMode::kOff
-                                 : LaserMode::kAlternate;
+  const std::string mode = laser.choice("mode", "on", {"on", "alternate", "off", "pattern"});
+  c.laser_mode = mode == "on"          ? LaserMode::kOn
+                 : mode == "off"       ? LaserMode::kOff
+                 : mode == "alternate" ? LaserMode::kAlternate
+                                       : LaserMode::kPattern;
+  if (c.laser_mode == LaserMode::kPattern) {
+    if (!laser.has("pattern")) {
+      laser.fail("pattern", "required with mode: pattern, e.g. \"110\" (on, on, off, repeated)");
+    }
+    const std::string pattern = laser.string("pattern", "");
+    if (pattern.empty() || pattern.size() > 1024 ||
+        pattern.find_first_not_of("01") != std::string::npos) {
+      laser.fail("pattern",
+                 "must be 1 to 1024 characters 0 (off) or 1 (on), got '" + pattern + "'");
+    }
+    for (char bit : pattern)
+      c.laser_pattern.push_back(bit == '1');
+  } else if (laser.has("pattern")) {
+    laser.fail("pattern", "only used with mode: pattern");
+  }
   c.laser_frame_timeout_ms =
       static_cast<int>(laser.integer("frame_timeout_ms", c.laser_frame_timeout_ms, 10, 10000));
   c.laser_options = laser;

@@ -10,7 +10,7 @@
 
 namespace laserline::daemon {
 
-enum class LaserMode : std::uint8_t { kOn, kAlternate, kOff };
+enum class LaserMode : std::uint8_t { kOn, kAlternate, kOff, kPattern };
 
 enum class ImageCompression : std::uint8_t { kNone, kZlib, kPng, kJpeg };
 
@@ -42,6 +42,7 @@ struct DaemonConfig {
 
   std::string laser_backend = "sim";
   LaserMode laser_mode = LaserMode::kOn;
+  std::vector<bool> laser_pattern;  // kPattern: frame n has the laser on when [n % size] is set
   int laser_frame_timeout_ms = 300;
   hal::YamlMap laser_options;  // likewise for the laser backend
 

@@ -173,13 +173,14 @@ bool FramePath::desired_laser(std::uint64_t grab_index) const {
       return false;
     case LaserMode::kAlternate:
       return grab_index % 2 == 0;
+    case LaserMode::kPattern:
+      return config_.laser_pattern[grab_index % config_.laser_pattern.size()];
   }
   return false;
 }
 
-void FramePath::switch_laser(bool on, std::uint64_t for_frame) {
-  // The switch record (time, frame) has no consumer yet; the hardware backends will publish it.
-  if (laser_.set(on, for_frame, nullptr)) {
+void FramePath::switch_laser(bool on, std::uint64_t for_frame, hal::LaserSwitch* record) {
+  if (laser_.set(on, for_frame, record)) {
     counters_.laser_switches.fetch_add(1, std::memory_order_relaxed);
   } else {
     counters_.laser_errors.fetch_add(1, std::memory_order_relaxed);
@@ -203,10 +204,13 @@ void FramePath::camera_loop() {
   std::uint64_t grab_index = 0;
   const bool lossless = camera_.paced_by_consumer();
   bool frames_flowing = true;  // until a grab fails; the laser stays off until frames return
+  // The last switch this thread made: time and the grab it was for. Each frame carries its time,
+  // so a frame whose exposure began before its switch is known (and counted) as uncertain.
+  hal::LaserSwitch last_switch;
 
   while (!stopping_.load(std::memory_order_relaxed)) {
     const bool want_laser = frames_flowing && desired_laser(grab_index);
-    if (want_laser != laser_.is_on()) switch_laser(want_laser, grab_index);
+    if (want_laser != laser_.is_on()) switch_laser(want_laser, grab_index, &last_switch);
 
     FrameSlot* slot = lossless ? claim_waiting(*frames_, stopping_) : frames_->try_claim();
     if (lossless && slot == nullptr) break;  // stopping
@@ -217,6 +221,10 @@ void FramePath::camera_loop() {
     const hal::GrabStatus status = camera_.grab(pixels, info, timeout);
     switch (status) {
       case hal::GrabStatus::kOk:
+        info.laser_switch_mono_ns = last_switch.mono_ns;
+        if (last_switch.for_frame == grab_index && last_switch.mono_ns > info.exposure_mono_ns) {
+          counters_.laser_late_switches.fetch_add(1, std::memory_order_relaxed);
+        }
         ++grab_index;
         frames_flowing = true;
         counters_.frames_captured.fetch_add(1, std::memory_order_relaxed);
@@ -337,6 +345,14 @@ void FramePath::fill_status(std::int64_t now_mono, std::int64_t period_ns) {
   s.publish_errors = publish_errors_.load(std::memory_order_relaxed);
   s.laser_safety_offs = counters_.laser_safety_offs.load(std::memory_order_relaxed);
   s.laser_errors = counters_.laser_errors.load(std::memory_order_relaxed);
+  s.laser_late_switches = counters_.laser_late_switches.load(std::memory_order_relaxed);
+  const hal::CameraHealth health = camera_.health();
+  s.camera_reconnects = health.reconnects;
+  s.camera_missing_packets = health.missing_packets;
+  s.camera_timeouts = health.timeouts;
+  s.camera_size_mismatches = health.size_mismatches;
+  s.camera_underruns = health.underruns;
+  s.camera_other_errors = health.other_errors;
   const double seconds = static_cast<double>(std::max<std::int64_t>(period_ns, 1)) * 1e-9;
   s.frame_rate_hz =
       static_cast<float>(static_cast<double>(s.frames_processed - last_status_frames_) / seconds);
@@ -443,6 +459,8 @@ FramePathSummary FramePath::summary() const {
   s.publish_errors = publish_errors_.load();
   s.laser_safety_offs = counters_.laser_safety_offs.load();
   s.frames_over_budget = counters_.frames_over_budget.load();
+  s.laser_switches = counters_.laser_switches.load();
+  s.laser_late_switches = counters_.laser_late_switches.load();
   s.latency = final_latency_;  // complete once stop() returned
   s.pipeline = final_pipeline_;
   return s;

@@ -33,6 +33,8 @@ struct FramePathSummary {
   std::int64_t publish_errors = 0;
   std::int64_t laser_safety_offs = 0;
   std::int64_t frames_over_budget = 0;
+  std::int64_t laser_switches = 0;
+  std::int64_t laser_late_switches = 0;
   LatencySummary latency;   // exposure -> profile published
   LatencySummary pipeline;  // frame arrival -> profile published
 };
@@ -73,7 +75,8 @@ class FramePath {
   void publisher_loop();
   void image_loop();
   bool desired_laser(std::uint64_t grab_index) const;
-  void switch_laser(bool on, std::uint64_t for_frame);
+  // `record` receives the switch's time and frame (camera thread only; others pass nullptr).
+  void switch_laser(bool on, std::uint64_t for_frame, hal::LaserSwitch* record = nullptr);
   void fill_status(std::int64_t now_mono, std::int64_t period_ns);
 
   const DaemonConfig& config_;

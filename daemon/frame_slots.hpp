@@ -48,6 +48,7 @@ struct FramePathCounters {
   std::atomic<std::int64_t> laser_safety_offs{0};
   std::atomic<std::int64_t> frames_over_budget{0};  // detection longer than one frame period
   std::atomic<std::int64_t> processing_max_ns{0};   // longest detection since the last status
+  std::atomic<std::int64_t> laser_late_switches{0};
   std::atomic<std::int64_t> last_frame_mono_ns{0};
   std::atomic<CameraState> camera_state{CameraState::kStarting};
 };

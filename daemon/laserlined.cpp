@@ -273,6 +273,11 @@ int main(int argc, char** argv) {
       static_cast<long long>(s.images_published), s.latency.p50_ms, s.latency.p99_ms,
       s.latency.max_ms, s.pipeline.p50_ms, s.pipeline.p99_ms, s.pipeline.max_ms,
       static_cast<long long>(s.latency.samples));
+  std::printf(
+      "laserlined: laser %s: %lld switches, %lld came after their frame's exposure began, %lld "
+      "forced off because frames stopped\n",
+      config.laser_backend.c_str(), static_cast<long long>(s.laser_switches),
+      static_cast<long long>(s.laser_late_switches), static_cast<long long>(s.laser_safety_offs));
   g_laser = nullptr;
   return 0;
 }

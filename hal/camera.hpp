@@ -18,6 +18,16 @@ enum class GrabStatus : std::uint8_t {
 
 const char* to_string(GrabStatus status);
 
+// Failures a camera backend counts by kind, totals since open(). Read from any thread.
+struct CameraHealth {
+  std::int64_t missing_packets = 0;  // frames incomplete: packets lost on the network
+  std::int64_t timeouts = 0;         // frames the driver gave up waiting for
+  std::int64_t size_mismatches = 0;  // frames whose size was not the configured one
+  std::int64_t underruns = 0;        // frames lost because no buffer was free
+  std::int64_t other_errors = 0;     // any other failed frame or device error
+  std::int64_t reconnects = 0;       // times the camera was lost and opened again
+};
+
 // A source of frames. Backends (sim, aravis, v4l2, replay) implement it and register with
 // CameraRegistry. Thread context: open()/format() from the setup thread; grab() from the one
 // camera thread; stop() from any thread (it wakes a blocked grab()).
@@ -40,6 +50,9 @@ class Camera {
   // so the frame path waits for room in its rings instead of dropping, and every frame is
   // processed, which makes a replay deterministic. A live camera cannot wait: false.
   virtual bool paced_by_consumer() const { return false; }
+
+  // Counters by failure kind; backends without any report zeros.
+  virtual CameraHealth health() const { return {}; }
 };
 
 }  // namespace laserline::hal

@@ -28,6 +28,9 @@ struct FrameInfo {
   std::int64_t arrival_mono_ns = 0;   // host CLOCK_MONOTONIC when the frame was complete
   std::int64_t arrival_wall_ns = 0;   // host CLOCK_REALTIME at the same instant
   bool laser_on = false;              // laser state during the exposure
+  // Host CLOCK_MONOTONIC of the last laser switch before this frame was grabbed (0 = none yet).
+  // When it is later than exposure_mono_ns the switch came too late for this frame.
+  std::int64_t laser_switch_mono_ns = 0;
 
   // Exposure time on the wall clock, from the two host clocks read together at arrival.
   std::int64_t exposure_wall_ns() const {

@@ -1,9 +1,13 @@
 #include "hal/registry.hpp"
 
+#include <cstdlib>
 #include <functional>
 
+#include "hal/aravis_camera.hpp"
+#include "hal/gpio_laser.hpp"
 #include "hal/sim/sim_camera.hpp"
 #include "hal/sim/sim_laser.hpp"
+#include "hal/v4l2_camera.hpp"
 
 namespace laserline::hal {
 
@@ -31,16 +35,99 @@ std::unique_ptr<Camera> create_sim_camera(const CameraRequest& request) {
   return std::make_unique<SimCamera>(options, request.laser, stall);
 }
 
+std::unique_ptr<Camera> create_aravis_camera(const CameraRequest& request) {
+  YamlMap& c = *request.options;
+  AravisCameraOptions o;
+  o.device = c.string("device", o.device);
+  o.pixel_format = c.choice("pixel_format", o.pixel_format, {"Mono8", "Mono12", "Mono16"});
+  o.width = static_cast<int>(c.integer("width", request.calibration->camera.width, 1, 65535));
+  o.height = static_cast<int>(c.integer("height", request.calibration->camera.height, 1, 65535));
+  o.offset_x = static_cast<int>(c.integer("offset_x", 0, 0, 65535));
+  o.offset_y = static_cast<int>(c.integer("offset_y", 0, 0, 65535));
+  o.frame_rate_hz = c.number("frame_rate_hz", 30.0, 0.1, 1000.0);
+  o.exposure_us = c.number("exposure_us", o.exposure_us, 0.0, 10e6);
+  o.gain_db = c.number("gain_db", o.gain_db, -1.0, 100.0);
+  o.packet_size = static_cast<int>(c.integer("packet_size", o.packet_size, -1, 65535));
+  o.packet_delay_ns = c.integer("packet_delay_ns", o.packet_delay_ns, -1, 1'000'000'000);
+  o.buffers = static_cast<int>(c.integer("buffers", o.buffers, 2, 1024));
+  const std::string trigger = c.choice("trigger", "free", {"free", "software", "line"});
+  o.trigger = trigger == "free"       ? AravisTrigger::kFreeRun
+              : trigger == "software" ? AravisTrigger::kSoftware
+                                      : AravisTrigger::kLine;
+  o.trigger_source = c.string("trigger_source", o.trigger_source);
+  if (c.has("features")) {
+    const YAML::Node features = c.node("features");
+    if (!features.IsMap()) c.fail("features", "must be a mapping of GenICam feature: value");
+    for (const auto& f : features) {
+      if (!f.second.IsScalar()) {
+        c.fail("features", "'" + f.first.as<std::string>() + "' must have a single value");
+      }
+      o.features.emplace_back(f.first.as<std::string>(), f.second.Scalar());
+    }
+  }
+  o.lost_after_ms = static_cast<int>(c.integer("lost_after_ms", o.lost_after_ms, 100, 60000));
+  o.reconnect_min_ms =
+      static_cast<int>(c.integer("reconnect_min_ms", o.reconnect_min_ms, 10, 60000));
+  o.reconnect_max_ms = static_cast<int>(
+      c.integer("reconnect_max_ms", o.reconnect_max_ms, o.reconnect_min_ms, 600000));
+  return std::make_unique<AravisCamera>(o);
+}
+
+std::unique_ptr<Camera> create_v4l2_camera(const CameraRequest& request) {
+  YamlMap& c = *request.options;
+  V4l2CameraOptions o;
+  o.device = c.string("device", o.device);
+  if (o.device.empty()) c.fail("device", "must name the video device, e.g. /dev/video0");
+  o.pixel_format = c.choice("pixel_format", o.pixel_format, {"GREY", "Y16", "YUYV"});
+  o.width = static_cast<int>(c.integer("width", request.calibration->camera.width, 1, 65535));
+  o.height = static_cast<int>(c.integer("height", request.calibration->camera.height, 1, 65535));
+  o.frame_rate_hz = c.number("frame_rate_hz", 30.0, 0.1, 1000.0);
+  o.buffers = static_cast<int>(c.integer("buffers", o.buffers, 2, 32));
+  o.reconnect_min_ms =
+      static_cast<int>(c.integer("reconnect_min_ms", o.reconnect_min_ms, 10, 60000));
+  o.reconnect_max_ms = static_cast<int>(
+      c.integer("reconnect_max_ms", o.reconnect_max_ms, o.reconnect_min_ms, 600000));
+  return std::make_unique<V4l2Camera>(o);
+}
+
 std::vector<CameraEntry>& camera_table() {
   static std::vector<CameraEntry> table = {
       {"sim", create_sim_camera},
+      {"aravis", create_aravis_camera},
+      {"v4l2", create_v4l2_camera},
   };
   return table;
+}
+
+std::unique_ptr<Laser> create_gpio_laser(YamlMap& options) {
+  GpioLaserOptions o;
+  if (!options.has("chip")) options.fail("chip", "required for the gpiod laser (e.g. gpiochip0)");
+  o.chip = options.string("chip", "");
+  if (!options.has("line")) {
+    options.fail("line", "required for the gpiod laser: a line offset or a line name");
+  }
+  const std::string line = options.string("line", "");
+  char* end = nullptr;
+  const long offset = std::strtol(line.c_str(), &end, 10);
+  if (!line.empty() && *end == '\0') {
+    if (offset < 0 || offset > 511) options.fail("line", "offset must be 0..511, got " + line);
+    o.offset = static_cast<int>(offset);
+  } else {
+    if (line.empty()) options.fail("line", "must not be empty");
+    o.line_name = line;
+  }
+  o.active_low = options.boolean("active_low", o.active_low);
+  o.consumer = options.string("consumer", o.consumer);
+  if (o.consumer.empty() || o.consumer.size() > 31) {
+    options.fail("consumer", "must be 1 to 31 characters (the kernel's limit)");
+  }
+  return std::make_unique<GpioLaser>(o);
 }
 
 const std::vector<LaserEntry>& laser_table() {
   static const std::vector<LaserEntry> table = {
       {"sim", [](YamlMap&) -> std::unique_ptr<Laser> { return std::make_unique<SimLaser>(); }},
+      {"gpiod", create_gpio_laser},
   };
   return table;
 }

@@ -16,6 +16,11 @@ packages=(
   libeigen3-dev
   libsystemd-dev
   zlib1g-dev
+  # hardware backends: GPIO laser (libgpiod 1.6), GigE Vision cameras (Aravis; its pkg-config
+  # file needs libusb's), V4L2 stand-in device (FUSE)
+  libgpiod-dev gpiod
+  libaravis-dev libusb-1.0-0-dev aravis-tools
+  libfuse3-dev fuse3
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # network namespaces for the LCM tests and the demo

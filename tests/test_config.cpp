@@ -84,11 +84,12 @@ TEST(Config, ChoicesListTheAlternatives) {
   EXPECT_EQ(error_of("detector:\n  name: magic\n"),
             "test.yaml:2: detector.name: must be one of maxvalue, fir, background, got 'magic'");
   EXPECT_EQ(error_of("laser:\n  mode: blink\n"),
-            "test.yaml:2: laser.mode: must be one of on, alternate, off, got 'blink'");
+            "test.yaml:2: laser.mode: must be one of on, alternate, off, pattern, got 'blink'");
   EXPECT_EQ(error_of("camera:\n  backend: gige\n"),
-            "test.yaml:2: camera.backend: unknown camera backend 'gige' (available: sim, lcm)");
+            "test.yaml:2: camera.backend: unknown camera backend 'gige' (available: sim, aravis, "
+            "v4l2, lcm)");
   EXPECT_EQ(error_of("laser:\n  backend: gpio\n"),
-            "test.yaml:2: laser.backend: unknown laser backend 'gpio' (available: sim)");
+            "test.yaml:2: laser.backend: unknown laser backend 'gpio' (available: sim, gpiod)");
 }
 
 TEST(Config, ReplayCameraNeedsAUrl) {
@@ -227,6 +228,45 @@ TEST(Config, ErrorsAreOneLine) {
     EXPECT_FALSE(e.empty());
     EXPECT_EQ(e.find('\n'), std::string::npos) << e;
   }
+}
+
+}  // namespace
+}  // namespace laserline::daemon
+
+namespace laserline::daemon {
+namespace {
+
+// The hardware backends validate their own keys when created, before any device is opened.
+TEST(Config, HardwareBackendOptionsAreValidatedWithoutHardware) {
+  const std::string size = "calibration: {camera: {width: 640, height: 480}}\n";
+  EXPECT_EQ(error_of(size + "camera: {backend: aravis, device: GV01, trigger: software,"
+                            " features: {Gamma: 1.0}, packet_size: -1}\n"),
+            "");
+  EXPECT_EQ(error_of(size + "camera:\n  backend: aravis\n  pixel_format: RGB8\n"),
+            "test.yaml:4: camera.pixel_format: must be one of Mono8, Mono12, Mono16, got 'RGB8'");
+  EXPECT_EQ(error_of(size + "camera:\n  backend: aravis\n  features: [Gamma]\n"),
+            "test.yaml:4: camera.features: must be a mapping of GenICam feature: value");
+  EXPECT_EQ(error_of(size + "camera:\n  backend: aravis\n  trigger: sometimes\n"),
+            "test.yaml:4: camera.trigger: must be one of free, software, line, got 'sometimes'");
+  EXPECT_EQ(
+      error_of(size + "camera:\n  backend: v4l2\n  device: /dev/video3\n  pixel_format: MJPG\n"),
+      "test.yaml:5: camera.pixel_format: must be one of GREY, Y16, YUYV, got 'MJPG'");
+  EXPECT_EQ(error_of(size + "camera:\n  backend: v4l2\n  width: 320\n"),
+            "test.yaml: calibration.camera: size 640x480 differs from the camera's 320x480");
+  EXPECT_EQ(error_of("laser:\n  mode: pattern\n"),
+            "test.yaml:2: laser.pattern: required with mode: pattern, e.g. \"110\" (on, on, off, "
+            "repeated)");
+  EXPECT_EQ(
+      error_of("laser:\n  mode: pattern\n  pattern: 1x0\n"),
+      "test.yaml:3: laser.pattern: must be 1 to 1024 characters 0 (off) or 1 (on), got '1x0'");
+  EXPECT_EQ(error_of("laser:\n  mode: on\n  pattern: \"10\"\n"),
+            "test.yaml:3: laser.pattern: only used with mode: pattern");
+  EXPECT_EQ(error_of("laser:\n  mode: pattern\n  pattern: \"110\"\n"), "");
+  EXPECT_EQ(error_of("laser:\n  backend: gpiod\n  chip: gpiochip0\n  line: -3\n"),
+            "test.yaml:4: laser.line: offset must be 0..511, got -3");
+  EXPECT_EQ(error_of("laser:\n  backend: gpiod\n  chip: gpiochip0\n  line: 3\n  pin: 4\n"),
+            "test.yaml:5: laser.pin: unknown key (expected one of: active_low, backend, chip, "
+            "consumer, frame_timeout_ms, line, mode)");
 }
 
 }  // namespace

@@ -1,0 +1,387 @@
+#include "hal/aravis_camera.hpp"
+
+#include <arv.h>
+#include <time.h>
+
+#include <algorithm>
+#include <cstring>
+
+#include "hal/clock.hpp"
+
+namespace laserline::hal {
+
+namespace {
+
+constexpr std::int64_t kMs = 1'000'000;
+// How fast the tracked clock offset may rise per frame to follow drift: 1 µs per frame is
+// 100 ppm at 10 Hz, far above crystal drift, and small against the transfer delays it filters.
+constexpr std::int64_t kDriftNsPerFrame = 1000;
+// Longest single wait inside grab(), so that stop() is noticed quickly.
+constexpr std::int64_t kWaitSliceUs = 50'000;
+
+// Takes the message out of a GError (and frees it); "" when there was none.
+std::string take_error(GError*& error) {
+  if (error == nullptr) return "";
+  std::string message = error->message;
+  g_clear_error(&error);
+  return message;
+}
+
+void sleep_ns(std::int64_t ns) {
+  const timespec ts{static_cast<time_t>(ns / 1'000'000'000), static_cast<long>(ns % 1'000'000'000)};
+  nanosleep(&ts, nullptr);
+}
+
+}  // namespace
+
+AravisCamera::AravisCamera(AravisCameraOptions options) : options_(std::move(options)) {
+  format_.width = options_.width;
+  format_.height = options_.height;
+  format_.stride = options_.width;
+  format_.pixel_format = PixelFormat::kMono8;
+  bytes_per_pixel_ = options_.pixel_format == "Mono8" ? 1 : 2;
+}
+
+AravisCamera::~AravisCamera() {
+  disconnect();
+}
+
+void AravisCamera::on_control_lost(_ArvDevice* /*device*/, void* self) {
+  static_cast<AravisCamera*>(self)->control_lost_.store(true, std::memory_order_release);
+}
+
+bool AravisCamera::open(std::string* error) {
+  disconnect();
+  payload_bytes_ = static_cast<std::size_t>(options_.width) *
+                   static_cast<std::size_t>(options_.height) *
+                   static_cast<std::size_t>(bytes_per_pixel_);
+  memory_.assign(static_cast<std::size_t>(options_.buffers),
+                 std::vector<std::uint8_t>(payload_bytes_, 0));
+  stopped_.store(false, std::memory_order_release);
+  offset_valid_ = false;
+  have_frame_id_ = false;
+  next_sequence_ = 0;
+  reconnect_delay_ms_ = options_.reconnect_min_ms;
+  return connect(error);
+}
+
+bool AravisCamera::configure(std::string* error) {
+  GError* e = nullptr;
+  auto failed = [&](const std::string& what) {
+    const std::string message = take_error(e);
+    if (message.empty()) return false;
+    if (error != nullptr) *error = what + ": " + message;
+    return true;
+  };
+  ArvCamera* camera = camera_;
+  // Acquisition must be stopped to change the format; the order is the one GenICam cameras
+  // accept: pixel format, then the region (offsets to 0 first so any size fits), transport,
+  // trigger, timing, then the user's own features.
+  arv_camera_stop_acquisition(camera, &e);
+  g_clear_error(&e);
+  arv_camera_set_pixel_format_from_string(camera, options_.pixel_format.c_str(), &e);
+  if (failed("pixel_format '" + options_.pixel_format + "'")) return false;
+  arv_camera_set_region(camera, 0, 0, options_.width, options_.height, &e);
+  if (failed("width/height " + std::to_string(options_.width) + "x" +
+             std::to_string(options_.height))) {
+    return false;
+  }
+  if (options_.offset_x != 0 || options_.offset_y != 0) {
+    arv_camera_set_region(camera, options_.offset_x, options_.offset_y, options_.width,
+                          options_.height, &e);
+    if (failed("offset_x/offset_y")) return false;
+  }
+  if (arv_camera_is_gv_device(camera)) {
+    if (options_.packet_size == -1) {
+      arv_camera_gv_auto_packet_size(camera, &e);
+      if (failed("packet_size: negotiation")) return false;
+    } else if (options_.packet_size > 0) {
+      arv_camera_gv_set_packet_size(camera, options_.packet_size, &e);
+      if (failed("packet_size")) return false;
+    }
+    if (options_.packet_delay_ns >= 0) {
+      arv_camera_gv_set_packet_delay(camera, options_.packet_delay_ns, &e);
+      if (failed("packet_delay_ns")) return false;
+    }
+  }
+  switch (options_.trigger) {
+    case AravisTrigger::kFreeRun:
+      arv_camera_clear_triggers(camera, &e);
+      if (failed("trigger: free")) return false;
+      arv_camera_set_frame_rate(camera, options_.frame_rate_hz, &e);
+      if (failed("frame_rate_hz")) return false;
+      break;
+    case AravisTrigger::kSoftware:
+      arv_camera_set_trigger(camera, "Software", &e);
+      if (failed("trigger: software")) return false;
+      break;
+    case AravisTrigger::kLine:
+      arv_camera_set_trigger(camera, options_.trigger_source.c_str(), &e);
+      if (failed("trigger_source '" + options_.trigger_source + "'")) return false;
+      break;
+  }
+  if (options_.exposure_us > 0) {
+    arv_camera_set_exposure_time(camera, options_.exposure_us, &e);
+    if (failed("exposure_us")) return false;
+  }
+  if (options_.gain_db >= 0) {
+    arv_camera_set_gain(camera, options_.gain_db, &e);
+    if (failed("gain_db")) return false;
+  }
+  ArvDevice* device = arv_camera_get_device(camera);
+  for (const auto& [name, value] : options_.features) {
+    arv_device_set_features_from_string(device, (name + "=" + value).c_str(), &e);
+    if (failed("features." + name)) return false;
+  }
+  const guint payload = arv_camera_get_payload(camera, &e);
+  if (failed("payload size")) return false;
+  if (payload != payload_bytes_) {
+    if (error != nullptr) {
+      *error = "the camera sends " + std::to_string(payload) + " bytes per frame, expected " +
+               std::to_string(payload_bytes_) + " for " + std::to_string(options_.width) + "x" +
+               std::to_string(options_.height) + " " + options_.pixel_format;
+    }
+    return false;
+  }
+  return true;
+}
+
+bool AravisCamera::connect(std::string* error) {
+  GError* e = nullptr;
+  const std::string name = options_.device.empty() ? "the first camera found" : options_.device;
+  camera_ = arv_camera_new(options_.device.empty() ? nullptr : options_.device.c_str(), &e);
+  if (camera_ == nullptr && !options_.device.empty()) {
+    // Aravis opens by device id, physical or IP address; a serial number is looked up here.
+    arv_update_device_list();
+    for (unsigned i = 0; i < arv_get_n_devices() && camera_ == nullptr; ++i) {
+      const char* serial = arv_get_device_serial_nbr(i);
+      if (serial != nullptr && options_.device == serial) {
+        g_clear_error(&e);
+        camera_ = arv_camera_new(arv_get_device_id(i), &e);
+      }
+    }
+  }
+  if (camera_ == nullptr) {
+    const std::string why = take_error(e);
+    if (error != nullptr) *error = "device '" + name + "': " + (why.empty() ? "not found" : why);
+    return false;
+  }
+  std::string why;
+  if (!configure(&why)) {
+    if (error != nullptr) *error = "device '" + name + "': " + why;
+    disconnect();
+    return false;
+  }
+  control_lost_.store(false, std::memory_order_release);
+  control_lost_handler_ = g_signal_connect(arv_camera_get_device(camera_), "control-lost",
+                                           G_CALLBACK(on_control_lost), this);
+  stream_ = arv_camera_create_stream(camera_, nullptr, nullptr, &e);
+  if (stream_ == nullptr) {
+    if (error != nullptr) *error = "device '" + name + "': cannot create stream: " + take_error(e);
+    disconnect();
+    return false;
+  }
+  for (auto& memory : memory_)
+    arv_stream_push_buffer(stream_, arv_buffer_new(memory.size(), memory.data()));
+  arv_camera_start_acquisition(camera_, &e);
+  if (e != nullptr) {
+    if (error != nullptr) {
+      *error = "device '" + name + "': cannot start acquisition: " + take_error(e);
+    }
+    disconnect();
+    return false;
+  }
+  silent_ns_ = 0;
+  // The camera may count frames from anywhere after a reconnect: sequence numbers continue
+  // from ours instead.
+  have_frame_id_ = false;
+  return true;
+}
+
+void AravisCamera::disconnect() {
+  if (stream_ != nullptr) update_stream_statistics();
+  if (camera_ != nullptr) {
+    GError* e = nullptr;
+    if (stream_ != nullptr) arv_camera_stop_acquisition(camera_, &e);  // fails when it is gone
+    g_clear_error(&e);
+  }
+  if (stream_ != nullptr) {
+    guint64 completed = 0, failures = 0, underruns = 0;
+    arv_stream_get_statistics(stream_, &completed, &failures, &underruns);
+    underruns_base_ += underruns;
+    // Unreferencing the stream stops its thread and frees the ArvBuffer wrappers; the pixel
+    // memory is ours and stays for the next stream.
+    g_object_unref(stream_);
+    stream_ = nullptr;
+  }
+  if (camera_ != nullptr) {
+    if (control_lost_handler_ != 0) {
+      g_signal_handler_disconnect(arv_camera_get_device(camera_), control_lost_handler_);
+      control_lost_handler_ = 0;
+    }
+    g_object_unref(camera_);
+    camera_ = nullptr;
+  }
+}
+
+void AravisCamera::stop() {
+  stopped_.store(true, std::memory_order_release);
+}
+
+void AravisCamera::count_bad_buffer(int status) {
+  switch (status) {
+    case ARV_BUFFER_STATUS_MISSING_PACKETS:
+    case ARV_BUFFER_STATUS_WRONG_PACKET_ID:
+      missing_packets_.fetch_add(1, std::memory_order_relaxed);
+      break;
+    case ARV_BUFFER_STATUS_TIMEOUT:
+      timeouts_.fetch_add(1, std::memory_order_relaxed);
+      break;
+    case ARV_BUFFER_STATUS_SIZE_MISMATCH:
+      size_mismatches_.fetch_add(1, std::memory_order_relaxed);
+      break;
+    default:
+      other_errors_.fetch_add(1, std::memory_order_relaxed);
+      break;
+  }
+}
+
+void AravisCamera::update_stream_statistics() {
+  guint64 completed = 0, failures = 0, underruns = 0;
+  arv_stream_get_statistics(stream_, &completed, &failures, &underruns);
+  underruns_.store(static_cast<std::int64_t>(underruns_base_ + underruns),
+                   std::memory_order_relaxed);
+}
+
+GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
+                              std::chrono::milliseconds timeout) {
+  if (stopped_.load(std::memory_order_acquire)) return GrabStatus::kStopped;
+  if (dst.size() < format_.bytes()) return GrabStatus::kError;
+  const std::int64_t start = monotonic_ns();
+  const std::int64_t deadline = start + timeout.count() * kMs;
+
+  if (stream_ == nullptr) {
+    // Lost: try again when the backoff has passed, waiting for it (in slices) meanwhile.
+    for (std::int64_t now = start; now < std::min(deadline, next_reconnect_mono_ns_);
+         now = monotonic_ns()) {
+      if (stopped_.load(std::memory_order_acquire)) return GrabStatus::kStopped;
+      sleep_ns(std::min({kWaitSliceUs * 1000, next_reconnect_mono_ns_ - now, deadline - now}));
+    }
+    if (monotonic_ns() < next_reconnect_mono_ns_) return GrabStatus::kTimeout;
+    std::string ignored;
+    if (!connect(&ignored)) {
+      disconnect();
+      next_reconnect_mono_ns_ = monotonic_ns() + reconnect_delay_ms_ * kMs;
+      reconnect_delay_ms_ = std::min(reconnect_delay_ms_ * 2, options_.reconnect_max_ms);
+      return GrabStatus::kError;
+    }
+    reconnects_.fetch_add(1, std::memory_order_relaxed);
+    reconnect_delay_ms_ = options_.reconnect_min_ms;
+  }
+
+  if (options_.trigger == AravisTrigger::kSoftware) {
+    // The frame path set the laser before calling grab(): the exposure starts now, after it.
+    GError* e = nullptr;
+    arv_camera_software_trigger(camera_, &e);
+    if (e != nullptr) {
+      g_clear_error(&e);
+      other_errors_.fetch_add(1, std::memory_order_relaxed);
+    }
+  }
+
+  while (true) {
+    if (stopped_.load(std::memory_order_acquire)) return GrabStatus::kStopped;
+    const std::int64_t now = monotonic_ns();
+    // Only the time spent waiting in vain counts: frames queue up while the caller is away.
+    const bool silent_too_long =
+        options_.trigger != AravisTrigger::kLine && silent_ns_ > options_.lost_after_ms * kMs;
+    if (control_lost_.load(std::memory_order_acquire) || silent_too_long) {
+      disconnect();
+      other_errors_.fetch_add(1, std::memory_order_relaxed);
+      next_reconnect_mono_ns_ = now + reconnect_delay_ms_ * kMs;
+      return GrabStatus::kError;
+    }
+    if (now >= deadline) return GrabStatus::kTimeout;
+    const std::int64_t wait_us = std::min<std::int64_t>(kWaitSliceUs, (deadline - now) / 1000 + 1);
+    ArvBuffer* buffer = arv_stream_timeout_pop_buffer(stream_, static_cast<guint64>(wait_us));
+    if (buffer == nullptr) {
+      silent_ns_ += monotonic_ns() - now;
+      continue;
+    }
+    silent_ns_ = 0;
+
+    const std::int64_t arrival_mono = monotonic_ns();
+    const std::int64_t arrival_wall = wall_ns();
+    const ArvBufferStatus status = arv_buffer_get_status(buffer);
+    std::size_t size = 0;
+    const auto* data = static_cast<const std::uint8_t*>(arv_buffer_get_data(buffer, &size));
+    if (status != ARV_BUFFER_STATUS_SUCCESS || data == nullptr || size != payload_bytes_) {
+      // Counted and skipped: the camera is alive (a frame came), this one is unusable.
+      if (status == ARV_BUFFER_STATUS_SUCCESS) {
+        size_mismatches_.fetch_add(1, std::memory_order_relaxed);
+      } else {
+        count_bad_buffer(status);
+      }
+      arv_stream_push_buffer(stream_, buffer);
+      update_stream_statistics();
+      continue;
+    }
+
+    if (bytes_per_pixel_ == 1) {
+      std::memcpy(dst.data(), data, payload_bytes_);
+    } else {
+      // 16-bit little-endian samples, MSB-aligned for Mono16 and right-aligned for Mono12.
+      const int shift = options_.pixel_format == "Mono12" ? 4 : 8;
+      const std::size_t pixels = payload_bytes_ / 2;
+      for (std::size_t i = 0; i < pixels; ++i) {
+        const auto v = static_cast<unsigned>(data[2 * i] | (data[2 * i + 1] << 8));
+        dst[i] = static_cast<std::uint8_t>(std::min(v >> shift, 255u));
+      }
+    }
+    const auto camera_ns = static_cast<std::int64_t>(arv_buffer_get_timestamp(buffer));
+    const std::uint64_t frame_id = arv_buffer_get_frame_id(buffer);
+    arv_stream_push_buffer(stream_, buffer);
+
+    // Frame ids: GigE Vision 1 wraps at 16 bits and skips 0; after a reconnect the camera may
+    // start again, so our sequence continues from where it was.
+    if (!have_frame_id_) {
+      sequence_base_ =
+          static_cast<std::int64_t>(next_sequence_) - static_cast<std::int64_t>(frame_id);
+      have_frame_id_ = true;
+    } else if (frame_id < last_frame_id_ && last_frame_id_ - frame_id > 32768 &&
+               last_frame_id_ <= 65535) {
+      sequence_base_ += 65535;
+    }
+    last_frame_id_ = frame_id;
+    next_sequence_ =
+        static_cast<std::uint64_t>(sequence_base_ + static_cast<std::int64_t>(frame_id)) + 1;
+
+    const std::int64_t offset = arrival_mono - camera_ns;
+    if (!offset_valid_ || offset < offset_ns_ + kDriftNsPerFrame) {
+      offset_ns_ = offset;
+      offset_valid_ = true;
+    } else {
+      offset_ns_ += kDriftNsPerFrame;
+    }
+    info.sequence = next_sequence_ - 1;
+    info.camera_ns = camera_ns;
+    info.exposure_mono_ns = camera_ns + offset_ns_;
+    info.arrival_mono_ns = arrival_mono;
+    info.arrival_wall_ns = arrival_wall;
+    update_stream_statistics();
+    return GrabStatus::kOk;
+  }
+}
+
+CameraHealth AravisCamera::health() const {
+  CameraHealth h;
+  h.missing_packets = missing_packets_.load(std::memory_order_relaxed);
+  h.timeouts = timeouts_.load(std::memory_order_relaxed);
+  h.size_mismatches = size_mismatches_.load(std::memory_order_relaxed);
+  h.underruns = underruns_.load(std::memory_order_relaxed);
+  h.other_errors = other_errors_.load(std::memory_order_relaxed);
+  h.reconnects = reconnects_.load(std::memory_order_relaxed);
+  return h;
+}
+
+}  // namespace laserline::hal

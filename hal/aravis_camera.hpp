@@ -1,0 +1,122 @@
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "hal/camera.hpp"
+
+struct _ArvCamera;
+struct _ArvStream;
+struct _ArvDevice;
+
+namespace laserline::hal {
+
+enum class AravisTrigger : std::uint8_t {
+  kFreeRun,   // the camera exposes at its own frame rate
+  kSoftware,  // grab() triggers each exposure, after the laser was set for it
+  kLine,      // an external line (trigger_source) starts each exposure
+};
+
+struct AravisCameraOptions {
+  std::string device;  // device id, serial number or IP address; "" = the first found
+  std::string pixel_format = "Mono8";  // Mono8, or Mono12 / Mono16 (delivered as their top 8 bits)
+  int width = 0;                       // region of interest; width/height = the calibrated size
+  int height = 0;
+  int offset_x = 0;
+  int offset_y = 0;
+  double frame_rate_hz = 30;
+  double exposure_us = 0;  // 0 = leave the camera's setting
+  double gain_db = -1;     // < 0 = leave the camera's setting
+  int packet_size = 0;     // GigE packet size in bytes; 0 = leave; -1 = negotiate the largest
+  std::int64_t packet_delay_ns = -1;  // GigE inter-packet delay; < 0 = leave
+  int buffers = 16;
+  AravisTrigger trigger = AravisTrigger::kFreeRun;
+  std::string trigger_source = "Line1";  // for kLine
+  // Further GenICam features, applied last in this order: (name, value as written in the YAML).
+  std::vector<std::pair<std::string, std::string>> features;
+  int lost_after_ms = 1000;  // no frame for this long (free-run/software) = camera lost
+  int reconnect_min_ms = 100;
+  int reconnect_max_ms = 2000;
+};
+
+// A GigE Vision (or USB3 Vision) camera through Aravis 0.8.
+//
+// Buffers: the pixel memory of `buffers` frames is allocated in open() and handed to Aravis
+// (arv_buffer_new over our memory) each time the stream is created; every buffer popped is
+// pushed back after its pixels were copied out. Nothing is allocated per frame.
+//
+// Time: the camera's timestamp (camera_ns, from its tick counter) is mapped to host
+// CLOCK_MONOTONIC by offset tracking: offset = min over frames of (host arrival - camera time),
+// i.e. the frame with the least transfer delay defines it, and the minimum is let rise slowly
+// (drift_ns_per_frame) so that it follows drift between the clocks. exposure_mono_ns is
+// camera_ns + offset: it is late by the shortest transfer delay seen (readout + network), which
+// is constant for a given format. Cameras with PTP should run it; the mapping is the same.
+//
+// Loss: a camera is lost when Aravis emits "control-lost" (heartbeat failed) or when grab() waited
+// lost_after_ms in all without any frame (free-run/software trigger; frames queued while the
+// caller was away count as frames). grab() then tears the stream down and
+// returns kError; later calls try to reconnect with exponential backoff (reconnect_min_ms
+// doubling up to reconnect_max_ms) and re-apply the whole configuration. Reconnecting allocates
+// (Aravis objects): that happens only on this recovery path, never while frames flow.
+//
+// Thread context: open()/format() from the setup thread, grab() from the camera thread, stop()
+// and health() from any thread. The control-lost callback runs on Aravis's heartbeat thread and
+// only sets a flag.
+class AravisCamera final : public Camera {
+ public:
+  explicit AravisCamera(AravisCameraOptions options);
+  ~AravisCamera() override;
+  AravisCamera(const AravisCamera&) = delete;
+  AravisCamera& operator=(const AravisCamera&) = delete;
+
+  bool open(std::string* error) override;
+  FrameFormat format() const override { return format_; }
+  GrabStatus grab(std::span<std::uint8_t> dst, FrameInfo& info,
+                  std::chrono::milliseconds timeout) override;
+  void stop() override;
+  CameraHealth health() const override;
+
+ private:
+  bool connect(std::string* error);
+  void disconnect();
+  bool configure(std::string* error);
+  void count_bad_buffer(int status);
+  void update_stream_statistics();
+  static void on_control_lost(_ArvDevice* device, void* self);
+
+  AravisCameraOptions options_;
+  FrameFormat format_;
+  std::size_t payload_bytes_ = 0;
+  int bytes_per_pixel_ = 1;
+  std::vector<std::vector<std::uint8_t>> memory_;  // the pixel memory of every buffer
+
+  _ArvCamera* camera_ = nullptr;
+  _ArvStream* stream_ = nullptr;
+  unsigned long control_lost_handler_ = 0;
+  std::atomic<bool> control_lost_{false};
+  std::atomic<bool> stopped_{false};
+
+  // Camera-thread state.
+  std::int64_t silent_ns_ = 0;  // time spent waiting for a frame since the last one
+  std::int64_t next_reconnect_mono_ns_ = 0;
+  int reconnect_delay_ms_ = 0;
+  std::int64_t offset_ns_ = 0;  // host monotonic - camera time, tracked
+  bool offset_valid_ = false;
+  std::uint64_t last_frame_id_ = 0;
+  std::int64_t sequence_base_ = 0;  // our sequence - the camera's frame id (wraps, reconnects)
+  std::uint64_t next_sequence_ = 0;
+  bool have_frame_id_ = false;
+  std::uint64_t underruns_base_ = 0;  // underruns of streams already closed
+
+  std::atomic<std::int64_t> missing_packets_{0};
+  std::atomic<std::int64_t> timeouts_{0};
+  std::atomic<std::int64_t> size_mismatches_{0};
+  std::atomic<std::int64_t> underruns_{0};
+  std::atomic<std::int64_t> other_errors_{0};
+  std::atomic<std::int64_t> reconnects_{0};
+};
+
+}  // namespace laserline::hal

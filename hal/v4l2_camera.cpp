@@ -1,0 +1,293 @@
+#include "hal/v4l2_camera.hpp"
+
+#include <fcntl.h>
+#include <linux/videodev2.h>
+#include <poll.h>
+#include <sys/ioctl.h>
+#include <sys/mman.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+
+#include "hal/clock.hpp"
+
+namespace laserline::hal {
+
+namespace {
+
+constexpr std::int64_t kMs = 1'000'000;
+constexpr int kWaitSliceMs = 50;  // longest single poll, so that stop() is noticed quickly
+constexpr std::int64_t kDriftNsPerFrame = 1000;
+
+int xioctl(int fd, unsigned long request, void* arg) {
+  int r;
+  do {
+    r = ioctl(fd, request, arg);
+  } while (r == -1 && errno == EINTR);
+  return r;
+}
+
+std::string fourcc_name(std::uint32_t fourcc) {
+  std::string s(4, ' ');
+  for (int i = 0; i < 4; ++i)
+    s[static_cast<std::size_t>(i)] = static_cast<char>((fourcc >> (8 * i)) & 0xff);
+  return s;
+}
+
+}  // namespace
+
+V4l2Camera::V4l2Camera(V4l2CameraOptions options) : options_(std::move(options)) {
+  format_.width = options_.width;
+  format_.height = options_.height;
+  format_.stride = options_.width;
+  format_.pixel_format = PixelFormat::kMono8;
+  fourcc_ = options_.pixel_format == "GREY"  ? V4L2_PIX_FMT_GREY
+            : options_.pixel_format == "Y16" ? V4L2_PIX_FMT_Y16
+                                             : V4L2_PIX_FMT_YUYV;
+}
+
+V4l2Camera::~V4l2Camera() {
+  disconnect();
+}
+
+bool V4l2Camera::open(std::string* error) {
+  disconnect();
+  stopped_.store(false, std::memory_order_release);
+  offset_valid_ = false;
+  have_sequence_ = false;
+  next_sequence_ = 0;
+  reconnect_delay_ms_ = options_.reconnect_min_ms;
+  return connect(error);
+}
+
+bool V4l2Camera::connect(std::string* error) {
+  const std::string& path = options_.device;
+  auto fail = [&](const std::string& why) {
+    if (error != nullptr) *error = path + ": " + why;
+    disconnect();
+    return false;
+  };
+  auto fail_errno = [&](const std::string& what) {
+    return fail(what + ": " + std::strerror(errno));
+  };
+
+  fd_ = ::open(path.c_str(), O_RDWR | O_NONBLOCK | O_CLOEXEC);
+  if (fd_ < 0) return fail_errno("cannot open");
+  v4l2_capability cap{};
+  if (xioctl(fd_, VIDIOC_QUERYCAP, &cap) != 0) return fail_errno("not a V4L2 device (QUERYCAP)");
+  const std::uint32_t caps =
+      (cap.capabilities & V4L2_CAP_DEVICE_CAPS) != 0 ? cap.device_caps : cap.capabilities;
+  if ((caps & V4L2_CAP_VIDEO_CAPTURE) == 0) return fail("not a video capture device");
+  if ((caps & V4L2_CAP_STREAMING) == 0) return fail("does not support streaming I/O");
+
+  v4l2_format fmt{};
+  fmt.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
+  fmt.fmt.pix.width = static_cast<std::uint32_t>(options_.width);
+  fmt.fmt.pix.height = static_cast<std::uint32_t>(options_.height);
+  fmt.fmt.pix.pixelformat = fourcc_;
+  fmt.fmt.pix.field = V4L2_FIELD_NONE;
+  if (xioctl(fd_, VIDIOC_S_FMT, &fmt) != 0) return fail_errno("cannot set the format (S_FMT)");
+  // Drivers adjust what they cannot do instead of failing: compare.
+  if (fmt.fmt.pix.pixelformat != fourcc_ ||
+      fmt.fmt.pix.width != static_cast<std::uint32_t>(options_.width) ||
+      fmt.fmt.pix.height != static_cast<std::uint32_t>(options_.height)) {
+    return fail("asked for " + options_.pixel_format + " " + std::to_string(options_.width) + "x" +
+                std::to_string(options_.height) + ", the driver offers " +
+                fourcc_name(fmt.fmt.pix.pixelformat) + " " + std::to_string(fmt.fmt.pix.width) +
+                "x" + std::to_string(fmt.fmt.pix.height));
+  }
+  const std::uint32_t bytes_per_pixel = fourcc_ == V4L2_PIX_FMT_GREY ? 1 : 2;
+  bytes_per_line_ = std::max(fmt.fmt.pix.bytesperline,
+                             static_cast<std::uint32_t>(options_.width) * bytes_per_pixel);
+
+  v4l2_streamparm parm{};
+  parm.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
+  if (xioctl(fd_, VIDIOC_G_PARM, &parm) == 0 &&
+      (parm.parm.capture.capability & V4L2_CAP_TIMEPERFRAME) != 0) {
+    parm.parm.capture.timeperframe.numerator = 1000;
+    parm.parm.capture.timeperframe.denominator =
+        static_cast<std::uint32_t>(options_.frame_rate_hz * 1000.0 + 0.5);
+    if (xioctl(fd_, VIDIOC_S_PARM, &parm) != 0) return fail_errno("cannot set the frame rate");
+  }
+
+  v4l2_requestbuffers req{};
+  req.count = static_cast<std::uint32_t>(options_.buffers);
+  req.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
+  req.memory = V4L2_MEMORY_MMAP;
+  if (xioctl(fd_, VIDIOC_REQBUFS, &req) != 0) return fail_errno("no mmap streaming (REQBUFS)");
+  if (req.count < 2) return fail("the driver gave " + std::to_string(req.count) + " buffers");
+  mappings_.assign(req.count, Mapping{});
+  for (std::uint32_t i = 0; i < req.count; ++i) {
+    v4l2_buffer buf{};
+    buf.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
+    buf.memory = V4L2_MEMORY_MMAP;
+    buf.index = i;
+    if (xioctl(fd_, VIDIOC_QUERYBUF, &buf) != 0) return fail_errno("QUERYBUF");
+    void* address =
+        mmap(nullptr, buf.length, PROT_READ | PROT_WRITE, MAP_SHARED, fd_, buf.m.offset);
+    if (address == MAP_FAILED) return fail_errno("cannot map buffer " + std::to_string(i));
+    mappings_[i] = Mapping{address, buf.length};
+    if (xioctl(fd_, VIDIOC_QBUF, &buf) != 0) return fail_errno("QBUF");
+  }
+  int type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
+  if (xioctl(fd_, VIDIOC_STREAMON, &type) != 0) return fail_errno("STREAMON");
+  have_sequence_ = false;
+  return true;
+}
+
+void V4l2Camera::disconnect() {
+  if (fd_ >= 0) {
+    int type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
+    xioctl(fd_, VIDIOC_STREAMOFF, &type);  // fails when the device is gone; nothing to do then
+  }
+  for (const Mapping& m : mappings_)
+    if (m.address != nullptr) munmap(m.address, m.length);
+  mappings_.clear();
+  if (fd_ >= 0) {
+    ::close(fd_);
+    fd_ = -1;
+  }
+}
+
+void V4l2Camera::lost() {
+  disconnect();
+  other_errors_.fetch_add(1, std::memory_order_relaxed);
+  next_reconnect_mono_ns_ = monotonic_ns() + reconnect_delay_ms_ * kMs;
+}
+
+void V4l2Camera::stop() {
+  stopped_.store(true, std::memory_order_release);
+}
+
+GrabStatus V4l2Camera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
+                            std::chrono::milliseconds timeout) {
+  if (stopped_.load(std::memory_order_acquire)) return GrabStatus::kStopped;
+  if (dst.size() < format_.bytes()) return GrabStatus::kError;
+  const std::int64_t deadline = monotonic_ns() + timeout.count() * kMs;
+
+  if (fd_ < 0) {
+    for (std::int64_t now = monotonic_ns(); now < std::min(deadline, next_reconnect_mono_ns_);
+         now = monotonic_ns()) {
+      if (stopped_.load(std::memory_order_acquire)) return GrabStatus::kStopped;
+      const std::int64_t wait =
+          std::min({kWaitSliceMs * kMs, next_reconnect_mono_ns_ - now, deadline - now});
+      const timespec ts{static_cast<time_t>(wait / 1'000'000'000),
+                        static_cast<long>(wait % 1'000'000'000)};
+      nanosleep(&ts, nullptr);
+    }
+    if (monotonic_ns() < next_reconnect_mono_ns_) return GrabStatus::kTimeout;
+    std::string ignored;
+    if (!connect(&ignored)) {
+      next_reconnect_mono_ns_ = monotonic_ns() + reconnect_delay_ms_ * kMs;
+      reconnect_delay_ms_ = std::min(reconnect_delay_ms_ * 2, options_.reconnect_max_ms);
+      return GrabStatus::kError;
+    }
+    reconnects_.fetch_add(1, std::memory_order_relaxed);
+    reconnect_delay_ms_ = options_.reconnect_min_ms;
+  }
+
+  while (true) {
+    if (stopped_.load(std::memory_order_acquire)) return GrabStatus::kStopped;
+    const std::int64_t now = monotonic_ns();
+    if (now >= deadline) return GrabStatus::kTimeout;
+    pollfd pfd{fd_, POLLIN, 0};
+    const int wait_ms =
+        static_cast<int>(std::min<std::int64_t>(kWaitSliceMs, (deadline - now) / kMs + 1));
+    const int ready = poll(&pfd, 1, wait_ms);
+    if (ready < 0 && errno != EINTR) {
+      lost();
+      return GrabStatus::kError;
+    }
+    if (ready <= 0) continue;
+    if ((pfd.revents & (POLLERR | POLLHUP | POLLNVAL)) != 0) {
+      lost();
+      return GrabStatus::kError;
+    }
+    v4l2_buffer buf{};
+    buf.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
+    buf.memory = V4L2_MEMORY_MMAP;
+    if (xioctl(fd_, VIDIOC_DQBUF, &buf) != 0) {
+      if (errno == EAGAIN) continue;
+      lost();  // ENODEV when unplugged; anything else leaves the stream unusable too
+      return GrabStatus::kError;
+    }
+    const std::int64_t arrival_mono = monotonic_ns();
+    const std::int64_t arrival_wall = wall_ns();
+    const std::size_t expected =
+        static_cast<std::size_t>(bytes_per_line_) * static_cast<std::size_t>(options_.height);
+    if (buf.index >= mappings_.size() || (buf.flags & V4L2_BUF_FLAG_ERROR) != 0 ||
+        buf.bytesused < expected) {
+      if (buf.index < mappings_.size() && (buf.flags & V4L2_BUF_FLAG_ERROR) == 0) {
+        size_mismatches_.fetch_add(1, std::memory_order_relaxed);
+      } else {
+        other_errors_.fetch_add(1, std::memory_order_relaxed);
+      }
+      if (xioctl(fd_, VIDIOC_QBUF, &buf) != 0) {
+        lost();
+        return GrabStatus::kError;
+      }
+      continue;
+    }
+
+    const auto* src = static_cast<const std::uint8_t*>(mappings_[buf.index].address);
+    const auto width = static_cast<std::size_t>(options_.width);
+    for (int y = 0; y < options_.height; ++y) {
+      const std::uint8_t* row = src + static_cast<std::size_t>(y) * bytes_per_line_;
+      std::uint8_t* out = dst.data() + static_cast<std::size_t>(y) * width;
+      if (fourcc_ == V4L2_PIX_FMT_GREY) {
+        std::memcpy(out, row, width);
+      } else {
+        // Y16: little-endian, keep the top byte. YUYV: Y0 U Y1 V, keep the lumas.
+        const std::size_t pick = fourcc_ == V4L2_PIX_FMT_Y16 ? 1 : 0;
+        for (std::size_t x = 0; x < width; ++x)
+          out[x] = row[2 * x + pick];
+      }
+    }
+    const std::int64_t stamp = static_cast<std::int64_t>(buf.timestamp.tv_sec) * 1'000'000'000 +
+                               static_cast<std::int64_t>(buf.timestamp.tv_usec) * 1000;
+    const bool monotonic =
+        (buf.flags & V4L2_BUF_FLAG_TIMESTAMP_MASK) == V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC;
+    const std::uint32_t driver_sequence = buf.sequence;
+    if (xioctl(fd_, VIDIOC_QBUF, &buf) != 0) {
+      lost();
+      return GrabStatus::kError;
+    }
+
+    if (!have_sequence_) {
+      sequence_base_ = static_cast<std::int64_t>(next_sequence_) - driver_sequence;
+      have_sequence_ = true;
+    } else if (driver_sequence > last_driver_sequence_ + 1) {
+      underruns_.fetch_add(driver_sequence - last_driver_sequence_ - 1, std::memory_order_relaxed);
+    }
+    last_driver_sequence_ = driver_sequence;
+    next_sequence_ = static_cast<std::uint64_t>(sequence_base_ + driver_sequence) + 1;
+
+    info.sequence = next_sequence_ - 1;
+    info.camera_ns = stamp;
+    if (monotonic) {
+      info.exposure_mono_ns = stamp;
+    } else {
+      const std::int64_t offset = arrival_mono - stamp;
+      offset_ns_ = !offset_valid_ ? offset : std::min(offset_ns_ + kDriftNsPerFrame, offset);
+      offset_valid_ = true;
+      info.exposure_mono_ns = stamp + offset_ns_;
+    }
+    info.arrival_mono_ns = arrival_mono;
+    info.arrival_wall_ns = arrival_wall;
+    return GrabStatus::kOk;
+  }
+}
+
+CameraHealth V4l2Camera::health() const {
+  CameraHealth h;
+  h.underruns = underruns_.load(std::memory_order_relaxed);
+  h.size_mismatches = size_mismatches_.load(std::memory_order_relaxed);
+  h.other_errors = other_errors_.load(std::memory_order_relaxed);
+  h.reconnects = reconnects_.load(std::memory_order_relaxed);
+  return h;
+}
+
+}  // namespace laserline::hal

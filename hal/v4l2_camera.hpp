@@ -1,0 +1,89 @@
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "hal/camera.hpp"
+
+namespace laserline::hal {
+
+struct V4l2CameraOptions {
+  std::string device = "/dev/video0";
+  std::string pixel_format = "GREY";  // GREY, Y16 (top 8 bits kept) or YUYV (luma kept)
+  int width = 0;
+  int height = 0;
+  double frame_rate_hz = 30;
+  int buffers = 4;
+  int reconnect_min_ms = 100;
+  int reconnect_max_ms = 2000;
+};
+
+// A V4L2 capture device with mmap streaming (REQBUFS / QBUF / poll / DQBUF).
+//
+// Buffers: the driver's buffers are mapped once per open and every one dequeued is queued again
+// after its pixels were copied (and converted to 8-bit luma) into the frame slot; nothing is
+// allocated per frame.
+//
+// Time: the driver's timestamp is CLOCK_MONOTONIC when it says so (V4L2_BUF_FLAG_TIMESTAMP_
+// MONOTONIC; every modern driver): it is then taken as is for exposure_mono_ns. Drivers stamp the
+// start of exposure (V4L2_BUF_FLAG_TSTAMP_SRC_SOE) or, more often, the end of readout (EOF); for
+// EOF the exposure began one exposure + readout earlier, which this backend does not know and does
+// not subtract. A driver with another clock has its stamps mapped like the aravis backend's
+// (minimum offset to arrival).
+//
+// Loss: ENODEV / POLLERR (device unplugged) closes the device; later grabs reopen it with
+// exponential backoff, which allocates only on that recovery path.
+//
+// Thread context: open()/format() from the setup thread, grab() from the camera thread, stop()
+// and health() from any thread.
+class V4l2Camera final : public Camera {
+ public:
+  explicit V4l2Camera(V4l2CameraOptions options);
+  ~V4l2Camera() override;
+  V4l2Camera(const V4l2Camera&) = delete;
+  V4l2Camera& operator=(const V4l2Camera&) = delete;
+
+  bool open(std::string* error) override;
+  FrameFormat format() const override { return format_; }
+  GrabStatus grab(std::span<std::uint8_t> dst, FrameInfo& info,
+                  std::chrono::milliseconds timeout) override;
+  void stop() override;
+  CameraHealth health() const override;
+
+ private:
+  struct Mapping {
+    void* address = nullptr;
+    std::size_t length = 0;
+  };
+
+  bool connect(std::string* error);
+  void disconnect();
+  void lost();
+
+  V4l2CameraOptions options_;
+  FrameFormat format_;
+  std::uint32_t fourcc_ = 0;
+  std::uint32_t bytes_per_line_ = 0;  // as the driver set it
+  int fd_ = -1;
+  std::vector<Mapping> mappings_;
+  std::atomic<bool> stopped_{false};
+
+  // Camera-thread state.
+  std::int64_t next_reconnect_mono_ns_ = 0;
+  int reconnect_delay_ms_ = 0;
+  std::int64_t offset_ns_ = 0;  // for drivers without monotonic timestamps
+  bool offset_valid_ = false;
+  std::int64_t sequence_base_ = 0;  // our sequence - the driver's (it restarts on reopen)
+  std::uint64_t next_sequence_ = 0;
+  bool have_sequence_ = false;
+  std::uint32_t last_driver_sequence_ = 0;
+
+  std::atomic<std::int64_t> underruns_{0};  // gaps in the driver's sequence: frames it lost
+  std::atomic<std::int64_t> size_mismatches_{0};
+  std::atomic<std::int64_t> other_errors_{0};
+  std::atomic<std::int64_t> reconnects_{0};
+};
+
+}  // namespace laserline::hal

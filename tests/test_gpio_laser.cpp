@@ -1,0 +1,417 @@
+// The gpiod laser backend against the real libgpiod 1.6 library, through the stand-in chip of
+// tests/gpiochip_shim.cpp: linked into this test for the in-process tests, LD_PRELOADed into
+// laserlined for the daemon's safety paths and the alternate-mode timing. The shim's log is the
+// "oscilloscope": every level change on the pin with its host time.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <laserline/profile_t.hpp>
+#include <lcm/lcm-cpp.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "hal/clock.hpp"
+#include "hal/gpio_laser.hpp"
+#include "hal/registry.hpp"
+#include "thread_allocations.hpp"
+
+namespace {
+
+using laserline::hal::GpioLaser;
+using laserline::hal::GpioLaserOptions;
+using laserline::hal::LaserSwitch;
+
+std::filesystem::path g_dir;
+
+// One line of the shim's log.
+struct PinEvent {
+  std::int64_t mono_ns = 0;
+  std::int64_t wall_ns = 0;
+  unsigned offset = 0;
+  int level = 0;
+  std::string event;
+  std::string consumer;
+};
+
+std::vector<PinEvent> read_pin_log(const std::filesystem::path& path) {
+  std::vector<PinEvent> events;
+  std::ifstream in(path);
+  PinEvent e;
+  while (in >> e.mono_ns >> e.wall_ns >> e.offset >> e.level >> e.event >> e.consumer)
+    events.push_back(e);
+  return events;
+}
+
+std::string describe(const std::vector<PinEvent>& events) {
+  std::ostringstream out;
+  for (const auto& e : events)
+    out << e.mono_ns << " line " << e.offset << " level " << e.level << " " << e.event << "\n";
+  return out.str();
+}
+
+class GpioLaserTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    log_ = g_dir /
+           (std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) + ".pins");
+  }
+  std::vector<PinEvent> pins() const { return read_pin_log(log_); }
+  std::filesystem::path log_;
+};
+
+// ---- In process: the shim is linked into this executable
+// -----------------------------------------
+
+// The shim reads its environment when the chip is opened; each test gets its own log.
+void use_log(const std::filesystem::path& path) {
+  setenv("LASERLINE_GPIO_SHIM_LOG", path.c_str(), 1);
+}
+
+TEST_F(GpioLaserTest, OpensOffSwitchesWithRecordsAndLeavesOff) {
+  use_log(log_);
+  {
+    GpioLaser laser(GpioLaserOptions{"gpiochip0", 0, "", false, "test-laser"});
+    std::string error;
+    ASSERT_TRUE(laser.open(&error)) << error;
+    EXPECT_FALSE(laser.is_on());
+    LaserSwitch record;
+    const std::int64_t before = laserline::hal::monotonic_ns();
+    ASSERT_TRUE(laser.set(true, 42, &record));
+    const std::int64_t after = laserline::hal::monotonic_ns();
+    EXPECT_TRUE(laser.is_on());
+    EXPECT_TRUE(record.on);
+    EXPECT_EQ(record.for_frame, 42u);
+    EXPECT_GE(record.mono_ns, before);
+    EXPECT_LE(record.mono_ns, after);
+    ASSERT_TRUE(laser.set(false, 43, &record));
+    EXPECT_FALSE(record.on);
+    ASSERT_TRUE(laser.set(true, 44, nullptr));
+    {
+      laserline::test::ThreadAllocationCount probe_count;
+      void* volatile probe = std::malloc(64);
+      std::free(probe);
+      ASSERT_EQ(probe_count.count(), 1) << "the allocation counter does not count";
+    }
+    laserline::test::ThreadAllocationCount allocations;
+    laser.set(true, 45, &record);  // no change: the same ioctl, no edge
+    EXPECT_EQ(allocations.count(), 0) << "switching the laser allocated";
+  }  // destroyed while on
+  const auto events = pins();
+  ASSERT_EQ(events.size(), 6u) << describe(events);
+  EXPECT_EQ(events[0].event, "request");
+  EXPECT_EQ(events[0].level, 0) << "the line must be requested already off";
+  EXPECT_EQ(events[0].consumer, "test-laser");
+  EXPECT_EQ(events[1].level, 1);
+  EXPECT_EQ(events[2].level, 0);
+  EXPECT_EQ(events[3].level, 1);
+  EXPECT_EQ(events[4].level, 0) << "destroyed while on: the destructor must switch it off";
+  EXPECT_EQ(events[4].event, "set");
+  EXPECT_EQ(events[5].event, "release");
+  EXPECT_EQ(events[5].level, 0);
+}
+
+TEST_F(GpioLaserTest, ActiveLowDrivesTheInvertedLevelAndFindsLinesByName) {
+  use_log(log_);
+  {
+    GpioLaser laser(GpioLaserOptions{"0", -1, "LASER_EN", true, "laserlined"});
+    std::string error;
+    ASSERT_TRUE(laser.open(&error)) << error;
+    ASSERT_TRUE(laser.set(true, 0, nullptr));
+  }
+  const auto events = pins();
+  ASSERT_EQ(events.size(), 4u) << describe(events);
+  EXPECT_EQ(events[0].offset, 2u) << "LASER_EN is line 2 of the stand-in chip";
+  EXPECT_EQ(events[0].level, 1) << "active-low off is a high level";
+  EXPECT_EQ(events[1].level, 0);
+  EXPECT_EQ(events[2].level, 1);
+  EXPECT_EQ(events[3].event, "release");
+  EXPECT_EQ(events[3].level, 1);
+}
+
+TEST_F(GpioLaserTest, MissingChipLineOrBusyLineIsAClearError) {
+  use_log(log_);
+  std::string error;
+  GpioLaser no_chip(GpioLaserOptions{"gpiochip7", 0, "", false, "laserlined"});
+  EXPECT_FALSE(no_chip.open(&error));
+  EXPECT_EQ(error, "chip 'gpiochip7': cannot open: No such file or directory");
+
+  GpioLaser no_offset(GpioLaserOptions{"gpiochip0", 9, "", false, "laserlined"});
+  EXPECT_FALSE(no_offset.open(&error));
+  EXPECT_EQ(error, "line 9 of gpiochip0 (laserline-shim): the chip has only 4 lines (0..3)");
+
+  GpioLaser no_name(GpioLaserOptions{"gpiochip0", -1, "LASER", false, "laserlined"});
+  EXPECT_FALSE(no_name.open(&error));
+  EXPECT_EQ(error, "line 'LASER' of gpiochip0 (laserline-shim): no line of that name");
+
+  GpioLaser holder(GpioLaserOptions{"gpiochip0", 1, "", false, "other-daemon"});
+  ASSERT_TRUE(holder.open(&error)) << error;
+  GpioLaser second(GpioLaserOptions{"gpiochip0", 1, "", false, "laserlined"});
+  EXPECT_FALSE(second.open(&error));
+  EXPECT_EQ(error,
+            "line 1 of gpiochip0 (laserline-shim): cannot request it as an output: Device or "
+            "resource busy (held by 'other-daemon')");
+  EXPECT_FALSE(second.is_on());
+}
+
+TEST_F(GpioLaserTest, ConfigurationNamesTheMissingKey) {
+  auto make = [](const std::string& text) {
+    laserline::hal::YamlMap map(laserline::hal::load_yaml_text(text, "c.yaml"), "c.yaml", "laser");
+    return laserline::hal::make_laser("gpiod", map);
+  };
+  try {
+    make("{line: 3}");
+    FAIL() << "no chip accepted";
+  } catch (const laserline::hal::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("laser.chip: required"), std::string::npos) << e.what();
+  }
+  try {
+    make("{chip: gpiochip0}");
+    FAIL() << "no line accepted";
+  } catch (const laserline::hal::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("laser.line: required"), std::string::npos) << e.what();
+  }
+  EXPECT_NE(make("{chip: gpiochip0, line: LASER_EN, active_low: true}"), nullptr);
+}
+
+// ---- laserlined with the shim preloaded --------------------------------------------------------
+
+struct Daemon {
+  pid_t pid = -1;
+  std::filesystem::path output;
+};
+
+// Starts laserlined on `config` with the stand-in chip preloaded, its pin log at `pins`.
+Daemon start_daemon(const std::string& config, const std::filesystem::path& pins,
+                    const std::string& duration_s) {
+  static int counter = 0;
+  Daemon d;
+  d.output = g_dir / ("daemon" + std::to_string(++counter) + ".out");
+  const std::filesystem::path config_path = g_dir / ("daemon" + std::to_string(counter) + ".yaml");
+  std::ofstream(config_path) << config;
+  d.pid = fork();
+  if (d.pid == 0) {
+    freopen(d.output.c_str(), "w", stdout);
+    dup2(fileno(stdout), 2);
+    setenv("LD_PRELOAD", GPIOCHIP_SHIM_PATH, 1);
+    setenv("LASERLINE_GPIO_SHIM_LOG", pins.c_str(), 1);
+    // A sanitized laserlined loads its runtime after the shim; that order is harmless here.
+    setenv("ASAN_OPTIONS", "verify_asan_link_order=0", 1);
+    std::vector<const char*> argv = {LASERLINED_PATH, "--config", config_path.c_str()};
+    if (!duration_s.empty()) {
+      argv.push_back("--duration");
+      argv.push_back(duration_s.c_str());
+    }
+    argv.push_back(nullptr);
+    execv(LASERLINED_PATH, const_cast<char* const*>(argv.data()));
+    _exit(127);
+  }
+  return d;
+}
+
+std::string read_text(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+int wait_status(pid_t pid) {
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return status;
+}
+
+// Waits until the daemon's laser line has been switched on (frames are flowing).
+bool wait_for_laser_on(const std::filesystem::path& pins) {
+  for (int i = 0; i < 600; ++i) {
+    for (const auto& e : read_pin_log(pins))
+      if (e.event == "set" && e.level == 1) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return false;
+}
+
+std::string daemon_config(const std::string& laser, const std::string& camera,
+                          const std::filesystem::path& lcm_log, const std::string& sim = "") {
+  return "camera: {frame_rate_hz: 100, " + camera + " sim: {tilt_y_deg: 8" + sim +
+         "}}\n"
+         "calibration: {camera: {width: 320, height: 240, fx: 350, fy: 350}}\n"
+         "laser: {backend: gpiod, chip: gpiochip0, line: LASER_EN, " +
+         laser + "}\nlcm: {url: \"file://" + lcm_log.string() +
+         "?mode=w\", image_every_n: 0, status_period_s: 0.2}\n";
+}
+
+// The last events of a run: the laser is off when the line is released.
+void expect_left_off(const std::vector<PinEvent>& events) {
+  ASSERT_GE(events.size(), 2u) << describe(events);
+  EXPECT_EQ(events.front().event, "request");
+  EXPECT_EQ(events.front().level, 0) << "off at start";
+  EXPECT_EQ(events.back().level, 0) << "must end off:\n" << describe(events);
+}
+
+TEST_F(GpioLaserTest, DaemonAlternateSwitchesOncePerFrame) {
+  const auto lcm_log = g_dir / "alternate.lcm";
+  Daemon d = start_daemon(daemon_config("mode: alternate", "", lcm_log), log_, "3");
+  const int status = wait_status(d.pid);
+  const std::string out = read_text(d.output);
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << out;
+  const auto events = pins();
+  expect_left_off(events);
+  if (HasFailure()) return;
+
+  // Profiles in order of the frames that were grabbed (one per frame: the status says none was
+  // dropped anywhere, checked below).
+  std::vector<laserline::profile_t> profiles;
+  lcm::LogFile log(lcm_log.string(), "r");
+  ASSERT_TRUE(log.good());
+  while (const lcm::LogEvent* event = log.readNextEvent()) {
+    if (event->channel != "LASERLINE_PROFILE") continue;
+    laserline::profile_t p;
+    ASSERT_GT(p.decode(event->data, 0, static_cast<int>(event->datalen)), 0);
+    profiles.push_back(p);
+  }
+#ifdef LASERLINE_SANITIZED
+  ASSERT_GT(profiles.size(), 20u) << out;  // sanitized, the daemon runs several times slower
+#else
+  ASSERT_GT(profiles.size(), 100u) << out;
+#endif
+  ASSERT_NE(out.find(std::to_string(profiles.size()) + " frames captured, " +
+                     std::to_string(profiles.size()) + " processed, 0 dropped"),
+            std::string::npos)
+      << "every grabbed frame must have its profile:\n"
+      << out;
+
+  // Switches between the request and the release: one per grabbed frame (frame i asks for on
+  // when i is even), plus at stop at most two: the one for the frame the camera thread was
+  // waiting for when it was stopped, and the final off.
+  std::vector<PinEvent> switches;
+  for (const auto& e : events)
+    if (e.event == "set") switches.push_back(e);
+  ASSERT_GE(switches.size(), profiles.size()) << describe(events);
+  ASSERT_LE(switches.size(), profiles.size() + 2) << describe(events);
+  std::vector<double> margins_ms;  // exposure start - switch: > 0 when the switch came first
+  int late = 0;
+  for (std::size_t i = 0; i < profiles.size(); ++i) {
+    EXPECT_EQ(switches[i].level, i % 2 == 0 ? 1 : 0) << "frame " << i;
+    EXPECT_EQ(profiles[i].laser_on, i % 2 == 0) << "frame " << i;
+    const double margin_ms =
+        static_cast<double>(profiles[i].utime * 1000 - switches[i].wall_ns) * 1e-6;
+    margins_ms.push_back(margin_ms);
+    late += margin_ms < 0;
+    // The switch for frame i+1 comes after frame i arrived: never two switches in one frame.
+    if (i + 1 < profiles.size()) {
+      EXPECT_GT(switches[i + 1].wall_ns, profiles[i].utime * 1000) << "frame " << i;
+    }
+  }
+  std::sort(margins_ms.begin(), margins_ms.end());
+  std::printf(
+      "alternate mode, %zu frames at 100 Hz: %zu switches; switch -> exposure start min %.3f ms, "
+      "median %.3f ms, max %.3f ms; %d frames whose exposure began before their switch\n",
+      profiles.size(), switches.size(), margins_ms.front(), margins_ms[margins_ms.size() / 2],
+      margins_ms.back(), late);
+  EXPECT_NE(out.find("came after their frame's exposure began"), std::string::npos) << out;
+}
+
+TEST_F(GpioLaserTest, DaemonPatternModeSwitchesWhereThePatternChanges) {
+  const auto lcm_log = g_dir / "pattern.lcm";
+  Daemon d = start_daemon(daemon_config("mode: pattern, pattern: \"110\"", "", lcm_log), log_, "2");
+  const int status = wait_status(d.pid);
+  const std::string out = read_text(d.output);
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << out;
+  const auto events = pins();
+  expect_left_off(events);
+  std::vector<bool> claimed;
+  lcm::LogFile log(lcm_log.string(), "r");
+  ASSERT_TRUE(log.good());
+  while (const lcm::LogEvent* event = log.readNextEvent()) {
+    if (event->channel != "LASERLINE_PROFILE") continue;
+    laserline::profile_t p;
+    ASSERT_GT(p.decode(event->data, 0, static_cast<int>(event->datalen)), 0);
+    claimed.push_back(p.laser_on);
+  }
+  ASSERT_GT(claimed.size(), 15u) << out;
+  // Frame i asks for on when i % 3 != 2; the pin changes exactly where the pattern does.
+  std::vector<int> expected_levels;
+  bool level = false;
+  for (std::size_t i = 0; i < claimed.size(); ++i) {
+    const bool want = i % 3 != 2;
+    EXPECT_EQ(claimed[i], want) << "frame " << i;
+    if (want != level) expected_levels.push_back(want ? 1 : 0);
+    level = want;
+  }
+  std::vector<int> levels;
+  for (const auto& e : events)
+    if (e.event == "set") levels.push_back(e.level);
+  ASSERT_GE(levels.size(), expected_levels.size()) << describe(events);
+  ASSERT_LE(levels.size(), expected_levels.size() + 2) << describe(events);  // as in alternate
+  levels.resize(expected_levels.size());
+  EXPECT_EQ(levels, expected_levels);
+}
+
+TEST_F(GpioLaserTest, DaemonLeavesLaserOffOnSigterm) {
+  Daemon d = start_daemon(daemon_config("mode: on", "", g_dir / "term.lcm"), log_, "");
+  ASSERT_TRUE(wait_for_laser_on(log_)) << read_text(d.output);
+  kill(d.pid, SIGTERM);
+  const int status = wait_status(d.pid);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << read_text(d.output);
+  expect_left_off(pins());
+}
+
+TEST_F(GpioLaserTest, DaemonLeavesLaserOffWhenItCrashes) {
+  for (int sig : {SIGSEGV, SIGABRT}) {
+    std::filesystem::remove(log_);
+    Daemon d = start_daemon(daemon_config("mode: on", "", g_dir / "crash.lcm"), log_, "");
+    ASSERT_TRUE(wait_for_laser_on(log_)) << read_text(d.output);
+    kill(d.pid, sig);
+    const int status = wait_status(d.pid);
+    EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == sig) << "signal " << sig;
+    const auto events = pins();
+    expect_left_off(events);
+    // A crash does not release the line: the off came from the fatal-signal handler.
+    EXPECT_EQ(events.back().event, "set") << describe(events);
+  }
+}
+
+TEST_F(GpioLaserTest, DaemonSwitchesLaserOffWhileFramesStop) {
+  // Frames stop for 1 s after 0.5 s (a pulled cable); the laser must go off within the frame
+  // timeout and stay off until frames return.
+  Daemon d =
+      start_daemon(daemon_config("mode: on, frame_timeout_ms: 100", "timeout_ms: 200,",
+                                 g_dir / "stall.lcm", ", stall_after_s: 0.5, stall_for_s: 1"),
+                   log_, "2.5");
+  const int status = wait_status(d.pid);
+  const std::string out = read_text(d.output);
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << out;
+  const auto events = pins();
+  expect_left_off(events);
+  // The longest time the pin stayed low between two "on" periods is the outage.
+  std::int64_t longest_off_ns = 0;
+  for (std::size_t i = 1; i + 1 < events.size(); ++i) {
+    if (events[i].event == "set" && events[i].level == 0 && events[i + 1].level == 1) {
+      longest_off_ns = std::max(longest_off_ns, events[i + 1].mono_ns - events[i].mono_ns);
+    }
+  }
+  std::printf("stall of 1 s: laser off for %.3f s\n", static_cast<double>(longest_off_ns) * 1e-9);
+  EXPECT_GT(longest_off_ns, 800'000'000) << describe(events);
+  EXPECT_NE(out.find("forced off because frames stopped"), std::string::npos) << out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  g_dir = std::filesystem::temp_directory_path() / ("laserline_gpio_" + std::to_string(getpid()));
+  std::filesystem::create_directories(g_dir);
+  // The stand-in chip of the in-process tests (read when the chip is first opened).
+  setenv("LASERLINE_GPIO_SHIM_LINES", "SPARE0,SPARE1,LASER_EN,STROBE", 1);
+  const int result = RUN_ALL_TESTS();
+  std::filesystem::remove_all(g_dir);
+  return result;
+}

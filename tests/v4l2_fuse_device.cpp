@@ -1,0 +1,392 @@
+// A stand-in V4L2 capture device for tests: a FUSE file (libfuse3) that answers the V4L2 ioctls
+// a capture client uses and serves frames through mmap, so that a V4L2 client runs its real code
+// path (open, QUERYCAP, S_FMT, S_PARM, REQBUFS, QUERYBUF, mmap, QBUF, STREAMON, poll, DQBUF) on
+// this machine, which has no video device. The kernel passes a FUSE file's ioctls on when their
+// argument size is encoded in the command number, which holds for every V4L2 ioctl used here.
+// Test-only: never installed.
+//
+//   v4l2_fuse_device MOUNTPOINT [--format GREY|Y16|YUYV] [--width W] [--height H] [--fps F]
+//
+// MOUNTPOINT/video0 is the device until SIGTERM/SIGINT (then it disappears, as when a USB
+// camera is unplugged). Frame n carries the pattern of pattern_value() below at sequence n, a
+// CLOCK_MONOTONIC timestamp taken when its exposure "starts" (just before it is written), and
+// V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC | V4L2_BUF_FLAG_TSTAMP_SRC_SOE.
+//
+// mmap is served through the page cache: each buffer lives at offset index * kBufferStride of
+// the file, read() answers whole requests (a short read of a mapped page would kill the client
+// with SIGBUS), and the file's cached pages are invalidated each time a buffer is refilled so the
+// client's mapping sees the new frame. What it cannot cover is written in the README.
+#define FUSE_USE_VERSION 35
+#include <fuse.h>
+#include <linux/videodev2.h>
+#include <poll.h>
+#include <time.h>
+
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <condition_variable>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <deque>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "v4l2_test_pattern.hpp"
+
+namespace {
+
+constexpr const char* kName = "/video0";
+constexpr std::size_t kBufferStride = 16u << 20;  // file offset between buffers
+constexpr unsigned kMaxBuffers = 8;
+
+enum class State { kIdle, kQueued, kDone, kWithClient };
+
+struct Buffer {
+  std::vector<std::uint8_t> memory;
+  State state = State::kIdle;
+  v4l2_buffer info{};
+};
+
+struct Device {
+  std::mutex mutex;
+  std::uint32_t fourcc = V4L2_PIX_FMT_GREY;
+  std::uint32_t width = 640;
+  std::uint32_t height = 480;
+  std::uint32_t fps = 30;
+  std::vector<Buffer> buffers;
+  std::deque<unsigned> queued;  // in QBUF order
+  std::deque<unsigned> done;    // filled, in DQBUF order
+  bool streaming = false;
+  std::uint32_t sequence = 0;
+  std::condition_variable frame_done;
+  fuse_pollhandle* poll_handle = nullptr;
+  fuse* fs = nullptr;
+  std::atomic<bool> running{true};
+
+  std::uint32_t bytes_per_line() const { return fourcc == V4L2_PIX_FMT_GREY ? width : width * 2; }
+  std::uint32_t image_bytes() const { return bytes_per_line() * height; }
+};
+
+Device g_device;
+
+std::int64_t monotonic_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+void fill_format(v4l2_format* f) {
+  std::memset(&f->fmt, 0, sizeof(f->fmt));
+  f->type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
+  f->fmt.pix.width = g_device.width;
+  f->fmt.pix.height = g_device.height;
+  f->fmt.pix.pixelformat = g_device.fourcc;
+  f->fmt.pix.field = V4L2_FIELD_NONE;
+  f->fmt.pix.bytesperline = g_device.bytes_per_line();
+  f->fmt.pix.sizeimage = g_device.image_bytes();
+  f->fmt.pix.colorspace = V4L2_COLORSPACE_RAW;
+}
+
+int do_ioctl(const char* path, unsigned int cmd, void* /*arg*/, fuse_file_info* fi,
+             unsigned int /*flags*/, void* data) {
+  if (std::strcmp(path, kName) != 0) return -ENOTTY;
+  Device& d = g_device;
+  std::unique_lock lock(d.mutex);
+  switch (cmd) {
+    case VIDIOC_QUERYCAP: {
+      auto* cap = static_cast<v4l2_capability*>(data);
+      std::memset(cap, 0, sizeof(*cap));
+      std::snprintf(reinterpret_cast<char*>(cap->driver), sizeof(cap->driver), "laserline-fuse");
+      std::snprintf(reinterpret_cast<char*>(cap->card), sizeof(cap->card), "V4L2 stand-in");
+      std::snprintf(reinterpret_cast<char*>(cap->bus_info), sizeof(cap->bus_info), "fuse:0");
+      cap->version = 0x060100;
+      cap->device_caps = V4L2_CAP_VIDEO_CAPTURE | V4L2_CAP_STREAMING;
+      cap->capabilities = cap->device_caps | V4L2_CAP_DEVICE_CAPS;
+      return 0;
+    }
+    case VIDIOC_ENUM_FMT: {
+      auto* f = static_cast<v4l2_fmtdesc*>(data);
+      if (f->type != V4L2_BUF_TYPE_VIDEO_CAPTURE || f->index != 0) return -EINVAL;
+      f->flags = 0;
+      f->pixelformat = d.fourcc;
+      std::snprintf(reinterpret_cast<char*>(f->description), sizeof(f->description), "stand-in");
+      return 0;
+    }
+    case VIDIOC_G_FMT:
+    case VIDIOC_S_FMT:
+    case VIDIOC_TRY_FMT: {
+      auto* f = static_cast<v4l2_format*>(data);
+      if (f->type != V4L2_BUF_TYPE_VIDEO_CAPTURE) return -EINVAL;
+      // Like a fixed-mode sensor: any request is answered with the one format it has.
+      if (cmd == VIDIOC_S_FMT && d.streaming) return -EBUSY;
+      fill_format(f);
+      return 0;
+    }
+    case VIDIOC_G_PARM:
+    case VIDIOC_S_PARM: {
+      auto* p = static_cast<v4l2_streamparm*>(data);
+      if (p->type != V4L2_BUF_TYPE_VIDEO_CAPTURE) return -EINVAL;
+      if (cmd == VIDIOC_S_PARM && p->parm.capture.timeperframe.numerator != 0 &&
+          p->parm.capture.timeperframe.denominator != 0) {
+        d.fps = std::max(
+            1u, p->parm.capture.timeperframe.denominator / p->parm.capture.timeperframe.numerator);
+      }
+      std::memset(&p->parm, 0, sizeof(p->parm));
+      p->parm.capture.capability = V4L2_CAP_TIMEPERFRAME;
+      p->parm.capture.timeperframe = {1, d.fps};
+      return 0;
+    }
+    case VIDIOC_REQBUFS: {
+      auto* r = static_cast<v4l2_requestbuffers*>(data);
+      if (r->type != V4L2_BUF_TYPE_VIDEO_CAPTURE || r->memory != V4L2_MEMORY_MMAP) return -EINVAL;
+      if (d.streaming) return -EBUSY;
+      const unsigned count = std::min(r->count, kMaxBuffers);
+      d.buffers.assign(count, Buffer{});
+      d.queued.clear();
+      d.done.clear();
+      for (unsigned i = 0; i < count; ++i) {
+        Buffer& b = d.buffers[i];
+        b.memory.assign(d.image_bytes(), 0);
+        b.info.index = i;
+        b.info.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
+        b.info.memory = V4L2_MEMORY_MMAP;
+        b.info.length = d.image_bytes();
+        b.info.m.offset = static_cast<std::uint32_t>(i * kBufferStride);
+        b.info.field = V4L2_FIELD_NONE;
+      }
+      r->count = count;
+      r->capabilities = V4L2_BUF_CAP_SUPPORTS_MMAP;
+      return 0;
+    }
+    case VIDIOC_QUERYBUF:
+    case VIDIOC_QBUF:
+    case VIDIOC_DQBUF: {
+      auto* b = static_cast<v4l2_buffer*>(data);
+      if (b->type != V4L2_BUF_TYPE_VIDEO_CAPTURE || b->memory != V4L2_MEMORY_MMAP) return -EINVAL;
+      if (cmd == VIDIOC_DQBUF) {
+        if (!d.streaming) return -EINVAL;
+        if (d.done.empty() && (fi->flags & O_NONBLOCK) != 0) return -EAGAIN;
+        // Blocking, as a driver's DQBUF is (this FUSE thread waits; others serve meanwhile).
+        if (!d.frame_done.wait_for(lock, std::chrono::seconds(2),
+                                   [&] { return !d.done.empty() || !d.streaming; }) ||
+            !d.streaming) {
+          return -EIO;
+        }
+        const unsigned index = d.done.front();
+        d.done.pop_front();
+        d.buffers[index].state = State::kWithClient;
+        *b = d.buffers[index].info;
+        return 0;
+      }
+      if (b->index >= d.buffers.size()) return -EINVAL;
+      Buffer& buffer = d.buffers[b->index];
+      if (cmd == VIDIOC_QBUF) {
+        if (buffer.state == State::kQueued || buffer.state == State::kDone) return -EINVAL;
+        buffer.state = State::kQueued;
+        d.queued.push_back(b->index);
+      }
+      *b = buffer.info;
+      b->flags |= buffer.state == State::kQueued ? V4L2_BUF_FLAG_QUEUED : 0;
+      return 0;
+    }
+    case VIDIOC_STREAMON:
+    case VIDIOC_STREAMOFF: {
+      const int type = *static_cast<int*>(data);
+      if (type != V4L2_BUF_TYPE_VIDEO_CAPTURE) return -EINVAL;
+      d.streaming = cmd == VIDIOC_STREAMON;
+      d.frame_done.notify_all();
+      if (!d.streaming) {
+        d.queued.clear();
+        d.done.clear();
+        for (Buffer& b : d.buffers)
+          b.state = State::kIdle;
+      }
+      return 0;
+    }
+    default:
+      return -ENOTTY;
+  }
+}
+
+int do_getattr(const char* path, struct stat* st, fuse_file_info* /*fi*/) {
+  std::memset(st, 0, sizeof(*st));
+  if (std::strcmp(path, "/") == 0) {
+    st->st_mode = S_IFDIR | 0755;
+    st->st_nlink = 2;
+    return 0;
+  }
+  if (std::strcmp(path, kName) != 0) return -ENOENT;
+  st->st_mode = S_IFREG | 0660;
+  st->st_nlink = 1;
+  // Fixed, so that every buffer's pages are inside the file whatever REQBUFS asks later.
+  st->st_size = static_cast<off_t>(kMaxBuffers * kBufferStride);
+  return 0;
+}
+
+int do_readdir(const char* path, void* buf, fuse_fill_dir_t filler, off_t /*offset*/,
+               fuse_file_info* /*fi*/, fuse_readdir_flags /*flags*/) {
+  if (std::strcmp(path, "/") != 0) return -ENOENT;
+  filler(buf, ".", nullptr, 0, static_cast<fuse_fill_dir_flags>(0));
+  filler(buf, "..", nullptr, 0, static_cast<fuse_fill_dir_flags>(0));
+  filler(buf, kName + 1, nullptr, 0, static_cast<fuse_fill_dir_flags>(0));
+  return 0;
+}
+
+int do_open(const char* path, fuse_file_info* fi) {
+  if (std::strcmp(path, kName) != 0) return -ENOENT;
+  fi->direct_io = 0;   // mmap goes through the page cache...
+  fi->keep_cache = 0;  // ...which is not trusted across opens
+  return 0;
+}
+
+// Whole pages, always: the bytes of the buffer at that offset, zeros past its image.
+int do_read(const char* path, char* out, std::size_t size, off_t offset, fuse_file_info* /*fi*/) {
+  if (std::strcmp(path, kName) != 0) return -ENOENT;
+  Device& d = g_device;
+  std::lock_guard lock(d.mutex);
+  std::memset(out, 0, size);
+  std::size_t done = 0;
+  while (done < size) {
+    const std::size_t at = static_cast<std::size_t>(offset) + done;
+    const std::size_t index = at / kBufferStride;
+    const std::size_t within = at % kBufferStride;
+    const std::size_t chunk = std::min(size - done, kBufferStride - within);
+    if (index < d.buffers.size() && within < d.buffers[index].memory.size()) {
+      const std::size_t n = std::min(chunk, d.buffers[index].memory.size() - within);
+      std::memcpy(out + done, d.buffers[index].memory.data() + within, n);
+    }
+    done += chunk;
+  }
+  return static_cast<int>(size);
+}
+
+int do_poll(const char* path, fuse_file_info* /*fi*/, fuse_pollhandle* ph, unsigned* revents) {
+  if (std::strcmp(path, kName) != 0) return -ENOENT;
+  Device& d = g_device;
+  std::lock_guard lock(d.mutex);
+  if (ph != nullptr) {
+    if (d.poll_handle != nullptr) fuse_pollhandle_destroy(d.poll_handle);
+    d.poll_handle = ph;
+  }
+  *revents = d.done.empty() ? 0 : (POLLIN | POLLRDNORM);
+  return 0;
+}
+
+// The sensor: a frame every 1/fps into the oldest queued buffer; with none queued the frame is
+// lost (its sequence number skipped), as a real driver does.
+void produce_frames() {
+  Device& d = g_device;
+  std::int64_t next = monotonic_ns();
+  while (d.running.load()) {
+    std::uint32_t fps = 30;
+    {
+      std::lock_guard lock(d.mutex);
+      fps = d.fps;
+    }
+    next += 1'000'000'000 / fps;
+    const timespec until{static_cast<time_t>(next / 1'000'000'000),
+                         static_cast<long>(next % 1'000'000'000)};
+    clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &until, nullptr);
+    fuse_pollhandle* notify = nullptr;
+    {
+      std::lock_guard lock(d.mutex);
+      if (!d.streaming) continue;
+      const std::uint32_t sequence = d.sequence++;
+      if (d.queued.empty()) continue;
+      const unsigned index = d.queued.front();
+      d.queued.pop_front();
+      Buffer& b = d.buffers[index];
+      const std::int64_t exposure = monotonic_ns();
+      laserline::test::fill_pattern(d.fourcc, d.width, d.height, sequence, b.memory.data());
+      b.info.bytesused = d.image_bytes();
+      b.info.sequence = sequence;
+      b.info.timestamp.tv_sec = static_cast<time_t>(exposure / 1'000'000'000);
+      b.info.timestamp.tv_usec = static_cast<suseconds_t>((exposure % 1'000'000'000) / 1000);
+      b.info.flags = V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC | V4L2_BUF_FLAG_TSTAMP_SRC_SOE;
+      b.state = State::kDone;
+      d.done.push_back(index);
+      d.frame_done.notify_all();
+      notify = d.poll_handle;
+      d.poll_handle = nullptr;
+    }
+    // Outside the lock: the kernel may call read() on another FUSE thread while invalidating.
+    fuse_invalidate_path(d.fs, kName);
+    if (notify != nullptr) {
+      fuse_notify_poll(notify);
+      fuse_pollhandle_destroy(notify);
+    }
+  }
+}
+
+std::uint32_t parse_format(const std::string& name) {
+  if (name == "GREY") return V4L2_PIX_FMT_GREY;
+  if (name == "Y16") return V4L2_PIX_FMT_Y16;
+  if (name == "YUYV") return V4L2_PIX_FMT_YUYV;
+  std::fprintf(stderr, "v4l2_fuse_device: --format: expected GREY, Y16 or YUYV, got '%s'\n",
+               name.c_str());
+  std::exit(2);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2) {
+    std::fprintf(stderr,
+                 "usage: v4l2_fuse_device MOUNTPOINT [--format GREY|Y16|YUYV] [--width W] "
+                 "[--height H] [--fps F]\n");
+    return 2;
+  }
+  const std::string mountpoint = argv[1];
+  for (int i = 2; i + 1 < argc; i += 2) {
+    const std::string key = argv[i];
+    const std::string value = argv[i + 1];
+    if (key == "--format") {
+      g_device.fourcc = parse_format(value);
+    } else if (key == "--width") {
+      g_device.width = static_cast<std::uint32_t>(std::stoul(value));
+    } else if (key == "--height") {
+      g_device.height = static_cast<std::uint32_t>(std::stoul(value));
+    } else if (key == "--fps") {
+      g_device.fps = static_cast<std::uint32_t>(std::stoul(value));
+    } else {
+      std::fprintf(stderr, "v4l2_fuse_device: unknown argument '%s'\n", key.c_str());
+      return 2;
+    }
+  }
+
+  fuse_operations ops{};
+  ops.getattr = do_getattr;
+  ops.readdir = do_readdir;
+  ops.open = do_open;
+  ops.read = do_read;
+  ops.ioctl = do_ioctl;
+  ops.poll = do_poll;
+  char arg0[] = "v4l2_fuse_device";
+  char* fuse_argv[] = {arg0, nullptr};
+  fuse_args args = FUSE_ARGS_INIT(1, fuse_argv);
+  fuse* fs = fuse_new(&args, &ops, sizeof(ops), nullptr);
+  if (fs == nullptr || fuse_mount(fs, mountpoint.c_str()) != 0) {
+    std::fprintf(stderr, "v4l2_fuse_device: cannot mount on %s\n", mountpoint.c_str());
+    return 1;
+  }
+  fuse_set_signal_handlers(fuse_get_session(fs));
+  g_device.fs = fs;
+  std::printf("v4l2_fuse_device: %s%s ready\n", mountpoint.c_str(), kName);
+  std::fflush(stdout);
+  std::thread sensor(produce_frames);
+  fuse_loop_config config{};
+  config.clone_fd = 0;
+  config.max_idle_threads = 4;
+  const int result = fuse_loop_mt(fs, &config);
+  g_device.running.store(false);
+  sensor.join();
+  fuse_remove_signal_handlers(fuse_get_session(fs));
+  fuse_unmount(fs);
+  fuse_destroy(fs);
+  return result == 0 ? 0 : 1;
+}
