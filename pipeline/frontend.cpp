@@ -252,6 +252,9 @@ void Frontend::normalise_subtracting(const ImageView& current, const ImageView& 
   background_ = background;
   to_background_ = current_to_background;
   subtracting_ = true;
+  // The background may be a band of rows of the frame (its own size; the homography says where).
+  const auto bg_width = static_cast<float>(background.width);
+  const auto bg_height = static_cast<float>(background.height);
   const std::size_t s = static_cast<std::size_t>(stride_);
   for (int r = 0; r < rows_.rows(); ++r) {
     const float v = rows_.source_row(r);
@@ -276,16 +279,16 @@ void Frontend::normalise_subtracting(const ImageView& current, const ImageView& 
       const float y = (yn0 + ynu * centre) * inv;
       const float x0 = (xn0 + xnu * centre) * inv - (centre - static_cast<float>(u0));
       const float fx0 = std::floor(x0), fy0 = std::floor(y);
-      if (count != kWarpBlock || !(fx0 >= 0.0f && fx0 + static_cast<float>(count) < width_ &&
-                                   fy0 >= 0.0f && fy0 + 1.0f < height_)) {
+      if (count != kWarpBlock || !(fx0 >= 0.0f && fx0 + static_cast<float>(count) < bg_width &&
+                                   fy0 >= 0.0f && fy0 + 1.0f < bg_height)) {
         // At the border of the background frame, pixel by pixel; where there is nothing to
         // compare with there is no signal.
         for (int k = 0; k < count; ++k) {
           const float xk = x0 + static_cast<float>(k);
           const float x_cur = static_cast<float>(a[u0 + k]);
           const float now = x_cur + f * (static_cast<float>(b[u0 + k]) - x_cur);
-          const bool inside = xk >= 0.0f && xk < static_cast<float>(width_ - 1) && y >= 0.0f &&
-                              y < static_cast<float>(height_ - 1);
+          const bool inside =
+              xk >= 0.0f && xk < bg_width - 1.0f && y >= 0.0f && y < bg_height - 1.0f;
           const float difference = inside ? now - bilinear(background, xk, y) : 0.0f;
           sum[u0 + k] = above[u0 + k] + static_cast<std::int32_t>(
                                             std::lround(std::max(difference, 0.0f) * kFixedOne));
@@ -374,8 +377,8 @@ class ColumnSampler {
     y0_ = static_cast<float>(y0);
     dx_ = static_cast<float>(x1 - x0);
     dy_ = static_cast<float>(y1 - y0);
-    x_max_ = static_cast<float>(current.width - 1);
-    y_max_ = static_cast<float>(current.height - 1);
+    x_max_ = static_cast<float>(background->width - 1);
+    y_max_ = static_cast<float>(background->height - 1);
   }
 
   float operator()(int v) const {

@@ -63,7 +63,9 @@ class Frontend {
   // pixel of the current frame to where the same scene point was in the background frame),
   // resampled to normalised rows in one pass. Negative differences (the background was brighter:
   // the laser of the previous frame, or texture moving in) are clipped to 0: the laser only adds
-  // light. The warp is evaluated exactly once per block of kWarpBlock pixels and as a translation
+  // light. The background may be any image (e.g. a band of rows of the previous frame): the
+  // homography says where a current pixel is in it. The warp is evaluated exactly once per block
+  // of kWarpBlock pixels and as a translation
   // within it: for frame-to-frame motion that is exact to a few hundredths of a pixel.
   void normalise_subtracting(const ImageView& current, const ImageView& background,
                              const Homography& current_to_background);

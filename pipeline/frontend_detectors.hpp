@@ -30,7 +30,7 @@ class FirDetector final : public Detector {
 // estimated from tracked features (III-A), is subtracted before the FIR stages. With the laser
 // alternating, the previous frame is the laser-off one: the classic on/off subtraction, motion
 // compensated. Laser-off frames and frames without a motion estimate (the first one) give no
-// points. Keeps a copy of the previous frame.
+// points. Keeps a copy of the previous frame (of the rows the warp can reach).
 class BackgroundDetector final : public Detector {
  public:
   explicit BackgroundDetector(const DetectorOptions& options);
@@ -47,7 +47,8 @@ class BackgroundDetector final : public Detector {
   Frontend frontend_;
   MotionEstimator motion_;
   MotionEstimate last_motion_;
-  std::vector<std::uint8_t> background_;  // the previous frame, packed
+  std::vector<std::uint8_t> background_;  // the previous frame's rows the warp can reach, packed
+  int band_first_ = 0, band_rows_ = 0;    // which rows those are
   bool have_background_ = false;
   int width_ = 0, height_ = 0;
 };
