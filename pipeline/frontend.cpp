@@ -11,7 +11,8 @@
 // The dense kernels are compiled twice on x86-64, for the baseline and for AVX2, and the loader
 // picks the one the CPU runs (GCC function multi-versioning): twice the lanes per instruction where
 // the machine has them, and the same binary still runs everywhere.
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+// Not under ThreadSanitizer: the loader runs the version resolvers before its runtime is up.
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__SANITIZE_THREAD__)
 #define LASERLINE_DENSE_KERNEL __attribute__((target_clones("avx2", "default")))
 #else
 #define LASERLINE_DENSE_KERNEL
