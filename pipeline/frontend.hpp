@@ -41,7 +41,8 @@ class RowNormalisation {
 };
 
 // The front-end of Section III on one frame, as separately callable stages over preallocated
-// buffers (float images of the normalised size, row-major, `stride()` floats per row):
+// buffers of the normalised size (row-major, `stride()` values per row; the normalised image is
+// kept as 32-bit column prefix sums in 1/256 grey level, the band-pass as floats):
 //   normalise() or normalise_subtracting()  III-A/B  -> normalised_at()
 //   band_pass()                             III-C    -> band_passed()
 //   find_candidates()                       III-D/E  -> Profile in original coordinates
@@ -65,8 +66,7 @@ class Frontend {
   // the laser of the previous frame, or texture moving in) are clipped to 0: the laser only adds
   // light. The background may be any image (e.g. a band of rows of the previous frame): the
   // homography says where a current pixel is in it. The warp is evaluated exactly once per block
-  // of kWarpBlock pixels and as a translation
-  // within it: for frame-to-frame motion that is exact to a few hundredths of a pixel.
+  // of kWarpBlock pixels and as a translation within it (error bound at kWarpBlock).
   void normalise_subtracting(const ImageView& current, const ImageView& background,
                              const Homography& current_to_background);
   void band_pass();
