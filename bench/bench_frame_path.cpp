@@ -13,6 +13,7 @@
 #include <opencv2/core.hpp>
 #include <thread>
 
+#include "bench_scenes.hpp"
 #include "daemon/spsc_ring.hpp"
 #include "hal/sim/sim_scene.hpp"
 #include "pipeline/maxvalue_detector.hpp"
@@ -80,17 +81,6 @@ void BM_ring_reference_mutex_deque(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * kItemsPerIteration);
 }
 BENCHMARK(BM_ring_reference_mutex_deque)->UseRealTime()->Unit(benchmark::kMillisecond);
-
-laserline::hal::SimSceneOptions sim_options(int width, int height) {
-  laserline::hal::SimSceneOptions o;
-  o.calibration.camera.width = width;
-  o.calibration.camera.height = height;
-  o.calibration.camera.fx = o.calibration.camera.fy = 1400.0 * width / 1280.0;
-  o.calibration.camera.cx = (width - 1) / 2.0;
-  o.calibration.camera.cy = (height - 1) / 2.0;
-  o.tilt_y_deg = 8;
-  return o;
-}
 
 std::vector<std::uint8_t> sim_frame(int width, int height) {
   laserline::hal::SimScene scene(sim_options(width, height));

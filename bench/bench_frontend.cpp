@@ -85,8 +85,7 @@ void BM_frontend_stages_after_homography(benchmark::State& state) {
   const pipeline::DetectorOptions o = bench_options();
   pipeline::Frontend frontend(o.geometry, o.frontend);
   frontend.reset(kWidth, kHeight);
-  pipeline::Profile profile(static_cast<std::size_t>(kWidth) *
-                            o.frontend.max_candidates_per_column);
+  pipeline::Profile profile(frontend.max_points(kWidth));
   for (auto _ : state) {
     frontend.normalise_subtracting(view(f.current), view(f.previous), f.current_to_previous);
     frontend.band_pass();
@@ -126,8 +125,7 @@ void BM_naive_opencv_stages(benchmark::State& state) {
   }
   cv::Mat warped, cur_f, prev_f, diff, normalised, box_in, box_out, band, mag, box_n, box_g, noise,
       snr;
-  pipeline::Profile profile(static_cast<std::size_t>(kWidth) *
-                            o.frontend.max_candidates_per_column);
+  pipeline::Profile profile(reference.max_points(kWidth));
   for (auto _ : state) {
     profile.clear();
     cv::warpPerspective(previous, warped, cv::Mat(h), current.size(),

@@ -15,6 +15,7 @@
 #include <utility>
 #include <vector>
 
+#include "bench_scenes.hpp"
 #include "hal/sim/sim_scene.hpp"
 #include "pipeline/motion.hpp"
 
@@ -22,14 +23,7 @@ namespace {
 
 // Two frames a few apart, so that the camera has visibly moved; the laser is on.
 std::vector<std::vector<std::uint8_t>> sim_frames(int width, int height) {
-  laserline::hal::SimSceneOptions o;
-  o.calibration.camera.width = width;
-  o.calibration.camera.height = height;
-  o.calibration.camera.fx = o.calibration.camera.fy = 1400.0 * width / 1280.0;
-  o.calibration.camera.cx = (width - 1) / 2.0;
-  o.calibration.camera.cy = (height - 1) / 2.0;
-  o.tilt_y_deg = 8;
-  laserline::hal::SimScene scene(o);
+  laserline::hal::SimScene scene(sim_options(width, height));
   std::vector<std::vector<std::uint8_t>> frames(2,
                                                 std::vector<std::uint8_t>(scene.format().bytes()));
   scene.render(10, true, frames[0]);

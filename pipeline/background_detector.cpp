@@ -10,7 +10,7 @@ BackgroundDetector::BackgroundDetector(const DetectorOptions& options)
     : frontend_(options.geometry, options.frontend), motion_(options.motion) {}
 
 std::size_t BackgroundDetector::max_points(int width, int /*height*/) const {
-  return static_cast<std::size_t>(width) * frontend_.options().max_candidates_per_column;
+  return frontend_.max_points(width);
 }
 
 void BackgroundDetector::reset(int width, int height) {

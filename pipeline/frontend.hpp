@@ -56,6 +56,11 @@ class Frontend {
 
   const FrontendOptions& options() const { return options_; }
   const RowNormalisation& rows() const { return rows_; }
+  // Most points find_candidates() can give for a frame this wide.
+  std::size_t max_points(int width) const {
+    return static_cast<std::size_t>(width) *
+           static_cast<std::size_t>(options_.max_candidates_per_column);
+  }
   void reset(int width, int height);
 
   // III-B on the frame itself (the `fir` detector).

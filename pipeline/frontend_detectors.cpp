@@ -6,7 +6,7 @@ FirDetector::FirDetector(const DetectorOptions& options)
     : frontend_(options.geometry, options.frontend) {}
 
 std::size_t FirDetector::max_points(int width, int /*height*/) const {
-  return static_cast<std::size_t>(width) * frontend_.options().max_candidates_per_column;
+  return frontend_.max_points(width);
 }
 
 void FirDetector::reset(int width, int height) {
