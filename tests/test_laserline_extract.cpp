@@ -665,7 +665,7 @@ std::vector<std::array<float, 4>> read_ply(const std::string& path) {
   EXPECT_EQ(header[1], "format binary_little_endian 1.0");
   EXPECT_EQ(header[3].rfind("element vertex ", 0), 0u);
   EXPECT_EQ(header[4] + header[5] + header[6] + header[7],
-            "property float xproperty float yproperty float zproperty float snr");
+            "property float xproperty float yproperty float zproperty float scalar_snr");
   const long count = std::stol(header[3].substr(15));
   std::vector<std::array<float, 4>> points(static_cast<std::size_t>(count));
   in.read(reinterpret_cast<char*>(points.data()), count * 16);

@@ -204,7 +204,7 @@ TEST_F(PointCloudFiles, PlyHeaderCountAndValuesReadBack) {
   EXPECT_EQ(lines[2], "comment test cloud");
   EXPECT_EQ(lines[3].rfind("element vertex 3 ", 0), 0u) << lines[3];
   EXPECT_EQ(lines[4], "property float x");
-  EXPECT_EQ(lines[7], "property float snr");
+  EXPECT_EQ(lines[7], "property float scalar_snr");
   std::vector<unsigned char> body((std::istreambuf_iterator<char>(in)), {});
   ASSERT_EQ(body.size(), 3u * 4u * 4u);
   auto value = [&](std::size_t i) {  // little-endian float i

@@ -50,9 +50,12 @@ class PoseLog {
   std::vector<Row> rows_;
 };
 
-// A point cloud as binary little-endian PLY (float x y z, float snr), as CloudCompare, MeshLab
-// and PCL read it. The vertex count in the header is brought up to date by every commit(), so the
-// file is a complete PLY after each frame even if the program is interrupted later.
+// A point cloud as binary little-endian PLY (float x y z, float scalar_snr in dB), as CloudCompare,
+// MeshLab and PCL read it. The SNR is named with CloudCompare's "scalar_" prefix: CloudCompare
+// then loads it as a scalar field called "snr" without asking (also on its command line), which
+// it does not do for a property named plainly "snr". The vertex count in the header is brought up
+// to date by every commit(), so the file is a complete PLY after each frame even if the program is
+// interrupted later.
 class PlyWriter {
  public:
   // Creates (truncates) the file; `comment` goes into the header. Throws PointCloudError.
