@@ -184,7 +184,8 @@ PlyWriter::PlyWriter(const std::string& path, const std::string& comment) : path
   // The count is padded to a fixed width so that it can be rewritten in place.
   header += std::string(kCountWidth, ' ') + "\n";
   header +=
-      "property float x\nproperty float y\nproperty float z\nproperty float scalar_snr\nend_header\n";
+      "property float x\nproperty float y\nproperty float z\nproperty float "
+      "scalar_snr\nend_header\n";
   if (std::fwrite(header.data(), 1, header.size(), file_) != header.size() || !commit()) {
     throw PointCloudError(path + ": cannot be written: " + std::strerror(errno));
   }
