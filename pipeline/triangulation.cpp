@@ -54,11 +54,12 @@ bool Triangulator::undistort(double u, double v, double& x, double& y) const {
     // A root where the model folds over (det <= 0) is not the pixel's ray: the lens maps the
     // field one-to-one only up to the fold.
     if (!(det > 0.0) || !std::isfinite(det)) return false;
-    const double residual = std::hypot(fx, fy);
-    if (residual < kConverged) return true;
-    if (step == kMaxNewtonSteps) return residual < kAcceptable;
-    x -= (jyy * fx - jxy * fy) / det;
-    y -= (jxx * fy - jxy * fx) / det;
+    const double residual2 = fx * fx + fy * fy;
+    if (residual2 < kConverged * kConverged) return true;
+    if (step == kMaxNewtonSteps) return residual2 < kAcceptable * kAcceptable;
+    const double inverse_det = 1.0 / det;
+    x -= (jyy * fx - jxy * fy) * inverse_det;
+    y -= (jxx * fy - jxy * fx) * inverse_det;
   }
   return false;
 }
