@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <initializer_list>
 #include <sstream>
 
 namespace laserline::tools {
@@ -16,7 +17,8 @@ constexpr const char* kFieldNames[] = {"timestamp", "x", "y", "z", "qw", "qx", "
 constexpr int kFields = 8;
 // Navigation logs print quaternions with a few decimals: their norm is 1 only that closely.
 constexpr double kQuaternionNormTolerance = 1e-3;
-constexpr int kCountWidth = 20;  // digits reserved for the vertex count in the PLY header
+constexpr int kCountWidth = 20;          // digits reserved for the vertex count in the PLY header
+constexpr std::size_t kPointBytes = 16;  // float x y z snr
 
 std::string trim(const std::string& s) {
   const auto begin = s.find_first_not_of(" \t\r");
@@ -199,18 +201,18 @@ PlyWriter::~PlyWriter() {
 }
 
 void PlyWriter::add(const std::array<double, 3>& xyz, float snr) {
-  pending_.insert(pending_.end(), {static_cast<float>(xyz[0]), static_cast<float>(xyz[1]),
-                                   static_cast<float>(xyz[2]), snr});
+  for (float value :
+       {static_cast<float>(xyz[0]), static_cast<float>(xyz[1]), static_cast<float>(xyz[2]), snr})
+    append_le(pending_, value);
 }
 
 bool PlyWriter::commit() {
-  std::vector<unsigned char> bytes;
-  bytes.reserve(pending_.size() * 4);
-  for (float value : pending_)
-    append_le(bytes, value);
   if (std::fseek(file_, 0, SEEK_END) != 0) return false;
-  if (std::fwrite(bytes.data(), 1, bytes.size(), file_) != bytes.size()) return false;
-  const std::int64_t count = committed_ + static_cast<std::int64_t>(pending_.size() / 4);
+  if (!pending_.empty() &&
+      std::fwrite(pending_.data(), 1, pending_.size(), file_) != pending_.size()) {
+    return false;
+  }
+  const std::int64_t count = committed_ + static_cast<std::int64_t>(pending_.size() / kPointBytes);
   char digits[kCountWidth + 1];
   std::snprintf(digits, sizeof digits, "%-*lld", kCountWidth, static_cast<long long>(count));
   if (std::fseek(file_, count_offset_, SEEK_SET) != 0) return false;

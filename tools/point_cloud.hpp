@@ -72,7 +72,7 @@ class PlyWriter {
  private:
   std::string path_;
   FILE* file_ = nullptr;
-  std::vector<float> pending_;  // x y z snr per point
+  std::vector<unsigned char> pending_;  // points not yet written, as in the file
   std::int64_t committed_ = 0;
   long count_offset_ = 0;  // where the count's digits start in the header
 };
