@@ -2,6 +2,7 @@
 
 #include "pipeline/frontend_detectors.hpp"
 #include "pipeline/maxvalue_detector.hpp"
+#include "pipeline/triangulation.hpp"
 
 namespace laserline::pipeline {
 
@@ -9,11 +10,17 @@ std::vector<std::string> detector_names() {
   return {"maxvalue", "fir", "background"};
 }
 
-std::unique_ptr<Detector> make_detector(const std::string& name, const DetectorOptions& options) {
+// The detectors proper: points in pixels.
+static std::unique_ptr<Detector> make_image_detector(const std::string& name,
+                                                     const DetectorOptions& options) {
   if (name == "maxvalue") return std::make_unique<MaxValueDetector>(options.maxvalue_threshold);
   if (name == "fir") return std::make_unique<FirDetector>(options);
   if (name == "background") return std::make_unique<BackgroundDetector>(options);
   return nullptr;
+}
+
+std::unique_ptr<Detector> make_detector(const std::string& name, const DetectorOptions& options) {
+  return with_triangulation(make_image_detector(name, options), options.geometry);
 }
 
 }  // namespace laserline::pipeline
