@@ -35,7 +35,7 @@ constexpr int kReliefLog2 = 10;  // 1024 x 1024 lattice points
 constexpr int kReliefSize = 1 << kReliefLog2;
 constexpr int kReliefStride = kReliefSize + 1;
 constexpr double kReliefCellM = 0.005;  // lattice spacing: the tile repeats every 5.12 m
-constexpr int kNewtonSteps = 4;         // per pixel, from the base plane onto the relief
+constexpr int kNewtonSteps = 3;         // per pixel, from the base plane onto the relief
 
 using Vec3 = std::array<double, 3>;
 using Mat3 = std::array<double, 9>;  // row-major
