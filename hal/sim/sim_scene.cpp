@@ -868,8 +868,9 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
       const double reach = std::max({std::abs(s_row), std::abs(s_row + g.h[0] * padded),
                                      std::abs(t_row), std::abs(t_row + g.h[3] * padded)});
       const float w_min = static_cast<float>(std::max(reach * 1e-7, 1e-30));
-      // On the relief the hit slides from the base-plane hit toward the camera's foot point, so
-      // with this floor lattice and texel coordinates stay below 1e6 (and the foot's).
+      // On the relief the hit slides from the base-plane hit toward the camera's foot point (by
+      // at most all the way: the height below is floored at the relief's), so with this floor
+      // lattice and texel coordinates stay below 1e6 or the foot's, whichever is larger.
       const double texel_to_cell = g.texel_m / kReliefCellM;
       const float relief_w_min =
           static_cast<float>(std::max(reach * std::max(1.0, texel_to_cell) * 1e-6, 1e-30));
@@ -888,7 +889,7 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
                           relief_w_min,
                           static_cast<float>(g.c1 / g.texel_m),
                           static_cast<float>(g.c2 / g.texel_m),
-                          static_cast<float>(1.0 / g.d_surface),
+                          static_cast<float>(1.0 / std::max(g.d_surface, options_.relief_height_m)),
                           static_cast<float>(texel_to_cell),
                           static_cast<float>(options_.relief_height_m),
                           ambient};
