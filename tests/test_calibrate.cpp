@@ -9,7 +9,9 @@
 #include <cstdio>
 #include <filesystem>
 #include <numbers>
+#include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <string>
 #include <vector>
 
@@ -90,6 +92,39 @@ class Calibrate : public ::testing::Test {
   static std::vector<tools::CalibrationView>* views_;
 };
 std::vector<tools::CalibrationView>* Calibrate::views_ = nullptr;
+
+// The simulator's board: its corners where it says it paints them. Facing the camera at 1 m,
+// texels of 1 mm, 30 per square: the board's left edge is at texture coordinate
+// -(10 * 30 / 2) - 1/2 texels, so inner corner c is at x = (30 (c + 1) - 150.5) mm (likewise y
+// with 7 squares: -(105) - 1/2).
+TEST(SimCheckerboard, CornersAreWhereTheBoardIsPainted) {
+  hal::SimScene scene(view_options({1.0, 0, 0}));
+  const cv::Mat image = render(scene, false);
+  std::vector<cv::Point2f> corners;
+  ASSERT_TRUE(cv::findChessboardCorners(image, cv::Size(9, 6), corners));
+  cv::cornerSubPix(image, corners, cv::Size(7, 7), cv::Size(-1, -1),
+                   cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 100, 1e-4));
+  const hal::CameraIntrinsics cam = true_calibration().camera;
+  double worst = 0;
+  for (const auto& found : corners) {
+    // Nearest painted corner (findChessboardCorners may start from either end).
+    double nearest = 1e9;
+    for (int r = 0; r < 6; ++r) {
+      for (int c = 0; c < 9; ++c) {
+        const double x = (30.0 * (c + 1) - 150.5) * 1e-3, y = (30.0 * (r + 1) - 105.5) * 1e-3;
+        const double u = cam.cx + cam.fx * x / 1.0, v = cam.cy + cam.fy * y / 1.0;
+        nearest = std::min(nearest, std::hypot(found.x - u, found.y - v));
+      }
+    }
+    worst = std::max(worst, nearest);
+  }
+  std::printf("simulated board: corners within %.3f px of where they are painted\n", worst);
+  EXPECT_LT(worst, 0.1);
+
+  hal::SimSceneOptions odd = view_options({1.0, 0, 0});
+  odd.checkerboard.square_m = 0.0305;  // not a whole number of 1 mm texels
+  EXPECT_THROW(hal::SimScene{odd}, std::invalid_argument);
+}
 
 struct PlaneError {
   double angle_deg;
