@@ -294,22 +294,6 @@ void validate(const SimSceneOptions& o) {
           "scan_rate_deg_s must be within [0, 1000]");
   require(finite_nonneg(o.scan_amplitude_deg) && o.scan_amplitude_deg <= 45,
           "scan_amplitude_deg must be within [0, 45]");
-  const SimSceneOptions::Checkerboard& board = o.checkerboard;
-  require(board.columns >= 0 && board.rows >= 0, "checkerboard columns and rows must be >= 0");
-  if (board.columns > 0 && board.rows > 0) {
-    const double texel = o.texture_scale_m / kFinestSpacing;
-    const double squares = board.square_m / texel;
-    require(std::isfinite(squares) && squares >= 1 &&
-                std::abs(squares - std::round(squares)) < 1e-6 * squares,
-            "checkerboard square_m must be a whole number of texels (texture_scale_m / " +
-                std::to_string(kFinestSpacing) + ")");
-    // The board and its margin (one square each side) must fit in the wrapping texture tile.
-    const double side = std::round(squares) * (std::max(board.columns, board.rows) + 3);
-    require(side <= kTextureSize,
-            "checkerboard with its margin must fit in " + std::to_string(kTextureSize) + " texels");
-    require(finite_nonneg(board.dark_albedo) && board.dark_albedo <= 1,
-            "checkerboard dark_albedo must be within [0, 1]");
-  }
 }
 
 // Smooth value noise on a wrapping lattice of `spacing` texels, values in [-1, 1], added * amp.
@@ -391,10 +375,30 @@ std::vector<float> make_texture(std::uint64_t seed, double contrast) {
   return albedo;
 }
 
+void validate_checkerboard(const SimSceneOptions& o) {
+  const SimSceneOptions::Checkerboard& board = o.checkerboard;
+  require(board.columns >= 0 && board.rows >= 0, "checkerboard columns and rows must be >= 0");
+  if (board.columns > 0 && board.rows > 0) {
+    const double texel = o.texture_scale_m / kFinestSpacing;
+    const double squares = board.square_m / texel;
+    require(std::isfinite(squares) && squares >= 1 &&
+                std::abs(squares - std::round(squares)) < 1e-6 * squares,
+            "checkerboard square_m must be a whole number of texels (texture_scale_m / " +
+                std::to_string(kFinestSpacing) + ")");
+    // The board and its margin (one square each side) must fit in the wrapping texture tile.
+    const double side = std::round(squares) * (std::max(board.columns, board.rows) + 3);
+    require(side <= kTextureSize,
+            "checkerboard with its margin must fit in " + std::to_string(kTextureSize) + " texels");
+    require(finite_nonneg(board.dark_albedo) && board.dark_albedo <= 1,
+            "checkerboard dark_albedo must be within [0, 1]");
+  }
+}
+
 // Paints the calibration checkerboard (if any) into the albedo tile. Texel i is the albedo at
 // texture coordinate i (wrapping), and bilinear sampling puts an edge between texels i - 1 and i
 // exactly at i - 1/2: the board's edges are laid on half-integers so its squares are exact.
 void paint_checkerboard(std::vector<float>& albedo, const SimSceneOptions& o) {
+  validate_checkerboard(o);
   const SimSceneOptions::Checkerboard& board = o.checkerboard;
   if (board.columns <= 0 || board.rows <= 0) return;
   const int square =
