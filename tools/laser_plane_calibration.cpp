@@ -224,6 +224,30 @@ Plane fit_plane(const std::vector<cv::Vec3d>& points, const std::vector<char>& u
   return p;
 }
 
+// Where the radial distortion stops being one-to-one inside the image: the distorted radius
+// (as a fraction of the farthest image corner's) at which r (1 + k1 r^2 + k2 r^4 + k3 r^6) stops
+// growing; 0 when it grows all the way to the image's corners.
+double distortion_fold(const hal::CameraIntrinsics& c) {
+  double corner = 0;
+  for (double u : {0.0, c.width - 1.0}) {
+    for (double v : {0.0, c.height - 1.0})
+      corner = std::max(corner, std::hypot((u - c.cx) / c.fx, (v - c.cy) / c.fy));
+  }
+  const auto& [k1, k2, p1, p2, k3] = c.distortion;
+  (void)p1;
+  (void)p2;
+  constexpr int kSteps = 2000;
+  const double step = 4.0 * corner / kSteps;  // undistorted radius may exceed the distorted one
+  for (int i = 1; i <= kSteps; ++i) {
+    const double r = i * step, r2 = r * r;
+    const double rd = r * (1 + r2 * (k1 + r2 * (k2 + r2 * k3)));
+    if (rd >= corner) return 0.0;
+    const double slope = 1 + r2 * (3 * k1 + r2 * (5 * k2 + r2 * 7 * k3));
+    if (!(slope > 0)) return rd / corner;
+  }
+  return 1.0;  // never reaches the corners: the model shrinks the whole image onto less
+}
+
 double median(std::vector<double> v) {
   std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
   return v[v.size() / 2];
@@ -332,6 +356,27 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
     result.intrinsics_estimated = true;
   }
 
+  double reach = 0, image_corner = 0;
+  for (const auto& b : boards) {
+    for (const auto& p : b.corners)
+      reach = std::max(reach, std::hypot(p.x - cam.cx, p.y - cam.cy));
+  }
+  for (double u : {0.0, cam.width - 1.0}) {
+    for (double v : {0.0, cam.height - 1.0})
+      image_corner = std::max(image_corner, std::hypot(u - cam.cx, v - cam.cy));
+  }
+  result.corner_coverage = reach / image_corner;
+  if (result.intrinsics_estimated) {
+    const double fold = distortion_fold(cam);
+    if (fold > 0) {
+      fail(
+          format("the estimated distortion folds the image over at %.0f%% of the way to its "
+                 "corners while the boards reach only %.0f%%: add views with the board near the "
+                 "image's corners and edges, or estimate fewer --distortion-terms",
+                 100.0 * fold, 100.0 * result.corner_coverage));
+    }
+  }
+
   // Board poses.
   const cv::Matx33d k = camera_matrix(cam);
   const cv::Mat dist(cam.distortion, false);
@@ -432,19 +477,54 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
   result.points = static_cast<int>(points.size());
 
   // Plane fit with outlier rejection: 3 robust sigmas (MAD), at least 0.1 mm, until stable.
-  std::vector<char> use(points.size(), 1);
-  Plane plane = fit_plane(points, use);
-  for (int round = 0; round < 10; ++round) {
-    std::vector<double> distances(points.size());
-    for (std::size_t i = 0; i < points.size(); ++i)
-      distances[i] = std::abs(plane.normal.dot(points[i]) + plane.e);
-    const double limit = std::max(3.0 * 1.4826 * median(distances), 1e-4);
-    std::vector<char> next(points.size());
-    for (std::size_t i = 0; i < points.size(); ++i)
-      next[i] = distances[i] <= limit;
-    if (next == use) break;
-    use = std::move(next);
+  std::vector<char> allowed(points.size(), 1), use;
+  Plane plane;
+  auto robust_fit = [&] {
+    use = allowed;
     plane = fit_plane(points, use);
+    for (int round = 0; round < 10; ++round) {
+      std::vector<double> distances(points.size()), allowed_distances;
+      for (std::size_t i = 0; i < points.size(); ++i) {
+        distances[i] = std::abs(plane.normal.dot(points[i]) + plane.e);
+        if (allowed[i]) allowed_distances.push_back(distances[i]);
+      }
+      const double limit = std::max(3.0 * 1.4826 * median(allowed_distances), 1e-4);
+      std::vector<char> next(points.size());
+      for (std::size_t i = 0; i < points.size(); ++i)
+        next[i] = allowed[i] && distances[i] <= limit;
+      if (next == use) break;
+      use = std::move(next);
+      plane = fit_plane(points, use);
+    }
+  };
+  robust_fit();
+  // A view whose line is mostly off the plane saw something else as the line (e.g. a square's
+  // edge, where the line is not on the board): it is left out whole, and the plane fitted again.
+  {
+    std::vector<int> total(boards.size(), 0), kept(boards.size(), 0);
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      ++total[static_cast<std::size_t>(view_of[i])];
+      kept[static_cast<std::size_t>(view_of[i])] += use[i] ? 1 : 0;
+    }
+    bool dropped = false;
+    int remaining = 0;
+    for (std::size_t v = 0; v < boards.size(); ++v) {
+      if (total[v] == 0) continue;
+      if (2 * kept[v] < total[v]) {
+        dropped = true;
+        for (std::size_t i = 0; i < points.size(); ++i) {
+          if (view_of[i] == static_cast<int>(v)) allowed[i] = 0;
+        }
+      } else {
+        ++remaining;
+      }
+    }
+    if (remaining < 2) {
+      fail(
+          "the laser lines found do not lie on one plane (fewer than 2 views agree): check "
+          "that the line crosses the board in every view, or give --laser-off images");
+    }
+    if (dropped) robust_fit();
   }
 
   // The inliers must span a plane, not a line: at least 2 views' lines in different places.

@@ -74,6 +74,10 @@ struct PlaneCalibrationResult {
   bool intrinsics_estimated = false;
   double camera_rms_px = 0;  // cv::calibrateCamera's RMS reprojection error (when estimated)
   double corner_rms_px = 0;  // all views' corners reprojected with their poses
+  // How far out the boards' corners reach: the farthest corner's distance from the principal
+  // point as a fraction of the farthest image corner's. Estimated distortion is extrapolated
+  // beyond it.
+  double corner_coverage = 0;
   std::vector<ViewReport> views;
   int points = 0;                             // laser points on the views' lines
   int inliers = 0;                            // kept by the plane fit

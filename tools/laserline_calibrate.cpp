@@ -76,7 +76,16 @@ void print_report(const laserline::tools::PlaneCalibrationResult& r) {
   std::printf("  %dx%d fx %.3f fy %.3f cx %.3f cy %.3f distortion [%.6g %.6g %.6g %.6g %.6g]\n",
               c.width, c.height, c.fx, c.fy, c.cx, c.cy, c.distortion[0], c.distortion[1],
               c.distortion[2], c.distortion[3], c.distortion[4]);
-  std::printf("  board corners reprojected: RMS %.3f px\n", r.corner_rms_px);
+  std::printf(
+      "  board corners reprojected: RMS %.3f px; they reach %.0f%% of the way to the "
+      "image's corners\n",
+      r.corner_rms_px, 100.0 * r.corner_coverage);
+  if (r.intrinsics_estimated && r.corner_coverage < 0.8) {
+    std::printf(
+        "  warning: the distortion beyond %.0f%% is extrapolated; views with the board "
+        "near the image's corners make it sure\n",
+        100.0 * r.corner_coverage);
+  }
   const auto p = r.calibration.laser.plane_coefficients();
   std::printf("laser plane: a*X + b*Y + c*Z + e = 0 (camera frame, metres, unit normal)\n");
   std::printf("  plane [%.9f, %.9f, %.9f, %.9f]\n", p[0], p[1], p[2], p[3]);

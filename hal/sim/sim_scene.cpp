@@ -385,10 +385,13 @@ void validate_checkerboard(const SimSceneOptions& o) {
                 std::abs(squares - std::round(squares)) < 1e-6 * squares,
             "checkerboard square_m must be a whole number of texels (texture_scale_m / " +
                 std::to_string(kFinestSpacing) + ")");
-    // The board and its margin (one square each side) must fit in the wrapping texture tile.
-    const double side = std::round(squares) * (std::max(board.columns, board.rows) + 3);
-    require(side <= kTextureSize,
-            "checkerboard with its margin must fit in " + std::to_string(kTextureSize) + " texels");
+    // The board and its margin (one square each side) must fit in the half of the wrapping
+    // texture tile around the surface point.
+    const double reach = std::round(squares) * (std::max(board.columns, board.rows) + 3) / 2.0 +
+                         std::max(std::abs(board.offset_x_m), std::abs(board.offset_y_m)) / texel;
+    require(std::isfinite(reach) && reach <= kTextureSize / 2,
+            "checkerboard with its margin and offset must lie within " +
+                std::to_string(kTextureSize / 2) + " texels of the surface point");
     require(finite_nonneg(board.dark_albedo) && board.dark_albedo <= 1,
             "checkerboard dark_albedo must be within [0, 1]");
   }
@@ -405,12 +408,16 @@ void paint_checkerboard(std::vector<float>& albedo, const SimSceneOptions& o) {
       static_cast<int>(std::lround(board.square_m * kFinestSpacing / o.texture_scale_m));
   const int squares_x = board.columns + 1, squares_y = board.rows + 1;
   // Board coordinate (in texels from the board's top-left edge) of texel 0's centre.
-  const int origin_x = squares_x * square / 2, origin_y = squares_y * square / 2;
+  const double texel = o.texture_scale_m / kFinestSpacing;
+  const int origin_x =
+      squares_x * square / 2 - static_cast<int>(std::lround(board.offset_x_m / texel));
+  const int origin_y =
+      squares_y * square / 2 - static_cast<int>(std::lround(board.offset_y_m / texel));
   const auto dark = static_cast<float>(board.dark_albedo);
   for (int y = 0; y < kTextureStride; ++y) {
     for (int x = 0; x < kTextureStride; ++x) {
       // The tile wraps: texel x stands for texture coordinate x or x - kTextureSize, whichever
-      // is nearer 0 (the board is centred there).
+      // is nearer 0 (the board lies within half a tile of it).
       const int sx = (x & (kTextureSize - 1)) < kTextureSize / 2
                          ? (x & (kTextureSize - 1))
                          : (x & (kTextureSize - 1)) - kTextureSize;
