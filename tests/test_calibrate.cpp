@@ -3,6 +3,7 @@
 // rendered with, the calibration file's round trip, and the errors for bad inputs.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <array>
 #include <cmath>
@@ -229,7 +230,8 @@ TEST_F(Calibrate, LaserOnImagesAloneWithGivenIntrinsics) {
 
 TEST_F(Calibrate, WritesACalibrationFileTheDaemonReads) {
   const auto r = tools::calibrate_laser_plane(*views_, board_options());
-  const fs::path path = fs::path(testing::TempDir()) / "laserline_calibrate_roundtrip.yaml";
+  const fs::path path = fs::path(testing::TempDir()) /
+                        ("laserline_calibrate_roundtrip_" + std::to_string(getpid()) + ".yaml");
   tools::write_calibration_file(path.string(), r, "test views");
   const hal::Calibration back = hal::load_calibration_file(path.string());
   const auto& c = r.calibration.camera;
@@ -323,7 +325,8 @@ RunResult run(const std::string& command) {
 // The executable on files: folders of laser-on and laser-off images, the written file, and the
 // one-line error for an unreadable image.
 TEST_F(Calibrate, ToolOnImageFiles) {
-  const fs::path dir = fs::path(testing::TempDir()) / "laserline_calibrate_tool";
+  const fs::path dir =
+      fs::path(testing::TempDir()) / ("laserline_calibrate_tool_" + std::to_string(getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir / "on");
   fs::create_directories(dir / "off");
