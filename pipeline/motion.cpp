@@ -185,6 +185,13 @@ MotionEstimator::MotionEstimator(const MotionOptions& options) : options_(option
   require(std::isfinite(options.inlier_px) && options.inlier_px > 0, "inlier_px must be > 0");
   require(options.min_inliers >= 4, "min_inliers must be >= 4");
   require(options.laser_filter_ratio >= 1.0, "laser_filter_ratio must be >= 1");
+  require(options.essential_ransac_iterations >= 1, "essential_ransac_iterations must be >= 1");
+  require(std::isfinite(options.essential_inlier_px) && options.essential_inlier_px > 0,
+          "essential_inlier_px must be > 0");
+  require(
+      std::isfinite(options.essential_min_parallax_px) && options.essential_min_parallax_px >= 0,
+      "essential_min_parallax_px must be >= 0");
+  require(options.scale_tracks >= 0, "scale_tracks must be >= 0");
   state_ = new State;
 }
 
@@ -192,12 +199,32 @@ MotionEstimator::~MotionEstimator() {
   delete state_;
 }
 
-void MotionEstimator::reset(int width, int height) {
+void MotionEstimator::reset(int width, int height, const ScannerGeometry* geometry) {
   const MotionOptions& o = options_;
   const std::string size = std::to_string(width) + "x" + std::to_string(height);
   if (width <= 0 || height <= 0 || width > 65535 || height > 65535) {
     throw std::invalid_argument("MotionEstimator::reset: image size " + size +
                                 " must be within 1x1 .. 65535x65535");
+  }
+  if (geometry != nullptr) {
+    if (geometry->width != width || geometry->height != height) {
+      throw std::invalid_argument(
+          "MotionEstimator::reset: image size " + size + " differs from the geometry's " +
+          std::to_string(geometry->width) + "x" + std::to_string(geometry->height));
+    }
+    if (!(geometry->fx > 0 && geometry->fy > 0 && std::isfinite(geometry->fx) &&
+          std::isfinite(geometry->fy) && std::isfinite(geometry->cx) &&
+          std::isfinite(geometry->cy))) {
+      throw std::invalid_argument(
+          "MotionEstimator::reset: the geometry's fx, fy must be > 0 and "
+          "cx, cy finite");
+    }
+    for (double k : geometry->distortion) {
+      if (!std::isfinite(k)) {
+        throw std::invalid_argument(
+            "MotionEstimator::reset: the geometry's distortion must be finite");
+      }
+    }
   }
   State& s = *state_;
   // Until this reset() completes, update() refuses every frame (a refused size leaves no half

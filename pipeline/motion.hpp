@@ -2,9 +2,11 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <span>
 #include <vector>
 
+#include "pipeline/geometry.hpp"
 #include "pipeline/image_view.hpp"
 
 namespace laserline::pipeline {
@@ -24,6 +26,28 @@ struct MotionOptions {
   // Paper IV-A: a feature whose neighbourhood responds much more strongly across the laser line
   // (d/dv, the line runs along rows) than along it (d/du) may sit on the line; it is kept out.
   double laser_filter_ratio = 3.0;
+  // Camera motion (essential matrix), only when reset() was given the intrinsics: five-point
+  // RANSAC over the same tracks, at most this many samples (each gives up to 10 hypotheses).
+  int essential_ransac_iterations = 100;
+  double essential_inlier_px = 1.0;  // Sampson distance of an inlier, full-size pixels
+  // Camera rotation alone (or too little translation) leaves the translation undetermined: the
+  // median image motion the rotation does not explain must be at least this (full-size pixels).
+  double essential_min_parallax_px = 1.0;
+  // Inlier tracks of a pair followed on into the next frame, for CameraMotion::relative_scale
+  // (0: no relative scale). Each costs one more tracked feature per frame.
+  int scale_tracks = 64;
+};
+
+// The camera's motion between consecutive frames: X_current = R * X_previous + t, camera
+// coordinates (x right, y down, z forward), t of unit length (a single camera knows no scale).
+struct CameraMotion {
+  bool valid = false;
+  std::array<double, 9> rotation{1, 0, 0, 0, 1, 0, 0, 0, 1};  // row-major R
+  std::array<double, 3> translation{};                        // t, |t| = 1 when valid
+  int inliers = 0;
+  // |t of this frame pair| / |t of the previous pair|, from features tracked over the three
+  // frames (triangulated with both pairs); NaN when unknown.
+  double relative_scale = std::numeric_limits<double>::quiet_NaN();
 };
 
 // A planar projective transformation of pixel coordinates: p_current ~ H p_previous.
@@ -52,13 +76,18 @@ struct MotionEstimate {
   int rejected_on_laser = 0;  // of those, kept out by the laser filter
   int tracked = 0;            // tracks that converged
   int inliers = 0;
-  float rms_px = 0;  // RMS transfer error of the inliers, full-size pixels
+  float rms_px = 0;     // RMS transfer error of the inliers, full-size pixels
+  CameraMotion camera;  // invalid unless reset() was given the intrinsics
 };
 
 // Estimates the homography between consecutive frames from tracked image features (paper III-A):
 // features picked on a grid at a reduced resolution, laser-like features filtered out (IV-A),
 // tracked into the next frame coarse-to-fine, homography by bounded RANSAC and a least-squares
-// refit on the inliers. reset() allocates; update() does not.
+// refit on the inliers. With the camera's intrinsics and distortion (reset() with a geometry) it
+// also estimates the camera motion from the same tracks: undistorted, normalised coordinates,
+// five-point essential matrix by bounded RANSAC, cheirality to pick R and t, and the scale of t
+// relative to the previous pair from tracks followed over three frames.
+// reset() allocates; update() does not.
 // Thread context: one thread at a time per instance.
 class MotionEstimator {
  public:
@@ -68,7 +97,9 @@ class MotionEstimator {
   MotionEstimator& operator=(const MotionEstimator&) = delete;
 
   const MotionOptions& options() const { return options_; }
-  void reset(int width, int height);
+  // `geometry` (copied; may be null: homography only) gives the intrinsics and distortion for the
+  // camera motion; its size must be width x height.
+  void reset(int width, int height, const ScannerGeometry* geometry = nullptr);
   // Takes frame n (it is not kept: what is needed is copied into the pyramid) and estimates the
   // motion from the frame given before. Invalid after reset() and when too few inliers remain.
   MotionEstimate update(const ImageView& frame);
@@ -86,6 +117,9 @@ class MotionEstimator {
   MotionEstimate estimate_from_previous(int current, const ImageView& frame);
   // RANSAC and least-squares refit over the first n tracked pairs; false when nothing fits.
   bool fit_homography(int n, Homography& result, int& inlier_count);
+  // Five-point RANSAC over the first n tracked pairs (undistorted, normalised), cheirality, refit,
+  // and the scale relative to the previous pair.
+  CameraMotion estimate_camera_motion(int n);
 
   MotionOptions options_;
   State* state_ = nullptr;
