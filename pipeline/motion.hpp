@@ -2,9 +2,11 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <span>
 #include <vector>
 
+#include "pipeline/geometry.hpp"
 #include "pipeline/image_view.hpp"
 
 namespace laserline::pipeline {
@@ -24,6 +26,28 @@ struct MotionOptions {
   // Paper IV-A: a feature whose neighbourhood responds much more strongly across the laser line
   // (d/dv, the line runs along rows) than along it (d/du) may sit on the line; it is kept out.
   double laser_filter_ratio = 3.0;
+  // Camera motion (essential matrix), only when reset() was given the intrinsics: five-point
+  // RANSAC over the same tracks, at most this many samples (each gives up to 10 hypotheses).
+  int essential_ransac_iterations = 100;
+  double essential_inlier_px = 1.0;  // Sampson distance of an inlier, full-size pixels
+  // Camera rotation alone (or too little translation) leaves the translation undetermined: the
+  // median image motion the rotation does not explain must be at least this (full-size pixels).
+  double essential_min_parallax_px = 1.0;
+  // Inlier tracks of a pair followed on into the next frame, for CameraMotion::relative_scale
+  // (0: no relative scale). Each costs one more tracked feature per frame.
+  int scale_tracks = 64;
+};
+
+// The camera's motion between consecutive frames: X_current = R * X_previous + t, camera
+// coordinates (x right, y down, z forward), t of unit length (a single camera knows no scale).
+struct CameraMotion {
+  bool valid = false;
+  std::array<double, 9> rotation{1, 0, 0, 0, 1, 0, 0, 0, 1};  // row-major R
+  std::array<double, 3> translation{};                        // t, |t| = 1 when valid
+  int inliers = 0;
+  // |t of this frame pair| / |t of the previous pair|, from features tracked over the three
+  // frames (triangulated with both pairs); NaN when unknown.
+  double relative_scale = std::numeric_limits<double>::quiet_NaN();
 };
 
 // A planar projective transformation of pixel coordinates: p_current ~ H p_previous.
@@ -52,13 +76,72 @@ struct MotionEstimate {
   int rejected_on_laser = 0;  // of those, kept out by the laser filter
   int tracked = 0;            // tracks that converged
   int inliers = 0;
-  float rms_px = 0;  // RMS transfer error of the inliers, full-size pixels
+  float rms_px = 0;     // RMS transfer error of the inliers, full-size pixels
+  CameraMotion camera;  // invalid unless reset() was given the intrinsics
+};
+
+// Solutions of the five-point relative orientation problem (Nister; Stewenius' Groebner basis
+// form): essential matrices E (row-major) with current^T E previous = 0 for the five normalised
+// image points (x, y, 1) given. Returns how many (0 .. 10); no allocation.
+int five_point_essentials(const std::array<std::array<double, 2>, 5>& previous,
+                          const std::array<std::array<double, 2>, 5>& current,
+                          std::array<std::array<double, 9>, 10>& essentials);
+
+// Camera motion between consecutive frames from point correspondences in pixels (as seen, with
+// the lens distortion of the geometry): undistorted and normalised, five-point RANSAC with
+// a capped number of samples, Sampson error in pixels for the inliers, cheirality to pick R and t
+// among the four decompositions, a linear (eight-point) refit on the inliers kept when it fits
+// better. For relative_scale it asks for a subset of this pair's inliers to be followed into the
+// next frame (to_follow()), keeping their depth; with where they were found there, their depth
+// from the next pair gives the ratio of the two translations (median).
+// reset() allocates; estimate() does not. Thread context: one thread at a time per instance.
+class CameraMotionEstimator {
+ public:
+  explicit CameraMotionEstimator(const MotionOptions& options = {});
+
+  // Capacity: at most max_tracks correspondences per estimate().
+  void reset(const ScannerGeometry& geometry, int max_tracks);
+  // Forgets the previous pair (no relative scale for the next estimate()).
+  void forget();
+  // `tracks`: previous -> current pixel positions (FeatureTrack::inlier is ignored).
+  // `followed`: where the points to_follow() gave after the previous estimate() were found in
+  // the current frame, in the same order; NaN where lost, empty when not followed.
+  CameraMotion estimate(std::span<const FeatureTrack> tracks,
+                        std::span<const std::array<float, 2>> followed);
+  // Per track of the last estimate(): 1 if an inlier of the camera motion.
+  std::span<const std::uint8_t> inliers() const { return {inlier_.data(), track_count_}; }
+  // Points of the current frame (pixels) to find in the next one, for its relative_scale.
+  std::span<const std::array<float, 2>> to_follow() const {
+    return {follow_.data(), follow_count_};
+  }
+
+ private:
+  // Undistorted normalised coordinates of pixel (u, v).
+  std::array<double, 2> normalise(double u, double v) const;
+
+  MotionOptions options_;
+  ScannerGeometry geometry_;
+  double focal_ = 1;
+  std::size_t track_count_ = 0;
+  // Per correspondence: normalised coordinates, RANSAC order and inlier flags, residuals.
+  std::vector<double> x1_, y1_, x2_, y2_;
+  std::vector<int> order_;
+  std::vector<std::uint8_t> inlier_, candidate_;
+  std::vector<double> residual_;
+  // Points to follow into the next frame and their depth in this frame (units of |t|).
+  std::vector<std::array<float, 2>> follow_;
+  std::vector<double> follow_depth_;
+  std::size_t follow_count_ = 0;
 };
 
 // Estimates the homography between consecutive frames from tracked image features (paper III-A):
 // features picked on a grid at a reduced resolution, laser-like features filtered out (IV-A),
 // tracked into the next frame coarse-to-fine, homography by bounded RANSAC and a least-squares
-// refit on the inliers. reset() allocates; update() does not.
+// refit on the inliers. With the camera's intrinsics and distortion (reset() with a geometry) it
+// also estimates the camera motion from the same tracks: undistorted, normalised coordinates,
+// five-point essential matrix by bounded RANSAC, cheirality to pick R and t, and the scale of t
+// relative to the previous pair from tracks followed over three frames.
+// reset() allocates; update() does not.
 // Thread context: one thread at a time per instance.
 class MotionEstimator {
  public:
@@ -68,7 +151,9 @@ class MotionEstimator {
   MotionEstimator& operator=(const MotionEstimator&) = delete;
 
   const MotionOptions& options() const { return options_; }
-  void reset(int width, int height);
+  // `geometry` (copied; may be null: homography only) gives the intrinsics and distortion for the
+  // camera motion; its size must be width x height.
+  void reset(int width, int height, const ScannerGeometry* geometry = nullptr);
   // Takes frame n (it is not kept: what is needed is copied into the pyramid) and estimates the
   // motion from the frame given before. Invalid after reset() and when too few inliers remain.
   MotionEstimate update(const ImageView& frame);
@@ -86,9 +171,15 @@ class MotionEstimator {
   MotionEstimate estimate_from_previous(int current, const ImageView& frame);
   // RANSAC and least-squares refit over the first n tracked pairs; false when nothing fits.
   bool fit_homography(int n, Homography& result, int& inlier_count);
+  // Follows the camera estimator's points (to_follow()) from the previous frame into `frame`
+  // (pyramid `current`), into State::followed; returns how many there are.
+  int follow_points(int current, const ImageView& frame);
+  // Keeps the full-size patches around the camera estimator's new points to follow.
+  void keep_follow_patches(const ImageView& frame);
 
   MotionOptions options_;
   State* state_ = nullptr;
+  CameraMotionEstimator camera_;
 };
 
 }  // namespace laserline::pipeline
