@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <span>
 #include <vector>
 
 namespace laserline::pipeline {
@@ -58,6 +59,8 @@ class Profile {
   }
 
   const std::vector<ProfilePoint>& points() const { return points_; }
+  // The points for a later stage to complete in place (e.g. xyz); their number stays fixed.
+  std::span<ProfilePoint> mutable_points() { return points_; }
   std::size_t size() const { return points_.size(); }
   std::size_t capacity() const { return points_.capacity(); }
   bool overflowed() const { return overflowed_; }

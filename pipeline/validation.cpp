@@ -1,0 +1,473 @@
+#include "pipeline/validation.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+
+namespace laserline::pipeline {
+
+namespace {
+
+// Variance of a chain-code step that is only noise (px^2): keeps straight, noisy segments from
+// correlating with each other by chance.
+constexpr double kChainCodeNoise = 0.02;
+
+double box_distance(const LineSegment& a, const LineSegment& b) {
+  const double du = std::max({0, a.u_min - b.u_max, b.u_min - a.u_max});
+  const double dv = std::max({0.0f, a.v_min - b.v_max, b.v_min - a.v_max});
+  return std::hypot(du, dv);
+}
+
+using Vec3 = std::array<double, 3>;
+
+Vec3 rotate(const std::array<double, 9>& r, const Vec3& x) {
+  return {r[0] * x[0] + r[1] * x[1] + r[2] * x[2], r[3] * x[0] + r[4] * x[1] + r[5] * x[2],
+          r[6] * x[0] + r[7] * x[1] + r[8] * x[2]};
+}
+Vec3 rotate_back(const std::array<double, 9>& r, const Vec3& x) {
+  return {r[0] * x[0] + r[3] * x[1] + r[6] * x[2], r[1] * x[0] + r[4] * x[1] + r[7] * x[2],
+          r[2] * x[0] + r[5] * x[1] + r[8] * x[2]};
+}
+double dot(const Vec3& a, const Vec3& b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// IV-B
+
+void SegmentedFrame::reset(std::size_t max_points, double max_gap_px) {
+  points.reserve(max_points);
+  segments.reserve(max_points);
+  // A segment spans at most max_gap columns per candidate.
+  const auto span = static_cast<std::size_t>(std::ceil(std::max(max_gap_px, 1.0)));
+  rows.reserve(max_points * span + 1);
+  chain_code.reserve(max_points * span + 1);
+  clear();
+}
+
+void SegmentedFrame::clear() {
+  points.clear();
+  segments.clear();
+  rows.clear();
+  chain_code.clear();
+}
+
+void SegmentationScratch::reset(std::size_t max_points) {
+  for (std::vector<int>* v : {&order, &next, &head, &tail, &count, &active})
+    v->assign(max_points, 0);
+}
+
+void segment_candidates(const Profile& profile, const ValidationOptions& options,
+                        SegmentedFrame& out, SegmentationScratch& scratch) {
+  out.clear();
+  const std::vector<ProfilePoint>& pts = profile.points();
+  const int n = static_cast<int>(
+      std::min({pts.size(), scratch.order.size(), out.points.capacity(), out.segments.capacity()}));
+  int* order = scratch.order.data();
+  for (int i = 0; i < n; ++i)
+    order[i] = i;
+  auto before = [&pts](int a, int b) {
+    return pts[a].u != pts[b].u ? pts[a].u < pts[b].u : pts[a].v < pts[b].v;
+  };
+  // The front-ends give their candidates by column; sort only when they do not.
+  if (!std::is_sorted(order, order + n, before)) std::sort(order, order + n, before);
+
+  // Link each candidate to the nearest segment end within the gap in an earlier column.
+  const double gap = options.max_neighbour_gap_px;
+  const double gap2 = gap * gap;
+  const int column_gap = static_cast<int>(std::floor(gap));
+  int* next = scratch.next.data();
+  int* head = scratch.head.data();
+  int* tail = scratch.tail.data();
+  int* count = scratch.count.data();
+  int* active = scratch.active.data();
+  int building = 0, active_count = 0;
+  for (int i = 0; i < n; ++i) {
+    const int p = order[i];
+    const ProfilePoint& point = pts[p];
+    next[p] = -1;
+    if (i == 0 || pts[order[i - 1]].u != point.u) {
+      // New column: segments that ended too far to the left can no longer grow.
+      int kept = 0;
+      for (int a = 0; a < active_count; ++a)
+        if (pts[tail[active[a]]].u >= point.u - column_gap) active[kept++] = active[a];
+      active_count = kept;
+    }
+    int best = -1;
+    double best_d2 = gap2;
+    for (int a = 0; a < active_count; ++a) {
+      const ProfilePoint& end = pts[tail[active[a]]];
+      if (end.u >= point.u) continue;  // already extended in this column
+      const double du = point.u - end.u, dv = point.v - end.v;
+      const double d2 = du * du + dv * dv;
+      if (d2 <= best_d2) {
+        best_d2 = d2;
+        best = active[a];
+      }
+    }
+    if (best >= 0) {
+      next[tail[best]] = p;
+      tail[best] = p;
+      ++count[best];
+    } else {
+      head[building] = tail[building] = p;
+      count[building] = 1;
+      active[active_count++] = building++;
+    }
+  }
+
+  // Keep the segments long enough; lay out their points, rows and chain codes.
+  const std::size_t code_capacity = out.rows.capacity();
+  for (int s = 0; s < building; ++s) {
+    if (count[s] < options.min_segment_points) continue;
+    LineSegment seg;
+    seg.first = static_cast<int>(out.points.size());
+    seg.count = count[s];
+    seg.u_min = pts[head[s]].u;
+    seg.u_max = pts[tail[s]].u;
+    seg.v_min = seg.v_max = pts[head[s]].v;
+    seg.code_first = static_cast<int>(out.rows.size());
+    if (out.rows.size() + static_cast<std::size_t>(seg.u_max - seg.u_min + 1) > code_capacity)
+      break;
+    int previous = -1;
+    for (int p = head[s]; p >= 0; p = next[p]) {
+      const ProfilePoint& point = pts[p];
+      out.points.push_back({point.u, point.v, p});
+      seg.v_min = std::min(seg.v_min, point.v);
+      seg.v_max = std::max(seg.v_max, point.v);
+      if (previous >= 0) {
+        // Rows of the columns between two candidates: linear.
+        const ProfilePoint& from = pts[previous];
+        const int steps = point.u - from.u;
+        for (int k = 1; k < steps; ++k)
+          out.rows.push_back(from.v + (point.v - from.v) * static_cast<float>(k) / steps);
+      }
+      out.rows.push_back(point.v);
+      previous = p;
+    }
+    for (int u = seg.u_min; u < seg.u_max; ++u) {
+      const auto at = static_cast<std::size_t>(seg.code_first + (u - seg.u_min));
+      out.chain_code.push_back(out.rows[at + 1] - out.rows[at]);
+    }
+    out.chain_code.push_back(0.0f);  // keeps chain_code indexed like rows
+    out.segments.push_back(seg);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// IV-C
+
+void match_by_chain_code(const SegmentedFrame& previous, const SegmentedFrame& current,
+                         LineSegment& s, const ValidationOptions& options) {
+  s.previous = -1;
+  s.score = 0;
+  double best_score = options.min_correlation;
+  const int min_overlap = std::max(options.min_segment_points - 1, 1);
+  const float* a = current.chain_code.data() + s.code_first - s.u_min;  // a[u]: step u -> u+1
+  for (std::size_t t = 0; t < previous.segments.size(); ++t) {
+    const LineSegment& other = previous.segments[t];
+    if (box_distance(s, other) > options.max_box_distance_px) continue;
+    const float* b = previous.chain_code.data() + other.code_first - other.u_min;
+    // Enough overlap: at least half of the shorter one.
+    const int shorter = std::min(s.u_max - s.u_min, other.u_max - other.u_min);
+    const int needed = std::max(min_overlap, shorter / 2);
+    // Offsets from 0 outwards, so that a tie (a straight segment fits at every offset) keeps the
+    // smallest shift.
+    for (int step = 0; step <= 2 * options.max_column_offset; ++step) {
+      const int k = (step % 2 == 0 ? 1 : -1) * ((step + 1) / 2);
+      const int lo = std::max(s.u_min, other.u_min + k);
+      const int hi = std::min(s.u_max, other.u_max + k) - 1;  // last step
+      const int length = hi - lo + 1;
+      if (length < needed) continue;
+      double ab = 0, aa = 0, bb = 0;
+      for (int u = lo; u <= hi; ++u) {
+        const double x = a[u], y = b[u - k];
+        ab += x * y;
+        aa += x * x;
+        bb += y * y;
+      }
+      const double noise = kChainCodeNoise * length;
+      const double score = ab / std::sqrt((aa + noise) * (bb + noise));
+      if (score > best_score) {
+        best_score = score;
+        s.previous = static_cast<int>(t);
+        s.column_offset = static_cast<float>(k);
+        s.row_offset = 0;
+        s.score = static_cast<float>(score);
+      }
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// IV-D
+
+bool back_project(const ScannerGeometry& camera, const PairMotion& first, const PairMotion& second,
+                  const std::array<double, 2>& x0, const std::array<double, 2>& x1,
+                  double max_depth_baselines, std::array<double, 2>& x2, double& ray_gap_px) {
+  const Vec3 a{(x0[0] - camera.cx) / camera.fx, (x0[1] - camera.cy) / camera.fy, 1.0};
+  const Vec3 b{(x1[0] - camera.cx) / camera.fx, (x1[1] - camera.cy) / camera.fy, 1.0};
+  // In frame n-1: ray 0 from camera n-2's centre t1 along R1 a, ray 1 from the origin along b.
+  const Vec3 d0 = rotate(first.rotation, a);
+  const Vec3& t1 = first.translation;
+  // Closest points t1 + mu d0 and lambda b: least squares of mu d0 - lambda b = -t1.
+  const double d0d0 = dot(d0, d0), bb = dot(b, b), d0b = dot(d0, b);
+  const double d0t = dot(d0, t1), bt = dot(b, t1);
+  const double det = d0d0 * bb - d0b * d0b;
+  if (!(det > 1e-18)) return false;  // parallel rays: no parallax at all
+  const double mu = (d0b * bt - bb * d0t) / det;
+  const double lambda = (d0d0 * bt - d0b * d0t) / det;
+  if (!(mu > 0) || !(lambda > 0)) return false;  // behind a camera
+  const Vec3 on0{t1[0] + mu * d0[0], t1[1] + mu * d0[1], t1[2] + mu * d0[2]};
+  const Vec3 x{0.5 * (on0[0] + lambda * b[0]), 0.5 * (on0[1] + lambda * b[1]),
+               0.5 * (on0[2] + lambda * b[2])};
+  const double baseline = std::sqrt(dot(t1, t1));
+  if (!(x[2] > 0) || !(x[2] <= max_depth_baselines * baseline)) return false;
+
+  // How far the point lands from the two observations it came from.
+  const Vec3 rel{x[0] - t1[0], x[1] - t1[1], x[2] - t1[2]};
+  const Vec3 in0 = rotate_back(first.rotation, rel);
+  if (!(in0[2] > 0)) return false;
+  const double e0 = std::hypot(camera.fx * in0[0] / in0[2] + camera.cx - x0[0],
+                               camera.fy * in0[1] / in0[2] + camera.cy - x0[1]);
+  const double e1 = std::hypot(camera.fx * x[0] / x[2] + camera.cx - x1[0],
+                               camera.fy * x[1] / x[2] + camera.cy - x1[1]);
+  ray_gap_px = std::max(e0, e1);
+
+  // Into frame n, with the translation in the first pair's units.
+  const double scale = second.relative_scale;
+  const Vec3 r = rotate(second.rotation, x);
+  const Vec3 in2{r[0] + scale * second.translation[0], r[1] + scale * second.translation[1],
+                 r[2] + scale * second.translation[2]};
+  if (!(in2[2] > 0)) return false;
+  x2 = {camera.fx * in2[0] / in2[2] + camera.cx, camera.fy * in2[1] / in2[2] + camera.cy};
+  return true;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+LineValidator::LineValidator(const ScannerGeometry& geometry, const ValidationOptions& options)
+    : geometry_(geometry), options_(options) {
+  if (!(options.max_neighbour_gap_px >= 1.0))
+    throw std::invalid_argument("detector.validation.max_neighbour_gap_px must be >= 1");
+  if (options.min_segment_points < 2)
+    throw std::invalid_argument("detector.validation.min_segment_points must be >= 2");
+  if (!(options.background_px > 0))
+    throw std::invalid_argument("detector.validation.background_px must be > 0");
+  if (!(options.max_depth_baselines > 0))
+    throw std::invalid_argument("detector.validation.max_depth_baselines must be > 0");
+  if (options.max_column_offset < 0 || options.feature_search_px < 0 || options.patch_columns < 4 ||
+      options.patch_rows < 4) {
+    throw std::invalid_argument(
+        "detector.validation: max_column_offset and feature_search_px must be >= 0, "
+        "patch_columns and patch_rows >= 4");
+  }
+}
+
+void LineValidator::reset(int width, int height, std::size_t max_points) {
+  for (SegmentedFrame& f : frames_)
+    f.reset(max_points, options_.max_neighbour_gap_px);
+  scratch_.reset(max_points);
+  residuals_.assign(max_points, 0.0f);
+  front_end_valid_.assign(max_points, 0);
+  if (options_.association == SegmentAssociation::image_features) {
+    previous_image_.assign(static_cast<std::size_t>(width) * height, 0);
+  }
+  width_ = width;
+  height_ = height;
+  have_previous_image_ = false;
+  history_ = 0;
+  current_ = 0;
+}
+
+void LineValidator::validate(Profile& profile, const PairMotion& motion, const ImageView& image,
+                             const std::array<double, 9>* homography) {
+  const int previous = current_;
+  const int before = (current_ + 2) % 3;
+  current_ = (current_ + 1) % 3;
+  SegmentedFrame& frame = frames_[current_];
+  motions_[current_] = motion;
+  segment_candidates(profile, options_, frame, scratch_);
+  const std::vector<ProfilePoint>& candidates = profile.points();
+  for (std::size_t i = 0; i < candidates.size() && i < front_end_valid_.size(); ++i)
+    front_end_valid_[i] = candidates[i].valid ? 1 : 0;
+
+  // Tracks run over frames linked by a motion estimate.
+  history_ = history_ > 0 && motion.valid ? std::min(history_ + 1, 3) : 1;
+  if (history_ >= 2) {
+    if (options_.association == SegmentAssociation::chain_code) {
+      for (LineSegment& s : frame.segments)
+        match_by_chain_code(frames_[previous], frame, s, options_);
+    } else if (homography != nullptr && have_previous_image_) {
+      associate_by_image_features(frames_[previous], frame, image, *homography);
+    }
+  }
+  if (history_ >= 3) {
+    test_segments(frame, frames_[previous], frames_[before], motions_[previous], motion);
+  }
+
+  // The verdict: candidates outside any segment are noise, those of background segments are not
+  // laser. Every other candidate keeps the front-end's verdict.
+  const std::span<ProfilePoint> points = profile.mutable_points();
+  for (ProfilePoint& p : points) {
+    p.segment = -1;
+    p.valid = false;
+  }
+  // Validation only takes points away: the front-end's verdict of the others stands.
+  for (std::size_t s = 0; s < frame.segments.size(); ++s) {
+    const LineSegment& seg = frame.segments[s];
+    for (int i = seg.first; i < seg.first + seg.count; ++i) {
+      ProfilePoint& p = points[static_cast<std::size_t>(frame.points[i].profile_index)];
+      p.segment = static_cast<std::int32_t>(s);
+    }
+  }
+  for (std::size_t s = 0; s < frame.segments.size(); ++s) {
+    const LineSegment& seg = frame.segments[s];
+    if (seg.background) continue;
+    for (int i = seg.first; i < seg.first + seg.count; ++i) {
+      const SegmentPoint& sp = frame.points[i];
+      points[static_cast<std::size_t>(sp.profile_index)].valid =
+          front_end_valid_[static_cast<std::size_t>(sp.profile_index)] != 0;
+    }
+  }
+
+  if (options_.association == SegmentAssociation::image_features) {
+    for (int v = 0; v < height_; ++v) {
+      std::memcpy(previous_image_.data() + static_cast<std::size_t>(v) * width_, image.row(v),
+                  static_cast<std::size_t>(width_));
+    }
+    have_previous_image_ = true;
+  }
+}
+
+void LineValidator::test_segments(SegmentedFrame& current, const SegmentedFrame& previous,
+                                  const SegmentedFrame& before, const PairMotion& first,
+                                  const PairMotion& second) {
+  if (!first.valid || !second.valid || !std::isfinite(second.relative_scale)) return;
+  for (LineSegment& s : current.segments) {
+    if (s.previous < 0) continue;
+    const LineSegment& p = previous.segments[static_cast<std::size_t>(s.previous)];
+    if (p.previous < 0) continue;
+    const LineSegment& q = before.segments[static_cast<std::size_t>(p.previous)];
+    // Point association through the two offsets; each point of s that lies within both.
+    int n = 0;
+    for (int i = s.first; i < s.first + s.count; ++i) {
+      const SegmentPoint& x = current.points[i];
+      const int u1 = static_cast<int>(std::lround(x.u - s.column_offset));
+      if (u1 < p.u_min || u1 > p.u_max) continue;
+      const int u0 = static_cast<int>(std::lround(u1 - p.column_offset));
+      if (u0 < q.u_min || u0 > q.u_max) continue;
+      std::array<double, 2> x2{};
+      double ray_gap = 0;
+      const bool physical = back_project(
+          geometry_, first, second, {double(u0), before.row_at(q, u0)},
+          {double(u1), previous.row_at(p, u1)}, options_.max_depth_baselines, x2, ray_gap);
+      residuals_[static_cast<std::size_t>(n++)] =
+          physical ? static_cast<float>(std::max(ray_gap, std::hypot(x2[0] - x.u, x2[1] - x.v)))
+                   : std::numeric_limits<float>::infinity();
+    }
+    if (n < options_.min_segment_points) continue;
+    float* mid = residuals_.data() + n / 2;
+    std::nth_element(residuals_.data(), mid, residuals_.data() + n);
+    s.tested = true;
+    s.residual_px = *mid;
+    s.background = *mid <= options_.background_px;
+  }
+}
+
+bool LineValidator::track_box(const LineSegment& s, const ImageView& image,
+                              const std::array<double, 9>& h, float& du, float& dv) const {
+  // The patch: around the box centre, at most patch_columns x patch_rows, in the current image.
+  const int cu = (s.u_min + s.u_max) / 2;
+  const int cv = static_cast<int>(std::lround(0.5f * (s.v_min + s.v_max)));
+  const int half_u = std::min(options_.patch_columns / 2, std::max((s.u_max - s.u_min) / 2, 4));
+  const int half_v = options_.patch_rows / 2;
+  // Where the homography puts the centre in the previous frame: the search starts there.
+  const Homography forward{h};
+  const std::array<double, 2> back = forward.inverse().map(cu, cv);
+  if (!std::isfinite(back[0]) || !std::isfinite(back[1])) return false;
+  const int su = static_cast<int>(std::lround(back[0])) - cu;
+  const int sv = static_cast<int>(std::lround(back[1])) - cv;
+  const int r = options_.feature_search_px;
+  // Patch and every shifted patch must lie inside both images.
+  if (cu - half_u < 0 || cu + half_u >= width_ || cv - half_v < 0 || cv + half_v >= height_ ||
+      cu - half_u + su - r < 0 || cu + half_u + su + r >= width_ || cv - half_v + sv - r < 0 ||
+      cv + half_v + sv + r >= height_) {
+    return false;
+  }
+  // Sum of absolute differences over every other pixel, at each shift of the window.
+  constexpr int kMaxWindow = 2 * 32 + 1;
+  std::array<std::uint32_t, kMaxWindow * kMaxWindow> sad{};
+  const int window = 2 * r + 1;
+  if (window > kMaxWindow) return false;
+  for (int oy = -r; oy <= r; ++oy) {
+    for (int ox = -r; ox <= r; ++ox) {
+      std::uint32_t total = 0;
+      for (int y = -half_v; y <= half_v; y += 2) {
+        const std::uint8_t* a = image.row(cv + y) + cu;
+        const std::uint8_t* b = previous_image_.data() +
+                                static_cast<std::size_t>(cv + y + sv + oy) * width_ + cu + su + ox;
+        for (int x = -half_u; x <= half_u; x += 2)
+          total += static_cast<std::uint32_t>(std::abs(int(a[x]) - int(b[x])));
+      }
+      sad[static_cast<std::size_t>((oy + r) * window + ox + r)] = total;
+    }
+  }
+  int best = 0;
+  for (int i = 1; i < window * window; ++i)
+    if (sad[static_cast<std::size_t>(i)] < sad[static_cast<std::size_t>(best)]) best = i;
+  const int by = best / window, bx = best % window;
+  // Sub-pixel: a parabola through the best and its neighbours, along each axis.
+  auto vertex = [](double left, double centre, double right) {
+    const double curvature = left - 2 * centre + right;
+    return curvature > 0 ? std::clamp(0.5 * (left - right) / curvature, -0.5, 0.5) : 0.0;
+  };
+  auto at = [&](int y, int x) { return double(sad[static_cast<std::size_t>(y * window + x)]); };
+  double fx = 0, fy = 0;
+  if (bx > 0 && bx < window - 1) fx = vertex(at(by, bx - 1), at(by, bx), at(by, bx + 1));
+  if (by > 0 && by < window - 1) fy = vertex(at(by - 1, bx), at(by, bx), at(by + 1, bx));
+  // The scene at (u, v) now was at (u + shift) in the previous frame.
+  du = -static_cast<float>(su + (bx - r) + fx);
+  dv = -static_cast<float>(sv + (by - r) + fy);
+  return true;
+}
+
+void LineValidator::associate_by_image_features(const SegmentedFrame& previous,
+                                                SegmentedFrame& current, const ImageView& image,
+                                                const std::array<double, 9>& homography) {
+  for (LineSegment& s : current.segments) {
+    s.previous = -1;
+    float du = 0, dv = 0;
+    if (!track_box(s, image, homography, du, dv)) continue;
+    // The predecessor: the segment of the previous frame on which most of s's points land when
+    // moved as the texture under them moved.
+    int best_agree = std::max(options_.min_segment_points, s.count / 2) - 1;
+    for (std::size_t t = 0; t < previous.segments.size(); ++t) {
+      const LineSegment& p = previous.segments[t];
+      if (p.u_max < s.u_min - du - 1 || p.u_min > s.u_max - du + 1 ||
+          p.v_max < s.v_min - dv - options_.background_px ||
+          p.v_min > s.v_max - dv + options_.background_px) {
+        continue;
+      }
+      int agree = 0;
+      for (int i = s.first; i < s.first + s.count; ++i) {
+        const SegmentPoint& x = current.points[i];
+        const int u1 = static_cast<int>(std::lround(x.u - du));
+        if (u1 < p.u_min || u1 > p.u_max) continue;
+        if (std::abs(previous.row_at(p, u1) - (x.v - dv)) <= options_.background_px) ++agree;
+      }
+      if (agree > best_agree) {
+        best_agree = agree;
+        s.previous = static_cast<int>(t);
+        s.column_offset = du;
+        s.row_offset = dv;
+        s.score = static_cast<float>(agree) / static_cast<float>(s.count);
+      }
+    }
+  }
+}
+
+}  // namespace laserline::pipeline
