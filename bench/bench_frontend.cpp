@@ -6,6 +6,9 @@
 //                      per-column loop for the peaks
 //   frontend_background_detector: the whole `background` detector, homography estimation included
 //   frontend_fir_detector: the `fir` detector (no background subtraction)
+//   frontend_validation_stages/<association>: Section IV on the candidates `background` gives
+//                      (segments, chain codes or image patches, matching, back-projection)
+//   frontend_backprojection_detector: the whole `backprojection` detector
 // Run: build/default/bench/laserline_bench --benchmark_filter='frontend|naive'
 #include <benchmark/benchmark.h>
 
@@ -17,6 +20,7 @@
 
 #include "daemon/config.hpp"
 #include "hal/sim/sim_scene.hpp"
+#include "pipeline/backprojection_detector.hpp"
 #include "pipeline/frontend.hpp"
 #include "pipeline/frontend_detectors.hpp"
 #include "pipeline/subpixel.hpp"
@@ -201,5 +205,95 @@ void BM_frontend_fir_detector(benchmark::State& state) {
   state.counters["points"] = static_cast<double>(profile.size());
 }
 BENCHMARK(BM_frontend_fir_detector)->Unit(benchmark::kMillisecond);
+
+// Consecutive frames of the scan, the candidates `background` finds in each, and the camera motion
+// into each frame, for timing the validation alone.
+struct ValidationFrames {
+  static constexpr int kCount = 8;
+  std::vector<std::vector<std::uint8_t>> pixels;
+  std::vector<pipeline::Profile> candidates;
+  std::vector<pipeline::PairMotion> motion;
+  std::vector<std::array<double, 9>> homography;
+
+  ValidationFrames() {
+    const hal::SimSceneOptions scene = bench_scene();
+    hal::SimScene sim(scene);
+    pipeline::DetectorOptions o = bench_options();
+    pipeline::BackgroundDetector detector(o);
+    detector.reset(kWidth, kHeight);
+    std::vector<std::uint8_t> first(sim.format().bytes());
+    sim.render(9, true, first);
+    pipeline::Profile profile(detector.max_points(kWidth, kHeight));
+    detector.detect(view(first), {9, true}, profile);
+    // The scan tilts the camera about x by scan_rate / frame_rate per frame; this scene has no
+    // translation, so a small one along x is given (the validation's work does not depend on it).
+    const double a = scene.scan_rate_deg_s / scene.frame_rate_hz * M_PI / 180.0;
+    for (int k = 0; k < kCount; ++k) {
+      pixels.emplace_back(sim.format().bytes());
+      sim.render(10 + k, true, pixels.back());
+      detector.detect(view(pixels.back()), {static_cast<std::uint64_t>(10 + k), true}, profile);
+      candidates.push_back(profile);
+      pipeline::PairMotion m;
+      m.valid = true;
+      m.rotation = {1, 0, 0, 0, std::cos(a), -std::sin(a), 0, std::sin(a), std::cos(a)};
+      m.translation = {1, 0, 0};
+      m.relative_scale = 1.0;
+      motion.push_back(m);
+      homography.push_back(detector.last_motion().previous_to_current.h);
+    }
+  }
+};
+
+const ValidationFrames& validation_frames() {
+  static const ValidationFrames f;
+  return f;
+}
+
+// Section IV alone per frame (segmentation, association, back-projection), on the candidates of
+// consecutive frames of the scan; includes copying the candidates into the profile it rewrites.
+void BM_frontend_validation_stages(benchmark::State& state) {
+  const ValidationFrames& f = validation_frames();
+  pipeline::DetectorOptions o = bench_options();
+  o.validation.association = state.range(0) == 0 ? pipeline::SegmentAssociation::chain_code
+                                                 : pipeline::SegmentAssociation::image_features;
+  pipeline::LineValidator validator(o.geometry, o.validation);
+  validator.reset(kWidth, kHeight, f.candidates[0].capacity());
+  pipeline::Profile profile(f.candidates[0].capacity());
+  std::size_t k = 0, segments = 0, tested = 0, frames = 0;
+  for (auto _ : state) {
+    profile = f.candidates[k];
+    validator.validate(profile, f.motion[k], view(f.pixels[k]), &f.homography[k]);
+    benchmark::DoNotOptimize(profile.points().data());
+    segments += validator.segments().segments.size();
+    for (const pipeline::LineSegment& s : validator.segments().segments)
+      tested += s.tested ? 1 : 0;
+    ++frames;
+    k = (k + 1) % f.candidates.size();
+  }
+  state.SetLabel(state.range(0) == 0 ? "chain_code" : "image_features");
+  state.counters["candidates"] = static_cast<double>(f.candidates[0].size());
+  state.counters["segments"] = static_cast<double>(segments) / static_cast<double>(frames);
+  state.counters["tested"] = static_cast<double>(tested) / static_cast<double>(frames);
+}
+BENCHMARK(BM_frontend_validation_stages)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
+// The whole `backprojection` detector (motion with the essential matrix, `background`'s stages,
+// validation), fed the consecutive frames of the scan in turn (the sequence restarts every
+// ValidationFrames::kCount frames).
+void BM_frontend_backprojection_detector(benchmark::State& state) {
+  const ValidationFrames& f = validation_frames();
+  pipeline::BackprojectionDetector detector(bench_options());
+  detector.reset(kWidth, kHeight);
+  pipeline::Profile profile(detector.max_points(kWidth, kHeight));
+  std::uint64_t sequence = 0;
+  for (auto _ : state) {
+    const std::size_t k = sequence % f.pixels.size();
+    detector.detect(view(f.pixels[k]), {sequence, true}, profile);
+    ++sequence;
+    benchmark::DoNotOptimize(profile.points().data());
+  }
+  state.counters["points"] = static_cast<double>(profile.size());
+}
+BENCHMARK(BM_frontend_backprojection_detector)->Unit(benchmark::kMillisecond);
 
 }  // namespace
