@@ -9,9 +9,11 @@ namespace laserline::pipeline {
 
 namespace {
 
-// Variance of a chain-code step that is only noise (px^2): keeps straight, noisy segments from
-// correlating with each other by chance.
-constexpr double kChainCodeNoise = 0.02;
+// The descriptor correlated is, per column, the segment's presence (1) and its chain code times
+// this weight: straight segments (texture edges, flat walls) then match by their extent, curved
+// ones by their shape as well. A step of 0.5 px weighs as much as the presence.
+constexpr double kChainCodeWeight = 4.0;
+constexpr double kShiftMargin = 0.05;
 
 double box_distance(const LineSegment& a, const LineSegment& b) {
   const double du = std::max({0, a.u_min - b.u_max, b.u_min - a.u_max});
@@ -160,20 +162,34 @@ void segment_candidates(const Profile& profile, const ValidationOptions& options
 // ---------------------------------------------------------------------------------------------
 // IV-C
 
+void add_match(LineSegment& s, const SegmentMatch& m) {
+  int at = s.match_count;
+  if (at == LineSegment::kMaxMatches) {
+    if (m.score <= s.matches[LineSegment::kMaxMatches - 1].score) return;
+    --at;
+  } else {
+    ++s.match_count;
+  }
+  while (at > 0 && s.matches[static_cast<std::size_t>(at - 1)].score < m.score) {
+    s.matches[static_cast<std::size_t>(at)] = s.matches[static_cast<std::size_t>(at - 1)];
+    --at;
+  }
+  s.matches[static_cast<std::size_t>(at)] = m;
+}
+
 void match_by_chain_code(const SegmentedFrame& previous, const SegmentedFrame& current,
                          LineSegment& s, const ValidationOptions& options) {
-  s.previous = -1;
-  s.score = 0;
-  double best_score = options.min_correlation;
+  s.match_count = 0;
   const int min_overlap = std::max(options.min_segment_points - 1, 1);
   const float* a = current.chain_code.data() + s.code_first - s.u_min;  // a[u]: step u -> u+1
+  const double w = kChainCodeWeight;
   for (std::size_t t = 0; t < previous.segments.size(); ++t) {
     const LineSegment& other = previous.segments[t];
     if (box_distance(s, other) > options.max_box_distance_px) continue;
     const float* b = previous.chain_code.data() + other.code_first - other.u_min;
-    // Enough overlap: at least half of the shorter one.
-    const int shorter = std::min(s.u_max - s.u_min, other.u_max - other.u_min);
-    const int needed = std::max(min_overlap, shorter / 2);
+    const double shorter = std::min(s.u_max - s.u_min, other.u_max - other.u_min);
+    SegmentMatch best;
+    double best_correlation = options.min_correlation;
     // Offsets from 0 outwards, so that a tie (a straight segment fits at every offset) keeps the
     // smallest shift.
     for (int step = 0; step <= 2 * options.max_column_offset; ++step) {
@@ -181,7 +197,7 @@ void match_by_chain_code(const SegmentedFrame& previous, const SegmentedFrame& c
       const int lo = std::max(s.u_min, other.u_min + k);
       const int hi = std::min(s.u_max, other.u_max + k) - 1;  // last step
       const int length = hi - lo + 1;
-      if (length < needed) continue;
+      if (length < min_overlap) continue;
       double ab = 0, aa = 0, bb = 0;
       for (int u = lo; u <= hi; ++u) {
         const double x = a[u], y = b[u - k];
@@ -189,16 +205,23 @@ void match_by_chain_code(const SegmentedFrame& previous, const SegmentedFrame& c
         aa += x * x;
         bb += y * y;
       }
-      const double noise = kChainCodeNoise * length;
-      const double score = ab / std::sqrt((aa + noise) * (bb + noise));
-      if (score > best_score) {
-        best_score = score;
-        s.previous = static_cast<int>(t);
-        s.column_offset = static_cast<float>(k);
-        s.row_offset = 0;
-        s.score = static_cast<float>(score);
+      // Normalised cross-correlation of the descriptors (1, w * code) where they overlap, times
+      // the part of the shorter segment that overlaps: 1 for the same shape over all of it. A
+      // piece of a segment split differently in the other frame (the laser line broken by
+      // relief, or joined to a neighbour) still matches.
+      const double correlation =
+          (length + w * ab) / std::sqrt((length + w * aa) * (length + w * bb)) * length / shorter;
+      // A shift must be clearly better than a smaller one: noise on a nearly straight segment
+      // would otherwise pick any.
+      if (correlation > best_correlation + (best.previous >= 0 ? kShiftMargin : 0.0)) {
+        best_correlation = correlation;
+        // Matches rank by how many columns agree: a long segment is not matched to a short
+        // straight piece of texture that merely fits somewhere along it.
+        best = {static_cast<int>(t), static_cast<float>(k), 0.0f,
+                static_cast<float>(correlation * length)};
       }
     }
+    if (best.previous >= 0) add_match(s, best);
   }
 }
 
@@ -272,6 +295,7 @@ void LineValidator::reset(int width, int height, std::size_t max_points) {
     f.reset(max_points, options_.max_neighbour_gap_px);
   scratch_.reset(max_points);
   residuals_.assign(max_points, 0.0f);
+  image_motion_.assign(max_points, 0.0f);
   front_end_valid_.assign(max_points, 0);
   if (options_.association == SegmentAssociation::image_features) {
     previous_image_.assign(static_cast<std::size_t>(width) * height, 0);
@@ -295,8 +319,13 @@ void LineValidator::validate(Profile& profile, const PairMotion& motion, const I
   for (std::size_t i = 0; i < candidates.size() && i < front_end_valid_.size(); ++i)
     front_end_valid_[i] = candidates[i].valid ? 1 : 0;
 
-  // Tracks run over frames linked by a motion estimate.
-  history_ = history_ > 0 && motion.valid ? std::min(history_ + 1, 3) : 1;
+  // Tracks run over frames with candidates linked by a motion estimate (a frame without candidates,
+  // e.g. a laser-off one, breaks them).
+  if (profile.size() == 0) {
+    history_ = 0;
+  } else {
+    history_ = history_ > 0 && motion.valid ? std::min(history_ + 1, 3) : 1;
+  }
   if (history_ >= 2) {
     if (options_.association == SegmentAssociation::chain_code) {
       for (LineSegment& s : frame.segments)
@@ -307,6 +336,10 @@ void LineValidator::validate(Profile& profile, const PairMotion& motion, const I
   }
   if (history_ >= 3) {
     test_segments(frame, frames_[previous], frames_[before], motions_[previous], motion);
+  } else if (history_ == 2 && options_.require_track) {
+    // Only two frames so far: what is not tracked over those is not taken for the laser yet.
+    for (LineSegment& s : frame.segments)
+      s.background = s.match_count == 0;
   }
 
   // The verdict: candidates outside any segment are noise, those of background segments are not
@@ -348,33 +381,59 @@ void LineValidator::test_segments(SegmentedFrame& current, const SegmentedFrame&
                                   const PairMotion& second) {
   if (!first.valid || !second.valid || !std::isfinite(second.relative_scale)) return;
   for (LineSegment& s : current.segments) {
-    if (s.previous < 0) continue;
-    const LineSegment& p = previous.segments[static_cast<std::size_t>(s.previous)];
-    if (p.previous < 0) continue;
-    const LineSegment& q = before.segments[static_cast<std::size_t>(p.previous)];
-    // Point association through the two offsets; each point of s that lies within both.
+    // Not tracked over the three frames: the laser line is a lasting structure, so what is seen
+    // once is not taken for it.
+    s.background = options_.require_track;
+    // Point association through the matches: each point of s that lies within a match in frame
+    // n-1 whose own match in frame n-2 covers it.
     int n = 0;
     for (int i = s.first; i < s.first + s.count; ++i) {
       const SegmentPoint& x = current.points[i];
-      const int u1 = static_cast<int>(std::lround(x.u - s.column_offset));
-      if (u1 < p.u_min || u1 > p.u_max) continue;
-      const int u0 = static_cast<int>(std::lround(u1 - p.column_offset));
-      if (u0 < q.u_min || u0 > q.u_max) continue;
+      const LineSegment* p = nullptr;
+      const LineSegment* q = nullptr;
+      int u1 = 0, u0 = 0;
+      for (int a = 0; a < s.match_count && q == nullptr; ++a) {
+        const SegmentMatch& m = s.matches[static_cast<std::size_t>(a)];
+        p = &previous.segments[static_cast<std::size_t>(m.previous)];
+        u1 = static_cast<int>(std::lround(x.u - m.column_offset));
+        if (u1 < p->u_min || u1 > p->u_max) continue;
+        for (int b = 0; b < p->match_count; ++b) {
+          const SegmentMatch& m2 = p->matches[static_cast<std::size_t>(b)];
+          const LineSegment& candidate = before.segments[static_cast<std::size_t>(m2.previous)];
+          u0 = static_cast<int>(std::lround(u1 - m2.column_offset));
+          if (u0 >= candidate.u_min && u0 <= candidate.u_max) {
+            q = &candidate;
+            break;
+          }
+        }
+      }
+      if (q == nullptr) continue;
       std::array<double, 2> x2{};
       double ray_gap = 0;
       const bool physical = back_project(
-          geometry_, first, second, {double(u0), before.row_at(q, u0)},
-          {double(u1), previous.row_at(p, u1)}, options_.max_depth_baselines, x2, ray_gap);
+          geometry_, first, second, {double(u0), before.row_at(*q, u0)},
+          {double(u1), previous.row_at(*p, u1)}, options_.max_depth_baselines, x2, ray_gap);
+      // Across the line only: the laser's shape slides along it as the relief passes.
+      const float v1 = previous.row_at(*p, u1);
+      image_motion_[static_cast<std::size_t>(n)] =
+          std::max(std::abs(x.v - v1), std::abs(v1 - before.row_at(*q, u0)));
       residuals_[static_cast<std::size_t>(n++)] =
           physical ? static_cast<float>(std::max(ray_gap, std::hypot(x2[0] - x.u, x2[1] - x.v)))
                    : std::numeric_limits<float>::infinity();
     }
-    if (n < options_.min_segment_points) continue;
+    if (n < options_.min_segment_points) continue;  // too little overlap: not tracked
     float* mid = residuals_.data() + n / 2;
     std::nth_element(residuals_.data(), mid, residuals_.data() + n);
+    float* motion_mid = image_motion_.data() + n / 2;
+    std::nth_element(image_motion_.data(), motion_mid, image_motion_.data() + n);
     s.tested = true;
     s.residual_px = *mid;
-    s.background = *mid <= options_.background_px;
+    s.image_motion_px = *motion_mid;
+    // Static scene: background. Not static but moving in the image more than the laser line can
+    // (it moves with the camera: only as the depth along the sheet changes): not the laser either,
+    // a wrong association of texture artefacts.
+    s.background = *mid <= options_.background_px ||
+                   (options_.max_laser_motion_px > 0 && *motion_mid > options_.max_laser_motion_px);
   }
 }
 
@@ -439,12 +498,12 @@ void LineValidator::associate_by_image_features(const SegmentedFrame& previous,
                                                 SegmentedFrame& current, const ImageView& image,
                                                 const std::array<double, 9>& homography) {
   for (LineSegment& s : current.segments) {
-    s.previous = -1;
+    s.match_count = 0;
     float du = 0, dv = 0;
     if (!track_box(s, image, homography, du, dv)) continue;
-    // The predecessor: the segment of the previous frame on which most of s's points land when
+    // The predecessors: the segments of the previous frame on which enough of s's points land when
     // moved as the texture under them moved.
-    int best_agree = std::max(options_.min_segment_points, s.count / 2) - 1;
+    const int best_agree = std::max(options_.min_segment_points, s.count / 2) - 1;
     for (std::size_t t = 0; t < previous.segments.size(); ++t) {
       const LineSegment& p = previous.segments[t];
       if (p.u_max < s.u_min - du - 1 || p.u_min > s.u_max - du + 1 ||
@@ -460,11 +519,8 @@ void LineValidator::associate_by_image_features(const SegmentedFrame& previous,
         if (std::abs(previous.row_at(p, u1) - (x.v - dv)) <= options_.background_px) ++agree;
       }
       if (agree > best_agree) {
-        best_agree = agree;
-        s.previous = static_cast<int>(t);
-        s.column_offset = du;
-        s.row_offset = dv;
-        s.score = static_cast<float>(agree) / static_cast<float>(s.count);
+        add_match(s, {static_cast<int>(t), du, dv,
+                      static_cast<float>(agree) / static_cast<float>(s.count)});
       }
     }
   }

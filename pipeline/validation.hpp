@@ -52,6 +52,13 @@ struct ValidationOptions {
   // measurable parallax: that is what a laser line, which moves with the camera, looks like under
   // translation. Such points are not static scene. 1000 baselines: 1.4 px of parallax at f = 1400.
   double max_depth_baselines = 1000.0;
+  // Segments not tracked over the three frames are rejected too (else they keep the front-end's
+  // verdict): texture artefacts of the background subtraction come and go, the laser line lasts.
+  bool require_track = true;
+  // A tracked segment that moves more than this per frame across the line (rows, median over its
+  // points) is not the laser line, which moves with the camera: its image moves across the line
+  // only as the depth along the sheet changes. 0: no such test.
+  double max_laser_motion_px = 4.0;
 };
 
 // The camera motion between two consecutive frames, as the validation needs it:
@@ -64,19 +71,30 @@ struct PairMotion {
   double relative_scale = std::numeric_limits<double>::quiet_NaN();
 };
 
+// An association of a segment with one of the previous frame (IV-C).
+struct SegmentMatch {
+  int previous = -1;        // index of the segment in the previous frame
+  float column_offset = 0;  // its column = this column - column_offset
+  float row_offset = 0;     // image_features: the texture's row shift (its row = row - offset)
+  float score = 0;          // support, higher is better: correlation times columns (chain_code),
+                            // share of the points that agree (image_features)
+};
+
 // One laser-line segment of a frame (IV-B): candidates linked along the line, one per column.
 struct LineSegment {
+  static constexpr int kMaxMatches = 3;
   int first = 0, count = 0;  // its points: SegmentedFrame::points[first, first + count)
   int u_min = 0, u_max = 0;  // bounding box
   float v_min = 0, v_max = 0;
-  int code_first = 0;       // rows (u_max - u_min + 1 values) and chain code (one fewer)
-  int previous = -1;        // associated segment of the previous frame, -1 if none
-  float column_offset = 0;  // its column = this column - column_offset
-  float row_offset = 0;     // image_features: its row = this row - row_offset
-  float score = 0;          // correlation of the association
+  int code_first = 0;  // rows (u_max - u_min + 1 values) and chain code (one fewer)
+  // The best associations with segments of the previous frame, best first (a segment split
+  // differently in the two frames has several).
+  std::array<SegmentMatch, kMaxMatches> matches{};
+  int match_count = 0;
   bool background = false;  // IV-D verdict
   bool tested = false;      // tracked over three frames and triangulable
-  float residual_px = std::numeric_limits<float>::quiet_NaN();  // median back-projection error
+  float residual_px = std::numeric_limits<float>::quiet_NaN();      // median back-projection error
+  float image_motion_px = std::numeric_limits<float>::quiet_NaN();  // median motion per frame
 };
 
 struct SegmentPoint {
@@ -115,8 +133,11 @@ struct SegmentationScratch {
 void segment_candidates(const Profile& profile, const ValidationOptions& options,
                         SegmentedFrame& out, SegmentationScratch& scratch);
 
-// IV-C: the best match of segment `s` of `current` among the segments of `previous` (index, or -1)
-// by cross-correlation of chain codes; sets s.previous, s.column_offset and s.score.
+// Keeps `m` among the best kMaxMatches of `s` (one per previous segment), best first.
+void add_match(LineSegment& s, const SegmentMatch& m);
+
+// IV-C: the best matches of segment `s` of `current` among the segments of `previous` by
+// cross-correlation of chain codes (s.matches).
 void match_by_chain_code(const SegmentedFrame& previous, const SegmentedFrame& current,
                          LineSegment& s, const ValidationOptions& options);
 
@@ -153,6 +174,10 @@ class LineValidator {
 
   // The segments of the last frame validated, for overlays and tests.
   const SegmentedFrame& segments() const { return frames_[current_]; }
+  // Those of the frame before (age 1) and the one before it (age 2).
+  const SegmentedFrame& earlier_segments(int age) const {
+    return frames_[static_cast<std::size_t>((current_ + 3 - age % 3) % 3)];
+  }
 
  private:
   void associate_by_image_features(const SegmentedFrame& previous, SegmentedFrame& current,
@@ -171,7 +196,8 @@ class LineValidator {
   int current_ = 0;
   int history_ = 0;  // consecutive frames with motion, up to 3
   SegmentationScratch scratch_;
-  std::vector<float> residuals_;
+  std::vector<float> residuals_;               // per point of a segment: back-projection error
+  std::vector<float> image_motion_;            // and its image motion over the three frames
   std::vector<std::uint8_t> front_end_valid_;  // per candidate, as the front-end gave it
   // image_features: the previous original frame.
   std::vector<std::uint8_t> previous_image_;
