@@ -1,5 +1,6 @@
 #include "hal/registry.hpp"
 
+#include <algorithm>
 #include <cstdlib>
 #include <functional>
 
@@ -194,6 +195,13 @@ SimSceneOptions read_sim_options(YamlMap& sim, const Calibration& calibration,
   o.sway_period_s = sim.number("sway_period_s", o.sway_period_s, 0.1, 3600.0);
   o.scan_rate_deg_s = sim.number("scan_rate_deg_s", o.scan_rate_deg_s, 0.0, 1000.0);
   o.scan_amplitude_deg = sim.number("scan_amplitude_deg", o.scan_amplitude_deg, 0.0, 45.0);
+  o.relief_height_m = sim.number("relief_height_m", o.relief_height_m, 0.0, 0.5 * o.distance_m);
+  o.relief_min_height_m =
+      sim.number("relief_min_height_m", std::min(o.relief_min_height_m, o.relief_height_m), 0.0,
+                 o.relief_height_m);
+  o.relief_per_m2 = sim.number("relief_per_m2", o.relief_per_m2, 0.0, 100.0);
+  o.relief_max_slope = sim.number("relief_max_slope", o.relief_max_slope, 0.05, 1.0);
+  o.vehicle_speed_m_s = sim.number("vehicle_speed_m_s", o.vehicle_speed_m_s, -10.0, 10.0);
   return o;
 }
 

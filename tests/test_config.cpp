@@ -80,6 +80,15 @@ TEST(Config, OutOfRangeNamesTheLimits) {
             "test.yaml:2: detector.validation.min_segment_points: must be between 2 and 1000, got 1");
   EXPECT_EQ(error_of("camera:\n  sim:\n    noise_sigma: -1\n"),
             "test.yaml:3: camera.sim.noise_sigma: must be between 0 and 50, got -1");
+  EXPECT_EQ(error_of("camera:\n  sim:\n    relief_height_m: 0.1\n    relief_min_height_m: 0.2\n"),
+            "test.yaml:4: camera.sim.relief_min_height_m: must be between 0 and 0.1, got 0.2");
+  EXPECT_EQ(error_of("camera:\n  sim:\n    relief_max_slope: 2\n"),
+            "test.yaml:3: camera.sim.relief_max_slope: must be between 0.05 and 1, got 2");
+  EXPECT_EQ(error_of("camera:\n  sim:\n    vehicle_speed_m_s: 20\n"),
+            "test.yaml:3: camera.sim.vehicle_speed_m_s: must be between -10 and 10, got 20");
+  EXPECT_EQ(error_of("camera:\n  sim: {relief_height_m: 0.3, relief_per_m2: 0.5, "
+                     "relief_max_slope: 0.8, vehicle_speed_m_s: 0.4}\n"),
+            "");
 }
 
 TEST(Config, ChoicesListTheAlternatives) {

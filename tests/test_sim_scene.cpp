@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -516,6 +517,327 @@ TEST(SimScene, SaturatesAt255) {
   EXPECT_EQ(saturated, img.width);
 }
 
+// ---- Relief, vehicle motion and camera pose -------------------------------------------------
+
+using Vec3 = std::array<double, 3>;
+
+// A pier-like scene at small size: bumps and piles of 5-30 cm, the vehicle moving, the PTU
+// scanning (the same field of view as the 1280 x 1024 scenarios).
+SimSceneOptions relief_options() {
+  SimSceneOptions o = small_options();
+  o.tilt_y_deg = 8;
+  o.scan_rate_deg_s = 10;
+  o.relief_height_m = 0.30;
+  o.relief_min_height_m = 0.05;
+  o.relief_per_m2 = 1.0;
+  o.relief_max_slope = 0.9;
+  o.vehicle_speed_m_s = 0.4;
+  o.seed = 5;
+  return o;
+}
+
+double dot3(const Vec3& a, const Vec3& b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+// The surface's frame in the world, from the options as the header documents them: the base
+// plane through (0, 0, distance_m), axes the world's x and y turned by tilt_y then tilt_x.
+struct SurfaceFrame {
+  Vec3 e1, e2, normal;  // normal toward the camera
+  Vec3 origin;
+};
+
+SurfaceFrame surface_frame(const SimSceneOptions& o) {
+  const double ax = o.tilt_x_deg * std::numbers::pi / 180,
+               ay = o.tilt_y_deg * std::numbers::pi / 180;
+  const double rx[9] = {1, 0, 0, 0, std::cos(ax), -std::sin(ax), 0, std::sin(ax), std::cos(ax)};
+  const double ry[9] = {std::cos(ay), 0, std::sin(ay), 0, 1, 0, -std::sin(ay), 0, std::cos(ay)};
+  double b[9];
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j)
+      b[i * 3 + j] = rx[i * 3] * ry[j] + rx[i * 3 + 1] * ry[3 + j] + rx[i * 3 + 2] * ry[6 + j];
+  }
+  return {{b[0], b[3], b[6]}, {b[1], b[4], b[7]}, {-b[2], -b[5], -b[8]}, {0, 0, o.distance_m}};
+}
+
+Vec3 to_camera(const SimCameraPose& pose, const Vec3& x) {
+  Vec3 out{};
+  for (int i = 0; i < 3; ++i)
+    out[i] = dot3({pose.rotation[i * 3], pose.rotation[i * 3 + 1], pose.rotation[i * 3 + 2]}, x) +
+             pose.translation[i];
+  return out;
+}
+
+Vec3 to_world(const SimCameraPose& pose, const Vec3& x) {
+  const Vec3 d{x[0] - pose.translation[0], x[1] - pose.translation[1], x[2] - pose.translation[2]};
+  Vec3 out{};
+  for (int i = 0; i < 3; ++i)
+    out[i] = pose.rotation[i] * d[0] + pose.rotation[3 + i] * d[1] + pose.rotation[6 + i] * d[2];
+  return out;
+}
+
+// Where the ray of pixel (u, v) first meets the relieved surface, by brute force: marched in
+// 1 mm steps through the slab the relief can occupy, then bisected. `base_plane` ignores the
+// relief (what a homography assumes). Returns the world point, or NaNs when there is none.
+Vec3 ray_hit(const SimScene& scene, const SimCameraPose& pose, double u, double v,
+             bool base_plane = false) {
+  const SimSceneOptions& o = scene.options();
+  const CameraIntrinsics& cam = o.calibration.camera;
+  const SurfaceFrame f = surface_frame(o);
+  const Vec3 ray{(u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1.0};
+  auto point = [&](double z) { return to_world(pose, {z * ray[0], z * ray[1], z}); };
+  auto local = [&](double z) {
+    const Vec3 p = point(z);
+    const Vec3 d{p[0] - f.origin[0], p[1] - f.origin[1], p[2] - f.origin[2]};
+    return Vec3{dot3(f.e1, d), dot3(f.e2, d), dot3(f.normal, d)};
+  };
+  auto above = [&](double z) {
+    const Vec3 l = local(z);
+    return l[2] - (base_plane ? 0.0 : scene.relief_height(l[0], l[1]));
+  };
+  // Height above the base plane is affine in z.
+  const double h0 = local(0.0)[2], h1 = local(1.0)[2];
+  const double nan = std::nan("");
+  if (!(h1 < h0)) return {nan, nan, nan};
+  const double top = base_plane ? 0.01 : o.relief_height_m + 0.01;
+  double lo = (h0 - top) / (h0 - h1), hi = (h0 + 0.01) / (h0 - h1);
+  const double step = 0.001 / std::sqrt(dot3(ray, ray));
+  for (double z = lo + step; z < hi + step; z += step) {
+    if (above(std::min(z, hi)) <= 0) {
+      hi = std::min(z, hi);
+      break;
+    }
+    lo = z;
+  }
+  for (int i = 0; i < 60; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (above(mid) > 0 ? lo : hi) = mid;
+  }
+  return point(0.5 * (lo + hi));
+}
+
+TEST(SimSceneRelief, HeightsSlopesAndRepetitionAreAsConfigured) {
+  SimSceneOptions o = relief_options();
+  o.relief_max_slope = 0.8;
+  SimScene scene(o);
+  constexpr double kCell = 0.005, kPeriod = 5.12;
+  double highest = 0, steepest = 0;
+  int raised = 0, samples = 0;
+  for (double y = 0; y < kPeriod; y += 4 * kCell) {
+    for (double x = 0; x < kPeriod; x += 4 * kCell) {
+      const double h = scene.relief_height(x, y);
+      ASSERT_GE(h, 0.0);
+      highest = std::max(highest, h);
+      raised += h > 0.01 ? 1 : 0;
+      ++samples;
+      // Between neighbouring lattice points the rise is at most the slope limit.
+      steepest = std::max({steepest, std::abs(scene.relief_height(x + kCell, y) - h) / kCell,
+                           std::abs(scene.relief_height(x, y + kCell) - h) / kCell});
+      ASSERT_NEAR(scene.relief_height(x + kPeriod, y - 2 * kPeriod), h, 1e-9);  // repeats
+    }
+  }
+  const double fraction = static_cast<double>(raised) / samples;
+  std::printf("  relief: highest %.3f m, steepest %.3f, %.0f%% of the surface above 1 cm\n",
+              highest, steepest, 100 * fraction);
+  EXPECT_LE(highest, o.relief_height_m + 1e-6);
+  EXPECT_GT(highest, 0.25);
+  EXPECT_LE(steepest, o.relief_max_slope + 1e-3);
+  EXPECT_GT(steepest, 0.5 * o.relief_max_slope);
+  EXPECT_GT(fraction, 0.15);
+  EXPECT_LT(fraction, 0.8);
+
+  // The surface point is the base-plane point raised along the normal toward the camera.
+  o.tilt_x_deg = 0;
+  o.tilt_y_deg = 0;
+  SimScene straight(o);
+  const Vec3 p = straight.surface_point(0.3, -0.2);
+  EXPECT_NEAR(p[0], 0.3, 1e-12);
+  EXPECT_NEAR(p[1], -0.2, 1e-12);
+  EXPECT_NEAR(p[2], o.distance_m - straight.relief_height(0.3, -0.2), 1e-12);
+
+  // Seeded: the same seed gives the same relief, another seed another.
+  SimScene again(o);
+  o.seed = 6;
+  SimScene other(o);
+  int same = 0, differ = 0;
+  for (double x = 0; x < kPeriod; x += 0.1) {
+    same += again.relief_height(x, 1.0) == straight.relief_height(x, 1.0) ? 1 : 0;
+    differ += other.relief_height(x, 1.0) != straight.relief_height(x, 1.0) ? 1 : 0;
+  }
+  EXPECT_EQ(same, 52);
+  EXPECT_GT(differ, 10);
+}
+
+TEST(SimSceneRelief, ZeroReliefIsThePlaneWhateverTheOtherReliefOptions) {
+  SimSceneOptions o = small_options();
+  o.backscatter = 10;
+  SimScene plane(o);
+  o.relief_height_m = 0;
+  o.relief_min_height_m = 0;
+  o.relief_per_m2 = 7;
+  o.relief_max_slope = 0.3;
+  SimScene flat(o);
+  EXPECT_EQ(render(plane, 12, true).data, render(flat, 12, true).data);
+  EXPECT_EQ(flat.relief_height(0.1, 0.2), 0.0);
+  const SimGroundTruth a = truth_of(plane, 12, true), b = truth_of(flat, 12, true);
+  EXPECT_EQ(a.row, b.row);
+  EXPECT_EQ(a.depth_m, b.depth_m);
+}
+
+TEST(SimSceneRelief, TruthOnTheReliefMatchesABruteForceSearchAlongTheCameraRays) {
+  // Independent of the simulator's own solution (which walks the sheet in each column): here
+  // every pixel's ray is marched to the surface, and the laser is where the hit crosses the sheet.
+  const SimSceneOptions o = relief_options();
+  SimScene scene(o);
+  const std::uint64_t seq = 9;
+  const SimGroundTruth truth = truth_of(scene, seq, true);
+  const SimCameraPose pose = scene.camera_pose(seq);
+  const auto sheet = o.calibration.laser.plane_coefficients();
+  auto sheet_side = [&](int u, double v) {
+    const Vec3 x = to_camera(pose, ray_hit(scene, pose, u, v));
+    return sheet[0] * x[0] + sheet[1] * x[1] + sheet[2] * x[2] + sheet[3];
+  };
+  const SurfaceFrame f = surface_frame(o);
+  int checked = 0, on_relief = 0;
+  double worst_row = 0, worst_depth = 0;
+  for (int u = 0; u < o.calibration.camera.width; u += 4) {
+    if (!std::isfinite(truth.row[u])) continue;
+    int crossings = 0;
+    double lo = 0, hi = 0;
+    double previous = sheet_side(u, 0);
+    for (int v = 1; v < o.calibration.camera.height; ++v) {
+      const double side = sheet_side(u, v);
+      if ((side > 0) != (previous > 0)) {
+        ++crossings;
+        lo = v - 1;
+        hi = v;
+      }
+      previous = side;
+    }
+    ASSERT_EQ(crossings, 1) << "column " << u << ": the line must be seen once";
+    const bool lo_positive = sheet_side(u, lo) > 0;
+    for (int i = 0; i < 40; ++i) {
+      const double mid = 0.5 * (lo + hi);
+      ((sheet_side(u, mid) > 0) == lo_positive ? lo : hi) = mid;
+    }
+    const double row = 0.5 * (lo + hi);
+    const Vec3 world = ray_hit(scene, pose, u, row);
+    const double depth = to_camera(pose, world)[2];
+    EXPECT_NEAR(truth.row[u], row, 1e-3) << "column " << u;
+    EXPECT_NEAR(truth.depth_m[u], depth, 1e-5) << "column " << u;
+    worst_row = std::max(worst_row, std::abs(truth.row[u] - row));
+    worst_depth = std::max(worst_depth, std::abs(truth.depth_m[u] - depth));
+    const Vec3 d{world[0] - f.origin[0], world[1] - f.origin[1], world[2] - f.origin[2]};
+    on_relief += dot3(f.normal, d) > 0.05 ? 1 : 0;
+    ++checked;
+  }
+  std::printf("  %d columns, %d on relief above 5 cm: worst row %.2e px, depth %.2e m\n", checked,
+              on_relief, worst_row, worst_depth);
+  EXPECT_GT(checked, 70);
+  EXPECT_GT(on_relief, checked / 5);  // the line does run over the relief
+
+  // And the rendered line is where the truth says (noiseless, laser only).
+  SimScene lit(laser_only(o));
+  const Image img = render(lit, seq, true);
+  const SimGroundTruth t2 = truth_of(lit, seq, true);
+  int used = 0;
+  for (int u = 0; u < img.width; ++u) {
+    if (!std::isfinite(t2.row[u])) continue;
+    EXPECT_NEAR(gaussian_peak(img, u), t2.row[u], 0.03) << "column " << u;
+    ++used;
+  }
+  EXPECT_GT(used, 300);
+}
+
+TEST(SimSceneRelief, CameraPoseExplainsTheRenderedTextureWithParallax) {
+  SimSceneOptions o = relief_options();
+  o.noise_sigma = 0;
+  o.ambient = 150;
+  o.texture_contrast = 0.6;
+  SimScene scene(o);
+
+  // Frame 0 is the world frame.
+  const SimCameraPose p0 = scene.camera_pose(0);
+  for (int i = 0; i < 9; ++i)
+    EXPECT_NEAR(p0.rotation[i], i % 4 == 0 ? 1.0 : 0.0, 1e-12);
+  for (double t : p0.translation)
+    EXPECT_NEAR(t, 0.0, 1e-12);
+
+  // A point of frame a found again in frame b where the pose and the relief put it, not where
+  // the base plane (a homography) would.
+  const std::uint64_t a = 10, b = 14;
+  const Image ia = render(scene, a, false), ib = render(scene, b, false);
+  const SimCameraPose pa = scene.camera_pose(a), pb = scene.camera_pose(b);
+  const SurfaceFrame f = surface_frame(o);
+  const CameraIntrinsics& cam = o.calibration.camera;
+  auto project = [&](const Vec3& world, double& u, double& v) {
+    const Vec3 x = to_camera(pb, world);
+    u = cam.cx + cam.fx * x[0] / x[2];
+    v = cam.cy + cam.fy * x[1] / x[2];
+    return u >= 1 && v >= 1 && u < ib.width - 2 && v < ib.height - 2;
+  };
+  auto sample = [&](double u, double v) {
+    const int u0 = static_cast<int>(u), v0 = static_cast<int>(v);
+    const double fu = u - u0, fv = v - v0;
+    return (1 - fv) * ((1 - fu) * ib.at(u0, v0) + fu * ib.at(u0 + 1, v0)) +
+           fv * ((1 - fu) * ib.at(u0, v0 + 1) + fu * ib.at(u0 + 1, v0 + 1));
+  };
+  double error_relief = 0, error_plane = 0, parallax = 0;
+  int used = 0;
+  for (int v = 8; v < ia.height - 8; v += 5) {
+    for (int u = 8; u < ia.width - 8; u += 5) {
+      const Vec3 hit = ray_hit(scene, pa, u, v);
+      const Vec3 d{hit[0] - f.origin[0], hit[1] - f.origin[1], hit[2] - f.origin[2]};
+      if (!(dot3(f.normal, d) > 0.05)) continue;  // on the relief only
+      double ur, vr, up, vp;
+      if (!project(hit, ur, vr) || !project(ray_hit(scene, pa, u, v, true), up, vp)) continue;
+      error_relief += std::abs(ia.at(u, v) - sample(ur, vr));
+      error_plane += std::abs(ia.at(u, v) - sample(up, vp));
+      parallax += std::hypot(ur - up, vr - vp);
+      ++used;
+    }
+  }
+  ASSERT_GT(used, 200);
+  error_relief /= used;
+  error_plane /= used;
+  parallax /= used;
+  std::printf(
+      "  %d points on the relief: parallax %.2f px; grey error %.2f (pose + relief) vs "
+      "%.2f (base plane)\n",
+      used, parallax, error_relief, error_plane);
+  EXPECT_GT(parallax, 1.0);
+  EXPECT_LT(error_relief, 4.0);  // bilinear sampling of frame b across hard texture edges
+  EXPECT_LT(error_relief, 0.5 * error_plane);
+
+  // Without sway and scan the vehicle alone moves the camera, along the surface's x axis.
+  o.sway_m = 0;
+  o.sway_deg = 0;
+  o.scan_rate_deg_s = 0;
+  SimScene cruising(o);
+  const SimCameraPose later = cruising.camera_pose(30);  // 1 s
+  const Vec3 centre = to_world(later, {0, 0, 0});
+  for (int i = 0; i < 3; ++i)
+    EXPECT_NEAR(centre[i], o.vehicle_speed_m_s * f.e1[i], 1e-12);
+  for (int i = 0; i < 9; ++i)
+    EXPECT_NEAR(later.rotation[i], i % 4 == 0 ? 1.0 : 0.0, 1e-12);
+}
+
+TEST(SimSceneRelief, RejectsImpossibleReliefOptions) {
+  auto rejects = [](auto change) {
+    SimSceneOptions o = relief_options();
+    change(o);
+    EXPECT_THROW(SimScene{o}, std::invalid_argument);
+  };
+  rejects([](SimSceneOptions& o) { o.relief_height_m = -0.1; });
+  rejects([](SimSceneOptions& o) { o.relief_height_m = 0.7; });  // over half the distance
+  rejects([](SimSceneOptions& o) { o.relief_min_height_m = 0.4; });
+  rejects([](SimSceneOptions& o) { o.relief_per_m2 = -1; });
+  rejects([](SimSceneOptions& o) { o.relief_max_slope = 1.5; });
+  rejects([](SimSceneOptions& o) { o.relief_max_slope = 0; });
+  rejects([](SimSceneOptions& o) { o.vehicle_speed_m_s = std::nan(""); });
+  EXPECT_NO_THROW(SimScene{relief_options()});
+}
+
 // Best and mean time of one render() over `frames` frames, in milliseconds.
 std::pair<double, double> render_ms(SimScene& scene, std::vector<std::uint8_t>& buffer,
                                     int frames) {
@@ -545,7 +867,16 @@ TEST(SimScene, LargeFramesRenderWithoutHeapAllocation) {
   SimGroundTruth truth;
   scene.ground_truth(0, true, truth);  // the first call sizes the vectors
 
+  SimSceneOptions pier = o;
+  pier.relief_height_m = 0.3;
+  pier.vehicle_speed_m_s = 0.4;
+  SimScene relief(pier);
+  SimGroundTruth relief_truth;
+  relief.ground_truth(0, true, relief_truth);
+
   const std::size_t before = g_allocations.load();
+  relief.render(3, true, buffer);
+  relief.ground_truth(3, true, relief_truth);
   scene.render(0, true, buffer);
   scene.render(1, false, buffer);
   scene.render(1000, true, buffer);
@@ -570,6 +901,13 @@ TEST(SimScene, LargeFramesRenderWithoutHeapAllocation) {
     std::vector<std::uint8_t> small_buffer(small.format().bytes());
     const auto [small_best, small_mean] = render_ms(small, small_buffer, 10);
     std::printf("  1280x1024 render: best %.1f ms, mean %.1f ms\n", small_best, small_mean);
+    vga.relief_height_m = 0.3;
+    vga.relief_max_slope = 0.9;
+    vga.vehicle_speed_m_s = 0.4;
+    SimScene small_relief(vga);
+    const auto [relief_best, relief_mean] = render_ms(small_relief, small_buffer, 10);
+    std::printf("  1280x1024 render with relief: best %.1f ms, mean %.1f ms\n", relief_best,
+                relief_mean);
   }
 }
 

@@ -55,6 +55,23 @@ std::vector<Scenario> standard_scenarios(int width, int height) {
     out.push_back(s);
   }
   {
+    Scenario s{"pier",
+               "ambient as bright as the laser on a pier with bumps and piles of 5-30 cm; the "
+               "vehicle moves along it at 0.4 m/s while the PTU scans (parallax)",
+               base};
+    s.scene.ambient = 150;
+    s.scene.texture_contrast = 0.6;
+    s.scene.laser_peak = 100;
+    s.scene.noise_sigma = 2.0;
+    s.scene.seed = 5;
+    s.scene.relief_height_m = 0.30;
+    s.scene.relief_min_height_m = 0.05;
+    s.scene.relief_per_m2 = 1.0;
+    s.scene.relief_max_slope = 0.9;
+    s.scene.vehicle_speed_m_s = 0.4;
+    out.push_back(s);
+  }
+  {
     Scenario s{"backscatter", "turbid water: glow of the sheet in the water, weak line", base};
     s.scene.ambient = 15;
     s.scene.texture_contrast = 0.3;

@@ -20,8 +20,10 @@ struct Scenario {
   int frames = 16;  // the first is warm-up for detectors that need a previous frame; not scored
 };
 
-// clean, ambient (texture as bright as the laser, PTU scanning), backscatter (turbid water,
-// 3 dB line), clipped (saturated core), ambient-alternate (on/off subtraction).
+// clean, ambient (texture as bright as the laser, PTU scanning), ambient-alternate (on/off
+// subtraction), pier (as ambient on a surface with bumps and piles of 5-30 cm, the vehicle moving
+// along it: parallax no homography explains), backscatter (turbid water, 3 dB line), clipped
+// (saturated core).
 std::vector<Scenario> standard_scenarios(int width = 1280, int height = 1024);
 
 struct Score {

@@ -29,6 +29,13 @@ constexpr float kBandSigmas = 5.0f;  // the laser profile is evaluated within +-
 constexpr float kEdgeRows = 1.5f;    // truth is NaN when the centre is within 2 px of the border
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 constexpr float kNoGlow = 1e30f;  // inverse depth floor of the glow in columns without a line
+// The relief: a wrapping tile of heights on a square lattice, bilinearly interpolated, stored like
+// the texture with a copy of the first row and column after the last.
+constexpr int kReliefLog2 = 10;  // 1024 x 1024 lattice points
+constexpr int kReliefSize = 1 << kReliefLog2;
+constexpr int kReliefStride = kReliefSize + 1;
+constexpr double kReliefCellM = 0.005;  // lattice spacing: the tile repeats every 5.12 m
+constexpr int kNewtonSteps = 3;         // per pixel, from the base plane onto the relief
 
 using Vec3 = std::array<double, 3>;
 using Mat3 = std::array<double, 9>;  // row-major
@@ -108,12 +115,19 @@ struct FrameGeometry {
   std::array<double, 9> h{};   // pixel (u, v, 1) -> (S, T, W); texel coordinates are S/W, T/W
   std::array<double, 4> lp{};  // laser sheet a X + b Y + c Z + e = 0
   double fx = 1, fy = 1, cx = 0, cy = 0;
+  // For the relief: surface coordinates (metres) of a camera-frame point X are
+  // x = e1 . X + c1, y = e2 . X + c2, height toward the camera d_surface - n . X.
+  Vec3 e1{}, e2{};
+  double c1 = 0, c2 = 0;
+  double texel_m = 1;
 };
 
 struct ColumnLine {
   bool hit = false;
   double v = 0;  // row of the line centre
   double z = 0;  // depth of the lit surface point
+  double s = 0;  // texel coordinates of the lit surface point (set on relief only)
+  double t = 0;
 };
 
 // Where the sheet meets the surface along column u, in closed form: with X = Z (xn, yn, 1) the
@@ -211,6 +225,91 @@ void ambient_row(const float* __restrict tex, float s0, float su, float t0, floa
   }
 }
 
+// One image row of the relieved surface: the base-plane hit of each pixel's ray as in
+// ambient_row, then Newton steps on g(h) = relief(hit at height h) - h, where the hit at height h
+// slides from the base-plane hit toward the camera's foot point (foot_s, foot_t): by h / d for
+// a camera at height d. The slope limit keeps g' <= -(1 - slope tan(view angle)) < 0, so the root
+// is unique and a few steps reach it to well under a millimetre.
+struct ReliefRow {
+  float s0, su, t0, tu, w0, wu, w_min;  // base-plane texel coordinates, as in ambient_row
+  float foot_s, foot_t;                 // texel coordinates of the camera's foot point
+  float inv_height;                     // 1 / camera height above the base plane (1/m)
+  float texel_to_cell;                  // relief lattice cells per texel
+  float relief_max;                     // m
+  float ambient;
+};
+
+void relief_row(const float* __restrict tex, const float* __restrict relief, const ReliefRow& r,
+                int count, float* __restrict row) {
+  constexpr int kTexMask = kTextureSize - 1;
+  constexpr int kCellMask = kReliefSize - 1;
+  // Lanes of kBlock pixels step together, so that the gathers of one step are independent and
+  // the arithmetic vectorises (one pixel's Newton steps alone would be a chain of latencies).
+  for (int u0 = 0; u0 < count; u0 += kBlock) {
+    alignas(64) float sb[kBlock], tb[kBlock], ks[kBlock], kt[kBlock], h[kBlock], gain[kBlock];
+    alignas(64) float fs[kBlock], ft[kBlock];
+    alignas(64) std::int32_t index[kBlock];
+    for (int k = 0; k < kBlock; ++k) {
+      const float fu = static_cast<float>(u0 + k);
+      const float w = r.w0 + fu * r.wu;
+      const float inv = 1.0f / branchless_max(w, r.w_min);
+      sb[k] = (r.s0 + fu * r.su) * inv;
+      tb[k] = (r.t0 + fu * r.tu) * inv;
+      ks[k] = (r.foot_s - sb[k]) * r.inv_height;
+      kt[k] = (r.foot_t - tb[k]) * r.inv_height;
+      h[k] = 0.0f;
+      gain[k] = w > r.w_min ? r.ambient : 0.0f;
+    }
+    for (int step = 0; step < kNewtonSteps; ++step) {
+      for (int k = 0; k < kBlock; ++k) {
+        const float gs = (sb[k] + h[k] * ks[k]) * r.texel_to_cell;
+        const float gt = (tb[k] + h[k] * kt[k]) * r.texel_to_cell;
+        std::int32_t is = static_cast<std::int32_t>(gs), it = static_cast<std::int32_t>(gt);
+        is -= gs < static_cast<float>(is) ? 1 : 0;  // floor without a libm call
+        it -= gt < static_cast<float>(it) ? 1 : 0;
+        fs[k] = gs - static_cast<float>(is);
+        ft[k] = gt - static_cast<float>(it);
+        index[k] = (it & kCellMask) * kReliefStride + (is & kCellMask);
+      }
+      alignas(64) float c00[kBlock], c01[kBlock], c10[kBlock], c11[kBlock];
+      for (int k = 0; k < kBlock; ++k) {
+        const float* p = relief + index[k];
+        c00[k] = p[0];
+        c01[k] = p[1];
+        c10[k] = p[kReliefStride];
+        c11[k] = p[kReliefStride + 1];
+      }
+      for (int k = 0; k < kBlock; ++k) {
+        const float p00 = c00[k], p01 = c01[k], p10 = c10[k], p11 = c11[k];
+        const float top = p00 + fs[k] * (p01 - p00), bottom = p10 + fs[k] * (p11 - p10);
+        const float height = top + ft[k] * (bottom - top);
+        const float d_ds = (p01 - p00) + ft[k] * ((p11 - p10) - (p01 - p00));
+        const float d_dt = bottom - top;
+        // g' <= -0.2 always where the slope limit holds; the floor only guards grazing rays.
+        const float slope = (d_ds * ks[k] + d_dt * kt[k]) * r.texel_to_cell - 1.0f;
+        const float next = h[k] - (height - h[k]) / std::min(slope, -0.2f);
+        h[k] = std::min(std::max(next, 0.0f), r.relief_max);
+      }
+    }
+    for (int k = 0; k < kBlock; ++k) {
+      const float s = sb[k] + h[k] * ks[k], t = tb[k] + h[k] * kt[k];
+      std::int32_t is = static_cast<std::int32_t>(s), it = static_cast<std::int32_t>(t);
+      is -= s < static_cast<float>(is) ? 1 : 0;
+      it -= t < static_cast<float>(it) ? 1 : 0;
+      fs[k] = s - static_cast<float>(is);
+      ft[k] = t - static_cast<float>(it);
+      index[k] = (it & kTexMask) * kTextureStride + (is & kTexMask);
+    }
+    for (int k = 0; k < kBlock; ++k) {
+      const float* p = tex + index[k];
+      const float p00 = p[0], p01 = p[1], p10 = p[kTextureStride], p11 = p[kTextureStride + 1];
+      const float top = p00 + fs[k] * (p01 - p00);
+      const float bottom = p10 + fs[k] * (p11 - p10);
+      row[u0 + k] = gain[k] * (top + ft[k] * (bottom - top));
+    }
+  }
+}
+
 // Backscatter for `count` pixels (a multiple of kBlock) of one row. The ray of pixel u meets the
 // sheet at inverse depth p = p0 + u pu; it glows where the sheet is in front of the lit surface
 // point, 0 < 1/p < Z, i.e. p > glow_floor[u] = 1/Z (a huge value in columns without a line).
@@ -294,6 +393,91 @@ void validate(const SimSceneOptions& o) {
           "scan_rate_deg_s must be within [0, 1000]");
   require(finite_nonneg(o.scan_amplitude_deg) && o.scan_amplitude_deg <= 45,
           "scan_amplitude_deg must be within [0, 45]");
+  require(finite_nonneg(o.relief_height_m) && o.relief_height_m <= 0.5 * o.distance_m,
+          "relief_height_m must be within [0, distance_m / 2]");
+  require(finite_nonneg(o.relief_min_height_m) &&
+              (o.relief_height_m == 0 || o.relief_min_height_m <= o.relief_height_m),
+          "relief_min_height_m must be within [0, relief_height_m]");
+  require(finite_nonneg(o.relief_per_m2) && o.relief_per_m2 <= 100,
+          "relief_per_m2 must be within [0, 100]");
+  require(
+      std::isfinite(o.relief_max_slope) && o.relief_max_slope >= 0.05 && o.relief_max_slope <= 1.0,
+      "relief_max_slope must be within [0.05, 1]");
+  require(std::isfinite(o.vehicle_speed_m_s) && std::abs(o.vehicle_speed_m_s) <= 10,
+          "vehicle_speed_m_s must be within [-10, 10]");
+}
+
+// Shoulder of a relief feature at distance x beyond its top: 1 on the top, falling to 0 over
+// `width` along half a cosine (smooth, with no tail). Its steepest slope is (pi / 2) / width.
+double shoulder(double x, double width) {
+  if (x <= 0) return 1.0;
+  if (x >= width) return 0.0;
+  return 0.5 * (1.0 + std::cos(kPi * x / width));
+}
+
+// The relief tile: round bumps (a cosine dome), flat-topped posts (a disc with a shoulder) and
+// elongated piles (a capsule with a shoulder), combined by their maximum so that no flank is
+// steeper than the steepest feature's. Heights in metres at the lattice points.
+std::vector<float> make_relief(const SimSceneOptions& o) {
+  const int n = kReliefSize;
+  const double period = n * kReliefCellM;
+  std::vector<double> height(static_cast<std::size_t>(n) * n, 0.0);
+  Rng rng(o.seed ^ 0x72656c6965663031ULL);
+  const auto count = static_cast<int>(std::lround(o.relief_per_m2 * period * period));
+  for (int k = 0; k < count; ++k) {
+    const double cx = rng.uniform(0.0, period), cy = rng.uniform(0.0, period);
+    const double amplitude = rng.uniform(o.relief_min_height_m, o.relief_height_m);
+    const double width = amplitude * 0.5 * kPi / o.relief_max_slope * rng.uniform(1.0, 1.4);
+    const double kind = rng.uniform();
+    double half_length = 0, top = 0;  // capsule: a segment of 2 half_length, top half-width
+    if (kind < 0.4) {
+      // A round bump.
+    } else if (kind < 0.65) {
+      top = rng.uniform(0.02, 0.10);  // a post
+    } else {
+      half_length = rng.uniform(0.15, 0.6);  // a pile lying along the surface
+      top = rng.uniform(0.0, 0.04);
+    }
+    const double angle = rng.uniform(0.0, kPi);
+    const double dx = std::cos(angle), dy = std::sin(angle);
+    const double reach = std::min(half_length + top + width, 0.45 * period);
+    const int i0 = static_cast<int>(std::floor((cx - reach) / kReliefCellM));
+    const int i1 = static_cast<int>(std::ceil((cx + reach) / kReliefCellM));
+    const int j0 = static_cast<int>(std::floor((cy - reach) / kReliefCellM));
+    const int j1 = static_cast<int>(std::ceil((cy + reach) / kReliefCellM));
+    for (int j = j0; j <= j1; ++j) {
+      for (int i = i0; i <= i1; ++i) {
+        const double px = i * kReliefCellM - cx, py = j * kReliefCellM - cy;
+        const double along = std::clamp(px * dx + py * dy, -half_length, half_length);
+        const double ex = px - along * dx, ey = py - along * dy;
+        const double h = amplitude * shoulder(std::sqrt(ex * ex + ey * ey) - top, width);
+        double& cell = height[static_cast<std::size_t>(j & (n - 1)) * n + (i & (n - 1))];
+        cell = std::max(cell, h);
+      }
+    }
+  }
+  std::vector<float> tile(static_cast<std::size_t>(kReliefStride) * kReliefStride);
+  for (int y = 0; y < kReliefStride; ++y) {
+    for (int x = 0; x < kReliefStride; ++x) {
+      tile[static_cast<std::size_t>(y) * kReliefStride + x] =
+          static_cast<float>(height[static_cast<std::size_t>(y & (n - 1)) * n + (x & (n - 1))]);
+    }
+  }
+  return tile;
+}
+
+// Bilinear height of the relief tile at surface coordinates (x, y) in metres.
+double relief_at(const float* relief, double x, double y) {
+  const double gx = std::clamp(x / kReliefCellM, -1e9, 1e9);
+  const double gy = std::clamp(y / kReliefCellM, -1e9, 1e9);
+  const double fx0 = std::floor(gx), fy0 = std::floor(gy);
+  const double fx = gx - fx0, fy = gy - fy0;
+  const auto ix = static_cast<std::int64_t>(fx0) & (kReliefSize - 1);
+  const auto iy = static_cast<std::int64_t>(fy0) & (kReliefSize - 1);
+  const float* p = relief + iy * kReliefStride + ix;
+  const double top = p[0] + fx * (p[1] - p[0]);
+  const double bottom = p[kReliefStride] + fx * (p[kReliefStride + 1] - p[kReliefStride]);
+  return top + fy * (bottom - top);
 }
 
 // Smooth value noise on a wrapping lattice of `spacing` texels, values in [-1, 1], added * amp.
@@ -430,6 +614,11 @@ FrameGeometry make_geometry(const SimSceneOptions& o, const Mat3& r, const Vec3&
   const Vec3 tp{t[0] - p0[0], t[1] - p0[1], t[2] - p0[2]};
   const Vec3 re1 = mul_transposed(r, e1), re2 = mul_transposed(r, e2);
   const double c1 = dot(e1, tp), c2 = dot(e2, tp);
+  g.e1 = re1;
+  g.e2 = re2;
+  g.c1 = c1;
+  g.c2 = c2;
+  g.texel_m = texel;
   const std::array<Vec3, 3> rows{Vec3{(g.d_surface * re1[0] + c1 * g.n[0]) / texel,
                                       (g.d_surface * re1[1] + c1 * g.n[1]) / texel,
                                       (g.d_surface * re1[2] + c1 * g.n[2]) / texel},
@@ -455,6 +644,73 @@ float albedo_at(const FrameGeometry& g, const float* tex, double u, double v) {
                      static_cast<float>(std::clamp(t / w, -1e7, 1e7)));
 }
 
+// Where the sheet meets the relieved surface along column u. The sheet's points in the column
+// form a line P + l D (the sheet cut by the plane through the camera and the column); the relief
+// lies between heights 0 and relief_max, so the crossing is within the stretch of that line
+// between those heights. Walked from the top in steps of at most one lattice cell, then bisected
+// to double precision: the bilinear surface is continuous, so the sign change brackets a root.
+// The first crossing from the top is the lit one (the slope limit makes it the only one).
+ColumnLine solve_column_relief(const FrameGeometry& g, const float* relief, double relief_max,
+                               double u) {
+  ColumnLine out;
+  if (!g.surface) return out;
+  const auto& [a, b, c, e] = g.lp;
+  const double xn = (u - g.cx) / g.fx;
+  const Vec3 n1{1.0, 0.0, -xn}, n2{a, b, c};
+  const Vec3 dir{n1[1] * n2[2] - n1[2] * n2[1], n1[2] * n2[0] - n1[0] * n2[2],
+                 n1[0] * n2[1] - n1[1] * n2[0]};
+  // P = alpha n1 + beta n2 with n1 . P = 0 (in the column plane) and n2 . P = -e (on the sheet).
+  const double g11 = dot(n1, n1), g12 = dot(n1, n2), g22 = dot(n2, n2);
+  const double det = g11 * g22 - g12 * g12;
+  if (!(det > 1e-18 * g11 * g22)) return out;
+  const double alpha = e * g12 / det, beta = -e * g11 / det;
+  const Vec3 p{alpha * n1[0] + beta * n2[0], alpha * n1[1] + beta * n2[1],
+               alpha * n1[2] + beta * n2[2]};
+  // Height above the base plane along the line: q0 - l qd.
+  const double q0 = g.d_surface - dot(g.n, p), qd = dot(g.n, dir);
+  if (!(std::abs(qd) > 1e-12)) return out;
+  const double margin = 1e-3;
+  const double l_top = (q0 - (relief_max + margin)) / qd, l_bottom = (q0 + margin) / qd;
+  const double x0 = dot(g.e1, p) + g.c1, xd = dot(g.e1, dir);
+  const double y0 = dot(g.e2, p) + g.c2, yd = dot(g.e2, dir);
+  auto above = [&](double l) {
+    return (q0 - l * qd) - relief_at(relief, x0 + l * xd, y0 + l * yd);
+  };
+  const double span = std::abs(l_bottom - l_top) * std::hypot(xd, yd);
+  const int steps = static_cast<int>(std::clamp(std::ceil(span / kReliefCellM), 2.0, 100000.0));
+  double lo = l_top, hi = l_bottom;  // above(lo) > 0 >= above(hi) once bracketed
+  for (int k = 1; k <= steps; ++k) {
+    const double l = l_top + (l_bottom - l_top) * k / steps;
+    if (above(l) <= 0) {
+      hi = l;
+      break;
+    }
+    lo = l;
+  }
+  for (int k = 0; k < 200 && lo != hi; ++k) {
+    const double mid = 0.5 * (lo + hi);
+    if (mid == lo || mid == hi) break;
+    (above(mid) > 0 ? lo : hi) = mid;
+  }
+  const double l = 0.5 * (lo + hi);
+  const Vec3 x{p[0] + l * dir[0], p[1] + l * dir[1], p[2] + l * dir[2]};
+  if (!(x[2] > 0)) return out;
+  out.z = x[2];
+  out.v = g.cy + g.fy * x[1] / x[2];
+  out.s = (x0 + l * xd) / g.texel_m;
+  out.t = (y0 + l * yd) / g.texel_m;
+  out.hit =
+      std::isfinite(out.v) && std::isfinite(out.z) && std::isfinite(out.s) && std::isfinite(out.t);
+  return out;
+}
+
+// Where the sheet meets the surface in column u: on the relief when there is one.
+ColumnLine column_line(const FrameGeometry& g, const std::vector<float>& relief, double relief_max,
+                       int u) {
+  if (relief.empty()) return solve_column(g, u);
+  return solve_column_relief(g, relief.data(), relief_max, u);
+}
+
 double line_sigma(const SimSceneOptions& o, double z) {
   const double sheet =
       o.calibration.camera.fy * o.calibration.laser.sheet_width_m / z / kFwhmToSigma;
@@ -477,6 +733,7 @@ SimScene::SimScene(const SimSceneOptions& options) : options_(options) {
   scratch_truth_.depth_m.assign(width, kNaN);
   scratch_truth_.width_px.assign(width, kNaN);
   line_gain_.assign(width, 0.0f);
+  if (options_.relief_height_m > 0 && options_.relief_per_m2 > 0) relief_ = make_relief(options_);
 }
 
 FrameFormat SimScene::format() const {
@@ -492,6 +749,13 @@ SimScene::Pose SimScene::pose_at(std::uint64_t sequence) const {
   Pose pose;
   pose.t = {options_.sway_m * wave(phase, 0.0), options_.sway_m * 0.6 * wave(1.3 * phase, 1.0),
             options_.sway_m * 0.4 * wave(0.7 * phase, 2.0)};
+  if (options_.vehicle_speed_m_s != 0) {
+    // Along the surface's x axis (see make_geometry), so the distance to the surface stays.
+    const Mat3 basis = mul(rot_x(options_.tilt_x_deg * kDeg), rot_y(options_.tilt_y_deg * kDeg));
+    const double travel = options_.vehicle_speed_m_s * time;
+    for (int i = 0; i < 3; ++i)
+      pose.t[i] += travel * basis[i * 3];
+  }
   const double amp = options_.sway_deg * kDeg;
   double scan = 0.0;
   if (options_.scan_rate_deg_s > 0 && options_.scan_amplitude_deg > 0) {
@@ -505,6 +769,34 @@ SimScene::Pose SimScene::pose_at(std::uint64_t sequence) const {
   const double az = amp * 0.5 * wave(0.8 * phase, 4.1);
   pose.r = mul(rot_z(az), mul(rot_y(ay), rot_x(ax)));
   return pose;
+}
+
+SimCameraPose SimScene::camera_pose(std::uint64_t sequence) const {
+  const Pose pose = pose_at(sequence);  // camera -> world
+  SimCameraPose out;
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j)
+      out.rotation[i * 3 + j] = pose.r[j * 3 + i];
+  }
+  const Vec3 t = mul_transposed(pose.r, pose.t);
+  out.translation = {-t[0], -t[1], -t[2]};
+  return out;
+}
+
+double SimScene::relief_height(double x_m, double y_m) const {
+  return relief_.empty() ? 0.0 : relief_at(relief_.data(), x_m, y_m);
+}
+
+std::array<double, 3> SimScene::surface_point(double x_m, double y_m) const {
+  const Mat3 basis = mul(rot_x(options_.tilt_x_deg * kDeg), rot_y(options_.tilt_y_deg * kDeg));
+  const double h = relief_height(x_m, y_m);
+  // Axes e1, e2 are the basis' first two columns, the normal toward the camera minus the third.
+  std::array<double, 3> out{};
+  for (int i = 0; i < 3; ++i) {
+    out[i] = x_m * basis[i * 3] + y_m * basis[i * 3 + 1] - h * basis[i * 3 + 2];
+  }
+  out[2] += options_.distance_m;
+  return out;
 }
 
 void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint8_t> dst) {
@@ -531,7 +823,8 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
   float min_floor = kNoGlow;
   const bool laser = laser_on && (options_.laser_peak > 0 || options_.backscatter > 0);
   for (int u = 0; u < width; ++u) {
-    const ColumnLine line = laser ? solve_column(g, u) : ColumnLine{};
+    const ColumnLine line =
+        laser ? column_line(g, relief_, options_.relief_height_m, u) : ColumnLine{};
     if (!line.hit) {
       centre[u] = sigma[u] = depth[u] = kNaN;
       gain[u] = 0.0f;
@@ -542,7 +835,11 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
     sigma[u] = static_cast<float>(line_sigma(options_, line.z));
     depth[u] = static_cast<float>(line.z);
     glow_floor[u] = static_cast<float>(1.0 / line.z);
-    gain[u] = static_cast<float>(options_.laser_peak * albedo_at(g, tex, u, centre[u]) *
+    const float albedo = relief_.empty()
+                             ? albedo_at(g, tex, u, centre[u])
+                             : sample_tile(tex, static_cast<float>(std::clamp(line.s, -1e7, 1e7)),
+                                           static_cast<float>(std::clamp(line.t, -1e7, 1e7)));
+    gain[u] = static_cast<float>(options_.laser_peak * albedo *
                                  std::exp(-2.0 * options_.attenuation_per_m * line.z));
     band_lo = std::min(band_lo, centre[u] - kBandSigmas * sigma[u]);
     band_hi = std::max(band_hi, centre[u] + kBandSigmas * sigma[u]);
@@ -566,10 +863,32 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
       const double reach = std::max({std::abs(s_row), std::abs(s_row + g.h[0] * padded),
                                      std::abs(t_row), std::abs(t_row + g.h[3] * padded)});
       const float w_min = static_cast<float>(std::max(reach * 1e-7, 1e-30));
-      ambient_row(tex, static_cast<float>(s_row), static_cast<float>(g.h[0]),
-                  static_cast<float>(t_row), static_cast<float>(g.h[3]),
-                  static_cast<float>(g.h[7] * dv + g.h[8]), static_cast<float>(g.h[6]), w_min,
-                  ambient, padded, row);
+      // On the relief the hit slides from the base-plane hit toward the camera's foot point, so
+      // with this floor lattice and texel coordinates stay below 1e6 (and the foot's).
+      const double texel_to_cell = g.texel_m / kReliefCellM;
+      const float relief_w_min =
+          static_cast<float>(std::max(reach * std::max(1.0, texel_to_cell) * 1e-6, 1e-30));
+      if (relief_.empty()) {
+        ambient_row(tex, static_cast<float>(s_row), static_cast<float>(g.h[0]),
+                    static_cast<float>(t_row), static_cast<float>(g.h[3]),
+                    static_cast<float>(g.h[7] * dv + g.h[8]), static_cast<float>(g.h[6]), w_min,
+                    ambient, padded, row);
+      } else {
+        const ReliefRow r{static_cast<float>(s_row),
+                          static_cast<float>(g.h[0]),
+                          static_cast<float>(t_row),
+                          static_cast<float>(g.h[3]),
+                          static_cast<float>(g.h[7] * dv + g.h[8]),
+                          static_cast<float>(g.h[6]),
+                          relief_w_min,
+                          static_cast<float>(g.c1 / g.texel_m),
+                          static_cast<float>(g.c2 / g.texel_m),
+                          static_cast<float>(1.0 / g.d_surface),
+                          static_cast<float>(texel_to_cell),
+                          static_cast<float>(options_.relief_height_m),
+                          ambient};
+        relief_row(tex, relief_.data(), r, padded, row);
+      }
     } else {
       std::fill(row, row + padded, 0.0f);
     }
@@ -611,7 +930,8 @@ void SimScene::ground_truth(std::uint64_t sequence, bool laser_on, SimGroundTrut
   const FrameGeometry g = make_geometry(options_, pose.r, pose.t);
   const bool laser = laser_on && options_.laser_peak > 0;
   for (int u = 0; u < width; ++u) {
-    const ColumnLine line = laser ? solve_column(g, u) : ColumnLine{};
+    const ColumnLine line =
+        laser ? column_line(g, relief_, options_.relief_height_m, u) : ColumnLine{};
     // The same float the renderer centres the profile on.
     const float v = static_cast<float>(line.v);
     if (!line.hit || !(v >= kEdgeRows && v <= last_row - kEdgeRows)) {

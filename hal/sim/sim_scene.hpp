@@ -1,5 +1,6 @@
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -42,6 +43,30 @@ struct SimSceneOptions {
   // up. The scene then moves across the laser line, as the paper's background subtraction needs.
   double scan_rate_deg_s = 0.0;
   double scan_amplitude_deg = 10.0;
+
+  // Relief on the surface (a pier with piles and overgrowth): smooth round bumps, elongated
+  // ridges and flat-topped posts, raised along the surface normal toward the camera, placed from
+  // the seed at relief_per_m2 features per square metre of surface, heights uniform in
+  // [relief_min_height_m, relief_height_m]. Their flanks are no steeper than relief_max_slope
+  // (rise over run): no part of the relief hides another from a ray (camera or laser) while
+  // relief_max_slope * tan(ray's angle to the normal) < 1, e.g. up to 42 degrees at slope 0.9.
+  // relief_height_m = 0: the plane, exactly. The relief repeats every 5.12 m along the surface.
+  double relief_height_m = 0.0;
+  double relief_min_height_m = 0.05;
+  double relief_per_m2 = 1.0;
+  double relief_max_slope = 0.7;
+  // The vehicle moving along the surface: the camera (with its laser) translates at this speed
+  // along the surface's x axis (the world x axis turned by the tilts), on top of sway and scan.
+  double vehicle_speed_m_s = 0.0;
+};
+
+// The true pose of the camera for one frame, world -> camera: X_camera = rotation X_world +
+// translation (rotation row-major). The world frame is the camera frame of frame 0 at rest (x
+// right, y down, z along the optical axis); the surface's base plane goes through (0, 0,
+// distance_m) of the world.
+struct SimCameraPose {
+  std::array<double, 9> rotation{1, 0, 0, 0, 1, 0, 0, 0, 1};
+  std::array<double, 3> translation{};
 };
 
 // The exact answer for one frame.
@@ -67,6 +92,16 @@ class SimScene {
   // image width (allocation only the first time).
   void ground_truth(std::uint64_t sequence, bool laser_on, SimGroundTruth& truth) const;
 
+  // The true camera pose of frame `sequence` (sway, scan and vehicle motion).
+  SimCameraPose camera_pose(std::uint64_t sequence) const;
+
+  // The surface the renderer draws, in surface coordinates: (x_m, y_m) metres along the base
+  // plane's axes from its point (0, 0, distance_m), the x axis being the world x axis turned by
+  // tilt_y_deg then tilt_x_deg. relief_height() is the height toward the camera there (0 without
+  // relief); surface_point() is the point of the relieved surface in the world frame.
+  double relief_height(double x_m, double y_m) const;
+  std::array<double, 3> surface_point(double x_m, double y_m) const;
+
  private:
   struct Pose;
   Pose pose_at(std::uint64_t sequence) const;
@@ -74,10 +109,12 @@ class SimScene {
   SimSceneOptions options_;
   std::vector<float> texture_;  // tile of surface albedo noise, texture_size_ x texture_size_
   int texture_size_ = 0;
-  std::vector<std::int8_t> noise_;  // table of Gaussian sensor noise samples (scaled)
-  std::vector<float> row_buffer_;   // scratch for one image row
-  SimGroundTruth scratch_truth_;    // per-column truth of the frame being rendered
-  std::vector<float> line_gain_;    // per-column peak grey level of the line
+  std::vector<std::int8_t> noise_;      // table of Gaussian sensor noise samples (scaled)
+  std::vector<float> row_buffer_;       // scratch for one image row
+  SimGroundTruth scratch_truth_;        // per-column truth of the frame being rendered
+  std::vector<float> line_gain_;        // per-column peak grey level of the line
+  std::vector<float> relief_;           // wrapping tile of relief heights (m), empty without relief
+  std::vector<float> line_s_, line_t_;  // per column: texel coordinates of the lit point
 };
 
 }  // namespace laserline::hal
