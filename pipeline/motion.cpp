@@ -3,7 +3,9 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <complex>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -166,9 +168,21 @@ struct MotionEstimator::State {
   std::vector<int> inlier_index;
   std::vector<std::uint8_t> is_inlier;
   std::vector<std::uint8_t> best_inlier;
+
+  // Camera motion (with a geometry only): the camera estimator's points to follow from the
+  // previous frame, the whole pixels they are tracked from, their full-size patches (empty where
+  // the patch does not fit), and where they were found in the current frame (NaN: lost).
+  bool has_camera = false;
+  std::vector<Point> follow_from;
+  std::vector<Point> follow_pixel;
+  std::vector<std::uint8_t> follow_has_patch;
+  std::vector<std::uint8_t> follow_patches;
+  int follow_count = 0;
+  std::vector<std::array<float, 2>> followed;
 };
 
-MotionEstimator::MotionEstimator(const MotionOptions& options) : options_(options) {
+MotionEstimator::MotionEstimator(const MotionOptions& options)
+    : options_(options), camera_(options) {
   const auto require = [](bool ok, const char* what) {
     if (!ok) throw std::invalid_argument(std::string("MotionOptions: ") + what);
   };
@@ -307,6 +321,16 @@ void MotionEstimator::reset(int width, int height, const ScannerGeometry* geomet
   s.inlier_index.assign(cells, 0);
   s.is_inlier.assign(cells, 0);
   s.best_inlier.assign(cells, 0);
+
+  s.has_camera = geometry != nullptr;
+  const int follow = s.has_camera ? std::min(cells, o.scale_tracks) : 0;
+  s.follow_from.assign(follow, Point{});
+  s.follow_pixel.assign(follow, Point{});
+  s.follow_has_patch.assign(follow, 0);
+  s.follow_patches.assign(static_cast<std::size_t>(follow) * s.patch_bytes, 0);
+  s.followed.assign(follow, {});
+  s.follow_count = 0;
+  if (s.has_camera) camera_.reset(*geometry, cells);
   s.width = width;
   s.height = height;
 }
@@ -588,6 +612,7 @@ MotionEstimate MotionEstimator::update(const ImageView& frame) {
     estimate = estimate_from_previous(current, frame);
     s.reported_rejected = s.previous;
   }
+  if (s.has_camera) keep_follow_patches(frame);
   detect_features(current, frame);
   s.previous = current;
   s.has_previous = true;
@@ -716,6 +741,11 @@ MotionEstimate MotionEstimator::estimate_from_previous(int current, const ImageV
     ++n;
   }
   estimate.tracked = n;
+  if (s.has_camera) {
+    const int followed = follow_points(current, frame);
+    estimate.camera = camera_.estimate({s.tracks.data(), static_cast<std::size_t>(s.track_count)},
+                                       {s.followed.data(), static_cast<std::size_t>(followed)});
+  }
   if (n < std::max(4, o.min_inliers)) return estimate;
 
   Homography h;
@@ -738,6 +768,49 @@ MotionEstimate MotionEstimator::estimate_from_previous(int current, const ImageV
   const double determinant = to_matrix(h).determinant();
   estimate.valid = inliers >= o.min_inliers && w > 0 && determinant > 0;
   return estimate;
+}
+
+int MotionEstimator::follow_points(int current, const ImageView& frame) {
+  State& s = *state_;
+  constexpr float kLost = std::numeric_limits<float>::quiet_NaN();
+  for (int k = 0; k < s.follow_count; ++k) {
+    s.followed[k] = {kLost, kLost};
+    if (!s.follow_has_patch[k]) continue;
+    const Point from = s.follow_pixel[k];
+    const TrackResult t =
+        track_point(s.pyramids[s.previous], s.pyramids[current],
+                    s.follow_patches.data() + static_cast<std::ptrdiff_t>(k) * s.patch_bytes, frame,
+                    options_, from[0], from[1]);
+    // The point moves like the whole pixel next to it: the same sub-pixel offset.
+    if (t.converged) {
+      s.followed[k] = {t.u + (s.follow_from[k][0] - from[0]),
+                       t.v + (s.follow_from[k][1] - from[1])};
+    }
+  }
+  return s.follow_count;
+}
+
+void MotionEstimator::keep_follow_patches(const ImageView& frame) {
+  State& s = *state_;
+  const std::span<const std::array<float, 2>> points = camera_.to_follow();
+  const int n = options_.window_radius + 1;
+  const int count =
+      std::min(static_cast<int>(points.size()), static_cast<int>(s.follow_from.size()));
+  for (int k = 0; k < count; ++k) {
+    const Point p = points[k];
+    const Point pixel{std::round(p[0]), std::round(p[1])};
+    const int u = static_cast<int>(pixel[0]), v = static_cast<int>(pixel[1]);
+    s.follow_from[k] = p;
+    s.follow_pixel[k] = pixel;
+    s.follow_has_patch[k] = u - n >= 0 && v - n >= 0 && u + n < s.width && v + n < s.height;
+    if (!s.follow_has_patch[k]) continue;
+    std::uint8_t* patch = s.follow_patches.data() + static_cast<std::ptrdiff_t>(k) * s.patch_bytes;
+    for (int j = -n; j <= n; ++j) {
+      std::memcpy(patch, frame.row(v + j) + (u - n), static_cast<std::size_t>(2 * n + 1));
+      patch += 2 * n + 1;
+    }
+  }
+  s.follow_count = count;
 }
 
 namespace {
@@ -896,6 +969,588 @@ bool MotionEstimator::fit_homography(int n, Homography& result, int& inlier_coun
   result = to_homography(h_best);
   inlier_count = count;
   return true;
+}
+
+}  // namespace laserline::pipeline
+
+// ---------------------------------------------------------------------------------------------
+// Camera motion: five-point essential matrix
+
+namespace laserline::pipeline {
+
+namespace {
+
+using Matrix10 = Eigen::Matrix<double, 10, 10>;
+using Vector3 = Eigen::Vector3d;
+
+// Polynomials in x, y, z of degree <= 3, coefficients by monomial, in order of degree: 1; x y z;
+// x2 xy xz y2 yz z2; x3 x2y x2z xy2 xyz xz2 y3 y2z yz2 z3. A polynomial of degree <= d uses the
+// first 1, 4, 10 or 20 coefficients.
+using Polynomial = std::array<double, 20>;
+constexpr std::array<std::array<int, 3>, 20> kMonomials{
+    {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {2, 0, 0}, {1, 1, 0}, {1, 0, 1},
+     {0, 2, 0}, {0, 1, 1}, {0, 0, 2}, {3, 0, 0}, {2, 1, 0}, {2, 0, 1}, {1, 2, 0},
+     {1, 1, 1}, {1, 0, 2}, {0, 3, 0}, {0, 2, 1}, {0, 1, 2}, {0, 0, 3}}};
+
+// kProduct[i][j]: the monomial i * j (for the degrees multiplied here it is always <= 3).
+constexpr std::array<std::array<int, 10>, 10> kProduct = [] {
+  std::array<std::array<int, 10>, 10> table{};
+  for (int i = 0; i < 10; ++i) {
+    for (int j = 0; j < 10; ++j) {
+      table[i][j] = -1;
+      for (int k = 0; k < 20; ++k) {
+        if (kMonomials[k][0] == kMonomials[i][0] + kMonomials[j][0] &&
+            kMonomials[k][1] == kMonomials[i][1] + kMonomials[j][1] &&
+            kMonomials[k][2] == kMonomials[i][2] + kMonomials[j][2]) {
+          table[i][j] = k;
+        }
+      }
+    }
+  }
+  return table;
+}();
+
+// out += sign * a * b, a using its first na coefficients, b its first 4 (linear) or 10.
+void multiply_add(const Polynomial& a, int na, const Polynomial& b, int nb, double sign,
+                  Polynomial& out) {
+  for (int i = 0; i < na; ++i) {
+    if (a[i] == 0) continue;
+    for (int j = 0; j < nb; ++j)
+      out[kProduct[i][j]] += sign * a[i] * b[j];
+  }
+}
+
+// The eight-point normal matrix row of one correspondence: current^T E previous = row . e.
+Eigen::Matrix<double, 9, 1> epipolar_row(double x1, double y1, double x2, double y2) {
+  Eigen::Matrix<double, 9, 1> row;
+  row << x2 * x1, x2 * y1, x2, y2 * x1, y2 * y1, y2, x1, y1, 1;
+  return row;
+}
+
+// Squared Sampson distance of a correspondence to the epipolar geometry E (normalised units).
+double sampson_squared(const Matrix3& e, double x1, double y1, double x2, double y2) {
+  const double ex0 = e(0, 0) * x1 + e(0, 1) * y1 + e(0, 2);
+  const double ex1 = e(1, 0) * x1 + e(1, 1) * y1 + e(1, 2);
+  const double ex2 = e(2, 0) * x1 + e(2, 1) * y1 + e(2, 2);
+  const double etx0 = e(0, 0) * x2 + e(1, 0) * y2 + e(2, 0);
+  const double etx1 = e(0, 1) * x2 + e(1, 1) * y2 + e(2, 1);
+  const double residual = x2 * ex0 + y2 * ex1 + ex2;
+  const double denominator = ex0 * ex0 + ex1 * ex1 + etx0 * etx0 + etx1 * etx1;
+  return denominator > 0 ? residual * residual / denominator
+                         : std::numeric_limits<double>::infinity();
+}
+
+// Depths (d1 in the previous camera, d2 in the current one) of the point seen along (x1, y1, 1)
+// and (x2, y2, 1), least squares of d2 x2 = d1 R x1 + t. False when the rays are parallel.
+bool triangulate_depths(const Matrix3& r, const Vector3& t, double x1, double y1, double x2,
+                        double y2, double& d1, double& d2) {
+  const Vector3 a = r * Vector3(x1, y1, 1);
+  const Vector3 b(x2, y2, 1);
+  const double aa = a.dot(a), bb = b.dot(b), ab = a.dot(b), at = a.dot(t), bt = b.dot(t);
+  const double det = aa * bb - ab * ab;
+  if (!(det > 1e-14 * aa * bb)) return false;
+  d1 = (-at * bb + ab * bt) / det;
+  d2 = (aa * bt - ab * at) / det;
+  return true;
+}
+
+// The essential matrix nearest to m (singular values (s, s, 0)), as U, V with det = +1.
+bool essential_decomposition(const Matrix3& e, Matrix3& u, Matrix3& v) {
+  const Eigen::JacobiSVD<Matrix3> svd(e, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  u = svd.matrixU();
+  v = svd.matrixV();
+  if (u.determinant() < 0) u = -u;
+  if (v.determinant() < 0) v = -v;
+  return svd.singularValues()(1) > 1e-9 * svd.singularValues()(0);
+}
+
+Matrix3 skew(const Vector3& t) {
+  Matrix3 m;
+  m << 0, -t(2), t(1), t(2), 0, -t(0), -t(1), t(0), 0;
+  return m;
+}
+
+// Signed Sampson distance (normalised units): its square is sampson_squared().
+double sampson_signed(const Matrix3& e, double x1, double y1, double x2, double y2) {
+  const double ex0 = e(0, 0) * x1 + e(0, 1) * y1 + e(0, 2);
+  const double ex1 = e(1, 0) * x1 + e(1, 1) * y1 + e(1, 2);
+  const double ex2 = e(2, 0) * x1 + e(2, 1) * y1 + e(2, 2);
+  const double etx0 = e(0, 0) * x2 + e(1, 0) * y2 + e(2, 0);
+  const double etx1 = e(0, 1) * x2 + e(1, 1) * y2 + e(2, 1);
+  const double denominator = ex0 * ex0 + ex1 * ex1 + etx0 * etx0 + etx1 * etx1;
+  return denominator > 0 ? (x2 * ex0 + y2 * ex1 + ex2) / std::sqrt(denominator) : 0.0;
+}
+
+// Levenberg-Marquardt on the inliers' Sampson distances over the five degrees of freedom of
+// (R, t / |t|): the minimal and linear solutions fit a few points exactly or minimise an
+// algebraic error, this minimises (nearly) the image error. Bounded iterations; the
+// Jacobian by forward differences (five more essential matrices per iteration).
+void refine_motion(const double* x1, const double* y1, const double* x2, const double* y2,
+                   const std::uint8_t* inlier, int n, Matrix3& rotation, Vector3& translation) {
+  using Vector5 = Eigen::Matrix<double, 5, 1>;
+  using Matrix5 = Eigen::Matrix<double, 5, 5>;
+  const auto apply = [](const Matrix3& r, const Vector3& t, const Vector5& delta, Matrix3& r_out,
+                        Vector3& t_out) {
+    const Vector3 w = delta.head<3>();
+    const double angle = w.norm();
+    r_out = angle > 0 ? Matrix3(Eigen::AngleAxisd(angle, w / angle).toRotationMatrix() * r) : r;
+    // Two directions across t.
+    const Vector3 helper = std::abs(t(0)) < 0.9 ? Vector3::UnitX() : Vector3::UnitY();
+    const Vector3 b1 = t.cross(helper).normalized();
+    const Vector3 b2 = t.cross(b1);
+    t_out = (t + delta(3) * b1 + delta(4) * b2).normalized();
+  };
+  const auto cost = [&](const Matrix3& e) {
+    double sum = 0;
+    for (int i = 0; i < n; ++i) {
+      if (!inlier[i]) continue;
+      const double d = sampson_signed(e, x1[i], y1[i], x2[i], y2[i]);
+      sum += d * d;
+    }
+    return sum;
+  };
+  constexpr double kStep = 1e-7;
+  double lambda = 1e-3;
+  double current = cost(skew(translation) * rotation);
+  for (int iteration = 0; iteration < 10; ++iteration) {
+    const Matrix3 e = skew(translation) * rotation;
+    std::array<Matrix3, 5> moved;
+    for (int k = 0; k < 5; ++k) {
+      Vector5 delta = Vector5::Zero();
+      delta(k) = kStep;
+      Matrix3 r;
+      Vector3 t;
+      apply(rotation, translation, delta, r, t);
+      moved[k] = skew(t) * r;
+    }
+    Matrix5 normal = Matrix5::Zero();
+    Vector5 gradient = Vector5::Zero();
+    for (int i = 0; i < n; ++i) {
+      if (!inlier[i]) continue;
+      const double d = sampson_signed(e, x1[i], y1[i], x2[i], y2[i]);
+      Vector5 j;
+      for (int k = 0; k < 5; ++k)
+        j(k) = (sampson_signed(moved[k], x1[i], y1[i], x2[i], y2[i]) - d) / kStep;
+      normal.noalias() += j * j.transpose();
+      gradient.noalias() += j * d;
+    }
+    bool improved = false;
+    for (int attempt = 0; attempt < 4 && !improved; ++attempt) {
+      Matrix5 damped = normal;
+      for (int k = 0; k < 5; ++k)
+        damped(k, k) += lambda * std::max(normal(k, k), 1e-12);
+      const Vector5 delta = damped.ldlt().solve(-gradient);
+      if (!delta.allFinite()) return;
+      Matrix3 r;
+      Vector3 t;
+      apply(rotation, translation, delta, r, t);
+      const double candidate = cost(skew(t) * r);
+      if (candidate < current) {
+        const bool converged = current - candidate < 1e-10 * current;
+        rotation = r;
+        translation = t;
+        current = candidate;
+        lambda = std::max(lambda * 0.1, 1e-9);
+        improved = true;
+        if (converged) return;
+      } else {
+        lambda *= 10;
+      }
+    }
+    if (!improved) return;
+  }
+}
+
+Matrix3 project_to_essential(const Matrix3& m) {
+  const Eigen::JacobiSVD<Matrix3> svd(m, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  const Eigen::Vector3d s = svd.singularValues();
+  const double mean = 0.5 * (s(0) + s(1));
+  return svd.matrixU() * Eigen::Vector3d(mean, mean, 0).asDiagonal() * svd.matrixV().transpose();
+}
+
+}  // namespace
+
+int five_point_essentials(const std::array<std::array<double, 2>, 5>& previous,
+                          const std::array<std::array<double, 2>, 5>& current,
+                          std::array<std::array<double, 9>, 10>& essentials) {
+  // E = x X + y Y + z Z + W over the null space of the five epipolar constraints.
+  Eigen::Matrix<double, 9, 5> constraints;
+  for (int k = 0; k < 5; ++k) {
+    constraints.col(k) = epipolar_row(previous[k][0], previous[k][1], current[k][0], current[k][1]);
+  }
+  const Eigen::HouseholderQR<Eigen::Matrix<double, 9, 5>> qr(constraints);
+  const Eigen::Matrix<double, 9, 9> q = qr.householderQ();
+  // Rank below five: the sample does not fix a four-dimensional null space.
+  const auto& r = qr.matrixQR();
+  double largest = 0;
+  for (int k = 0; k < 5; ++k)
+    largest = std::max(largest, std::abs(r(k, k)));
+  for (int k = 0; k < 5; ++k)
+    if (!(std::abs(r(k, k)) > 1e-10 * largest)) return 0;
+
+  // Entries of E as linear polynomials: coefficients of 1, x, y, z.
+  std::array<std::array<Polynomial, 3>, 3> e{};
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      Polynomial& p = e[i][j];
+      p.fill(0);
+      p[0] = q(3 * i + j, 8);
+      p[1] = q(3 * i + j, 5);
+      p[2] = q(3 * i + j, 6);
+      p[3] = q(3 * i + j, 7);
+    }
+  }
+  // Ten cubic constraints: det(E) = 0 and 2 E E^T E - trace(E E^T) E = 0.
+  std::array<Polynomial, 10> equations{};
+  for (Polynomial& p : equations)
+    p.fill(0);
+  {
+    Polynomial minor{};
+    const auto cofactor = [&](int r1, int c1, int r2, int c2) {
+      minor.fill(0);
+      multiply_add(e[r1][c1], 4, e[r2][c2], 4, 1, minor);
+      multiply_add(e[r1][c2], 4, e[r2][c1], 4, -1, minor);
+    };
+    cofactor(1, 1, 2, 2);
+    multiply_add(minor, 10, e[0][0], 4, 1, equations[0]);
+    cofactor(1, 0, 2, 2);
+    multiply_add(minor, 10, e[0][1], 4, -1, equations[0]);
+    cofactor(1, 0, 2, 1);
+    multiply_add(minor, 10, e[0][2], 4, 1, equations[0]);
+  }
+  std::array<std::array<Polynomial, 3>, 3> eet{};
+  Polynomial trace{};
+  trace.fill(0);
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      eet[i][j].fill(0);
+      for (int k = 0; k < 3; ++k)
+        multiply_add(e[i][k], 4, e[j][k], 4, 1, eet[i][j]);
+    }
+    for (int k = 0; k < 10; ++k)
+      trace[k] += eet[i][i][k];
+  }
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      Polynomial& p = equations[1 + 3 * i + j];
+      for (int k = 0; k < 3; ++k)
+        multiply_add(eet[i][k], 10, e[k][j], 4, 2, p);
+      multiply_add(trace, 10, e[i][j], 4, -1, p);
+    }
+  }
+
+  // Gauss-Jordan: the ten cubic monomials in terms of the ten monomials of degree <= 2, the
+  // basis b = (x2 xy xz y2 yz z2 x y z 1) of the quotient ring.
+  constexpr std::array<int, 10> kBasis{4, 5, 6, 7, 8, 9, 1, 2, 3, 0};
+  Matrix10 cubic, rest;
+  for (int row = 0; row < 10; ++row) {
+    for (int k = 0; k < 10; ++k) {
+      cubic(row, k) = equations[row][10 + k];
+      rest(row, k) = equations[row][kBasis[k]];
+    }
+  }
+  const Eigen::FullPivLU<Matrix10> lu(cubic);
+  if (!lu.isInvertible()) return 0;
+  const Matrix10 reduced = lu.solve(rest);  // cubic monomials = -reduced * b
+  // Multiplication by x on the basis: x b = action * b; the eigenvectors at the solutions are b.
+  Matrix10 action = Matrix10::Zero();
+  for (int k = 0; k < 6; ++k)  // x * (x2 xy xz y2 yz z2) = x3 x2y x2z xy2 xyz xz2
+    action.row(k) = -reduced.row(k);
+  action(6, 0) = 1;  // x * x = x2
+  action(7, 1) = 1;  // x * y = xy
+  action(8, 2) = 1;  // x * z = xz
+  action(9, 6) = 1;  // x * 1 = x
+  if (!action.allFinite()) return 0;
+  const Eigen::EigenSolver<Matrix10> eigen(action, true);
+  if (eigen.info() != Eigen::Success) return 0;
+  // eigenvectors() computes them (complex) and returns them by value: once.
+  const Eigen::Matrix<std::complex<double>, 10, 10> vectors = eigen.eigenvectors();
+  int count = 0;
+  for (int k = 0; k < 10; ++k) {
+    const std::complex<double> lambda = eigen.eigenvalues()(k);
+    if (std::abs(lambda.imag()) > 1e-8 * (1 + std::abs(lambda.real()))) continue;
+    const auto v = vectors.col(k);
+    const double w = v(9).real();
+    if (std::abs(w) < 1e-12 * v.norm()) continue;
+    const double x = v(6).real() / w, y = v(7).real() / w, z = v(8).real() / w;
+    std::array<double, 9>& out = essentials[count];
+    double norm = 0;
+    for (int i = 0; i < 9; ++i) {
+      out[i] = x * q(i, 5) + y * q(i, 6) + z * q(i, 7) + q(i, 8);
+      norm += out[i] * out[i];
+    }
+    norm = std::sqrt(norm);
+    if (!(norm > 0) || !std::isfinite(norm)) continue;
+    for (double& value : out)
+      value /= norm;
+    ++count;
+  }
+  return count;
+}
+
+CameraMotionEstimator::CameraMotionEstimator(const MotionOptions& options) : options_(options) {}
+
+void CameraMotionEstimator::reset(const ScannerGeometry& geometry, int max_tracks) {
+  if (max_tracks < 0) throw std::invalid_argument("CameraMotionEstimator::reset: max_tracks < 0");
+  geometry_ = geometry;
+  focal_ = std::sqrt(geometry.fx * geometry.fy);
+  const auto size = static_cast<std::size_t>(max_tracks);
+  for (auto* v : {&x1_, &y1_, &x2_, &y2_, &residual_})
+    v->assign(size, 0);
+  order_.assign(size, 0);
+  inlier_.assign(size, 0);
+  candidate_.assign(size, 0);
+  const auto follow = std::min(size, static_cast<std::size_t>(options_.scale_tracks));
+  follow_.assign(follow, {});
+  follow_depth_.assign(follow, 0);
+  track_count_ = 0;
+  follow_count_ = 0;
+}
+
+void CameraMotionEstimator::forget() {
+  follow_count_ = 0;
+  track_count_ = 0;
+}
+
+std::array<double, 2> CameraMotionEstimator::normalise(double u, double v) const {
+  const ScannerGeometry& g = geometry_;
+  const double x0 = (u - g.cx) / g.fx, y0 = (v - g.cy) / g.fy;
+  const auto& [k1, k2, p1, p2, k3] = g.distortion;
+  if (k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0 && k3 == 0) return {x0, y0};
+  // The OpenCV model has no closed-form inverse: fixed-point iteration (as cv::undistortPoints),
+  // bounded; it converges for the distortion of real lenses within the image.
+  double x = x0, y = y0;
+  for (int iteration = 0; iteration < 20; ++iteration) {
+    const double r2 = x * x + y * y;
+    const double radial = 1 + ((k3 * r2 + k2) * r2 + k1) * r2;
+    const double dx = 2 * p1 * x * y + p2 * (r2 + 2 * x * x);
+    const double dy = p1 * (r2 + 2 * y * y) + 2 * p2 * x * y;
+    const double nx = (x0 - dx) / radial, ny = (y0 - dy) / radial;
+    const double change = std::abs(nx - x) + std::abs(ny - y);
+    x = nx;
+    y = ny;
+    if (change < 1e-12) break;
+  }
+  return {x, y};
+}
+
+CameraMotion CameraMotionEstimator::estimate(std::span<const FeatureTrack> tracks,
+                                             std::span<const std::array<float, 2>> followed) {
+  const MotionOptions& o = options_;
+  CameraMotion result;
+  const int n = static_cast<int>(std::min(tracks.size(), x1_.size()));
+  track_count_ = static_cast<std::size_t>(n);
+  // The points followed into this frame, consumed below; new ones are chosen at the end.
+  const std::size_t previous_follow = followed.size() == follow_count_ ? follow_count_ : 0;
+  follow_count_ = 0;
+  for (int i = 0; i < n; ++i) {
+    const auto a = normalise(tracks[i].previous_u, tracks[i].previous_v);
+    const auto b = normalise(tracks[i].u, tracks[i].v);
+    x1_[i] = a[0];
+    y1_[i] = a[1];
+    x2_[i] = b[0];
+    y2_[i] = b[1];
+    order_[i] = i;
+    inlier_[i] = 0;
+  }
+  if (n < std::max(5, o.min_inliers)) return result;
+
+  // MSAC cost over Sampson distances in pixels (focal length times the normalised distance).
+  const double threshold = o.essential_inlier_px / focal_;
+  const double threshold_squared = threshold * threshold;
+  const auto score = [&](const Matrix3& e, std::uint8_t* flags, int& count) {
+    double cost = 0;
+    count = 0;
+    for (int i = 0; i < n; ++i) {
+      const double d = sampson_squared(e, x1_[i], y1_[i], x2_[i], y2_[i]);
+      const bool inlier = d < threshold_squared;
+      flags[i] = inlier ? 1 : 0;
+      count += inlier ? 1 : 0;
+      cost += inlier ? d : threshold_squared;
+    }
+    return cost;
+  };
+
+  Random random{kRansacSeed};
+  Matrix3 best_e;
+  double best_cost = 0;
+  int best_count = 0;
+  bool found = false;
+  int iterations_needed = o.essential_ransac_iterations;
+  std::array<std::array<double, 2>, 5> sample_previous, sample_current;
+  std::array<std::array<double, 9>, 10> solutions;
+  for (int iteration = 0; iteration < iterations_needed; ++iteration) {
+    for (int k = 0; k < 5; ++k) {
+      std::swap(order_[k], order_[k + random.below(n - k)]);
+      const int i = order_[k];
+      sample_previous[k] = {x1_[i], y1_[i]};
+      sample_current[k] = {x2_[i], y2_[i]};
+    }
+    const int count = five_point_essentials(sample_previous, sample_current, solutions);
+    for (int s = 0; s < count; ++s) {
+      const Matrix3 e =
+          Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(solutions[s].data());
+      int inliers = 0;
+      const double cost = score(e, candidate_.data(), inliers);
+      if (found && cost >= best_cost) continue;
+      found = true;
+      best_cost = cost;
+      best_count = inliers;
+      best_e = e;
+      std::copy(candidate_.begin(), candidate_.begin() + n, inlier_.begin());
+      // Stop once a sample of all inliers has been drawn with the wanted confidence.
+      const double all_inliers = std::pow(static_cast<double>(inliers) / n, 5);
+      if (all_inliers >= 1.0) {
+        iterations_needed = std::min(iterations_needed, iteration + 1);
+      } else if (all_inliers > 0) {
+        const double needed = std::log(1 - kRansacConfidence) / std::log(1 - all_inliers) + 1;
+        if (needed < iterations_needed) iterations_needed = static_cast<int>(needed);
+      }
+    }
+  }
+  if (!found || best_count < 5) return result;
+
+  // Linear refit on the inliers (eight-point, projected onto the essential matrices), kept when
+  // its cost is lower; repeated while it improves.
+  for (int round = 0; round < 2 && best_count >= 8; ++round) {
+    Eigen::Matrix<double, 9, 9> normal = Eigen::Matrix<double, 9, 9>::Zero();
+    for (int i = 0; i < n; ++i) {
+      if (!inlier_[i]) continue;
+      const auto row = epipolar_row(x1_[i], y1_[i], x2_[i], y2_[i]);
+      normal.noalias() += row * row.transpose();
+    }
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 9, 9>> solver(normal);
+    if (solver.info() != Eigen::Success) break;
+    const Eigen::Matrix<double, 9, 1> v = solver.eigenvectors().col(0);
+    const Matrix3 e = project_to_essential(
+        Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(v.data()));
+    if (!e.allFinite()) break;
+    int inliers = 0;
+    const double cost = score(e, candidate_.data(), inliers);
+    if (cost >= best_cost) break;
+    best_cost = cost;
+    best_count = inliers;
+    best_e = e;
+    std::copy(candidate_.begin(), candidate_.begin() + n, inlier_.begin());
+  }
+  result.inliers = best_count;
+
+  // The four decompositions (R, +-t): the one that puts the inliers in front of both cameras.
+  Matrix3 u, v;
+  if (!essential_decomposition(best_e, u, v)) return result;
+  Matrix3 w;
+  w << 0, -1, 0, 1, 0, 0, 0, 0, 1;
+  const std::array<Matrix3, 2> rotations{u * w * v.transpose(), u * w.transpose() * v.transpose()};
+  Matrix3 rotation = rotations[0];
+  Vector3 translation = u.col(2);
+  int best_front = -1;
+  for (const Matrix3& r : rotations) {
+    for (const double sign : {1.0, -1.0}) {
+      const Vector3 t = sign * u.col(2);
+      int front = 0;
+      for (int i = 0; i < n; ++i) {
+        double d1 = 0, d2 = 0;
+        if (inlier_[i] && triangulate_depths(r, t, x1_[i], y1_[i], x2_[i], y2_[i], d1, d2) &&
+            d1 > 0 && d2 > 0) {
+          ++front;
+        }
+      }
+      if (front > best_front) {
+        best_front = front;
+        rotation = r;
+        translation = t;
+      }
+    }
+  }
+  // Refined on the image error; the inliers are those of the refined motion.
+  refine_motion(x1_.data(), y1_.data(), x2_.data(), y2_.data(), inlier_.data(), n, rotation,
+                translation);
+  best_e = skew(translation) * rotation;
+  score(best_e, inlier_.data(), best_count);
+  result.inliers = best_count;
+  best_front = 0;
+  for (int i = 0; i < n; ++i) {
+    double d1 = 0, d2 = 0;
+    if (inlier_[i] &&
+        triangulate_depths(rotation, translation, x1_[i], y1_[i], x2_[i], y2_[i], d1, d2) &&
+        d1 > 0 && d2 > 0) {
+      ++best_front;
+    }
+  }
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c)
+      result.rotation[r * 3 + c] = rotation(r, c);
+    result.translation[r] = translation(r);
+  }
+
+  // Rotation alone (Procrustes on the inliers' rays): when it explains the image motion to within
+  // essential_min_parallax_px, the translation's direction is not determined by the image.
+  Matrix3 correlation = Matrix3::Zero();
+  for (int i = 0; i < n; ++i) {
+    if (!inlier_[i]) continue;
+    correlation.noalias() += Vector3(x2_[i], y2_[i], 1).normalized() *
+                             Vector3(x1_[i], y1_[i], 1).normalized().transpose();
+  }
+  const Eigen::JacobiSVD<Matrix3> svd(correlation, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Matrix3 fix = Matrix3::Identity();
+  fix(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1 : 1;
+  const Matrix3 rotation_only = svd.matrixU() * fix * svd.matrixV().transpose();
+  int m = 0;
+  for (int i = 0; i < n; ++i) {
+    if (!inlier_[i]) continue;
+    const Vector3 p = rotation_only * Vector3(x1_[i], y1_[i], 1);
+    residual_[m++] = p(2) > 0 ? focal_ * std::hypot(p(0) / p(2) - x2_[i], p(1) / p(2) - y2_[i])
+                              : std::numeric_limits<double>::infinity();
+  }
+  std::nth_element(residual_.begin(), residual_.begin() + m / 2, residual_.begin() + m);
+  const double parallax_px = residual_[m / 2];
+
+  // Cheirality must hold for nearly all inliers: with noise and no parallax, depths take either
+  // sign and the decomposition is a guess.
+  result.valid = best_count >= o.min_inliers && 4 * best_front >= 3 * best_count &&
+                 parallax_px >= o.essential_min_parallax_px;
+  if (!result.valid) return result;
+
+  // Relative scale: the points followed from the previous frame, at depth follow_depth_ (units
+  // of the previous |t|) in it; their depth from this pair is in units of this |t|.
+  int ratios = 0;
+  for (std::size_t k = 0; k < previous_follow; ++k) {
+    if (!std::isfinite(followed[k][0]) || !std::isfinite(followed[k][1])) continue;
+    const auto a = normalise(follow_[k][0], follow_[k][1]);
+    const auto b = normalise(followed[k][0], followed[k][1]);
+    if (!(sampson_squared(best_e, a[0], a[1], b[0], b[1]) < threshold_squared)) continue;
+    double d1 = 0, d2 = 0;
+    if (!triangulate_depths(rotation, translation, a[0], a[1], b[0], b[1], d1, d2) || !(d1 > 0) ||
+        !(d2 > 0)) {
+      continue;
+    }
+    residual_[ratios++] = follow_depth_[k] / d1;
+  }
+  if (ratios >= 5) {
+    std::nth_element(residual_.begin(), residual_.begin() + ratios / 2, residual_.begin() + ratios);
+    result.relative_scale = residual_[ratios / 2];
+  }
+
+  // New points to follow: inliers in front of both cameras, spread over the list.
+  int front = 0;
+  for (int i = 0; i < n; ++i) {
+    double d1 = 0, d2 = 0;
+    if (inlier_[i] &&
+        triangulate_depths(rotation, translation, x1_[i], y1_[i], x2_[i], y2_[i], d1, d2) &&
+        d1 > 0 && d2 > 0) {
+      order_[front] = i;
+      residual_[front] = d2;
+      ++front;
+    }
+  }
+  const int wanted = std::min(front, static_cast<int>(follow_.size()));
+  for (int k = 0; k < wanted; ++k) {
+    const int j = static_cast<int>(static_cast<long long>(k) * front / wanted);
+    follow_[k] = {tracks[order_[j]].u, tracks[order_[j]].v};
+    follow_depth_[k] = residual_[j];
+  }
+  follow_count_ = static_cast<std::size_t>(wanted);
+  return result;
 }
 
 }  // namespace laserline::pipeline

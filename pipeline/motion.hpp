@@ -80,6 +80,60 @@ struct MotionEstimate {
   CameraMotion camera;  // invalid unless reset() was given the intrinsics
 };
 
+// Solutions of the five-point relative orientation problem (Nister; Stewenius' Groebner basis
+// form): essential matrices E (row-major) with current^T E previous = 0 for the five normalised
+// image points (x, y, 1) given. Returns how many (0 .. 10); no allocation.
+int five_point_essentials(const std::array<std::array<double, 2>, 5>& previous,
+                          const std::array<std::array<double, 2>, 5>& current,
+                          std::array<std::array<double, 9>, 10>& essentials);
+
+// Camera motion between consecutive frames from point correspondences in pixels (as seen, with
+// the lens distortion of the geometry): undistorted and normalised, five-point RANSAC with
+// a capped number of samples, Sampson error in pixels for the inliers, cheirality to pick R and t
+// among the four decompositions, a linear (eight-point) refit on the inliers kept when it fits
+// better. For relative_scale it asks for a subset of this pair's inliers to be followed into the
+// next frame (to_follow()), keeping their depth; with where they were found there, their depth
+// from the next pair gives the ratio of the two translations (median).
+// reset() allocates; estimate() does not. Thread context: one thread at a time per instance.
+class CameraMotionEstimator {
+ public:
+  explicit CameraMotionEstimator(const MotionOptions& options = {});
+
+  // Capacity: at most max_tracks correspondences per estimate().
+  void reset(const ScannerGeometry& geometry, int max_tracks);
+  // Forgets the previous pair (no relative scale for the next estimate()).
+  void forget();
+  // `tracks`: previous -> current pixel positions (FeatureTrack::inlier is ignored).
+  // `followed`: where the points to_follow() gave after the previous estimate() were found in
+  // the current frame, in the same order; NaN where lost, empty when not followed.
+  CameraMotion estimate(std::span<const FeatureTrack> tracks,
+                        std::span<const std::array<float, 2>> followed);
+  // Per track of the last estimate(): 1 if an inlier of the camera motion.
+  std::span<const std::uint8_t> inliers() const { return {inlier_.data(), track_count_}; }
+  // Points of the current frame (pixels) to find in the next one, for its relative_scale.
+  std::span<const std::array<float, 2>> to_follow() const {
+    return {follow_.data(), follow_count_};
+  }
+
+ private:
+  // Undistorted normalised coordinates of pixel (u, v).
+  std::array<double, 2> normalise(double u, double v) const;
+
+  MotionOptions options_;
+  ScannerGeometry geometry_;
+  double focal_ = 1;
+  std::size_t track_count_ = 0;
+  // Per correspondence: normalised coordinates, RANSAC order and inlier flags, residuals.
+  std::vector<double> x1_, y1_, x2_, y2_;
+  std::vector<int> order_;
+  std::vector<std::uint8_t> inlier_, candidate_;
+  std::vector<double> residual_;
+  // Points to follow into the next frame and their depth in this frame (units of |t|).
+  std::vector<std::array<float, 2>> follow_;
+  std::vector<double> follow_depth_;
+  std::size_t follow_count_ = 0;
+};
+
 // Estimates the homography between consecutive frames from tracked image features (paper III-A):
 // features picked on a grid at a reduced resolution, laser-like features filtered out (IV-A),
 // tracked into the next frame coarse-to-fine, homography by bounded RANSAC and a least-squares
@@ -117,12 +171,15 @@ class MotionEstimator {
   MotionEstimate estimate_from_previous(int current, const ImageView& frame);
   // RANSAC and least-squares refit over the first n tracked pairs; false when nothing fits.
   bool fit_homography(int n, Homography& result, int& inlier_count);
-  // Five-point RANSAC over the first n tracked pairs (undistorted, normalised), cheirality, refit,
-  // and the scale relative to the previous pair.
-  CameraMotion estimate_camera_motion(int n);
+  // Follows the camera estimator's points (to_follow()) from the previous frame into `frame`
+  // (pyramid `current`), into State::followed; returns how many there are.
+  int follow_points(int current, const ImageView& frame);
+  // Keeps the full-size patches around the camera estimator's new points to follow.
+  void keep_follow_patches(const ImageView& frame);
 
   MotionOptions options_;
   State* state_ = nullptr;
+  CameraMotionEstimator camera_;
 };
 
 }  // namespace laserline::pipeline

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
@@ -379,6 +380,262 @@ TEST(Homography, InverseUndoesTheMapping) {
     EXPECT_NEAR(back[1], p[1], 1e-9);
   }
   EXPECT_DOUBLE_EQ(inverse.h[8], 1.0);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Camera motion (essential matrix) from synthetic correspondences: 3-D points seen by a camera
+// with lens distortion (projected by OpenCV, an independent reference), known R and t.
+
+namespace camera_motion {
+
+struct Pose {
+  cv::Matx33d r = cv::Matx33d::eye();  // world -> camera
+  cv::Vec3d t{0, 0, 0};
+};
+
+ScannerGeometry distorted_geometry() {
+  ScannerGeometry g;
+  g.width = kWidth;
+  g.height = kHeight;
+  g.fx = 1500;
+  g.fy = 1490;
+  g.cx = 641.0;
+  g.cy = 509.5;
+  g.distortion = {-0.12, 0.05, 0.0008, -0.0005, 0.01};
+  return g;
+}
+
+cv::Matx33d rotation(double ax_deg, double ay_deg, double az_deg) {
+  cv::Mat r;
+  cv::Rodrigues(cv::Vec3d(ax_deg, ay_deg, az_deg) * (CV_PI / 180.0), r);
+  return cv::Matx33d(r);
+}
+
+// Angle of the rotation a^T b, degrees.
+double angle_between(const cv::Matx33d& a, const cv::Matx33d& b) {
+  const cv::Matx33d d = a.t() * b;
+  const double c = std::clamp((cv::trace(d) - 1.0) / 2.0, -1.0, 1.0);
+  return std::acos(c) * 180.0 / CV_PI;
+}
+
+double angle_between(const cv::Vec3d& a, const cv::Vec3d& b) {
+  const double c = std::clamp(a.dot(b) / (cv::norm(a) * cv::norm(b)), -1.0, 1.0);
+  return std::acos(c) * 180.0 / CV_PI;
+}
+
+cv::Matx33d rotation_of(const CameraMotion& m) {
+  return cv::Matx33d(m.rotation.data());
+}
+cv::Vec3d translation_of(const CameraMotion& m) {
+  return {m.translation[0], m.translation[1], m.translation[2]};
+}
+
+// Points in front of the first camera, 1.2 .. 3 m deep, spread over the image.
+std::vector<cv::Point3d> scene_points(int count, cv::RNG& rng) {
+  std::vector<cv::Point3d> points;
+  for (int i = 0; i < count; ++i) {
+    const double z = rng.uniform(1.2, 3.0);
+    points.emplace_back(rng.uniform(-0.38, 0.38) * z, rng.uniform(-0.3, 0.3) * z, z);
+  }
+  return points;
+}
+
+// Pixels (distorted) of the world points seen from `pose`, with Gaussian noise.
+std::vector<cv::Point2f> project(const std::vector<cv::Point3d>& points, const Pose& pose,
+                                 const ScannerGeometry& g, double noise_px, cv::RNG& rng) {
+  cv::Mat rvec;
+  cv::Rodrigues(cv::Mat(pose.r), rvec);
+  const cv::Matx33d k(g.fx, 0, g.cx, 0, g.fy, g.cy, 0, 0, 1);
+  std::vector<double> distortion(g.distortion.begin(), g.distortion.end());
+  std::vector<cv::Point2d> pixels;
+  cv::projectPoints(points, rvec, cv::Mat(pose.t), k, distortion, pixels);
+  std::vector<cv::Point2f> out;
+  for (const cv::Point2d& p : pixels) {
+    out.emplace_back(static_cast<float>(p.x + rng.gaussian(noise_px)),
+                     static_cast<float>(p.y + rng.gaussian(noise_px)));
+  }
+  return out;
+}
+
+std::vector<FeatureTrack> pair_tracks(const std::vector<cv::Point2f>& previous,
+                                      const std::vector<cv::Point2f>& current) {
+  std::vector<FeatureTrack> tracks;
+  for (std::size_t i = 0; i < previous.size(); ++i)
+    tracks.push_back({previous[i].x, previous[i].y, current[i].x, current[i].y, false});
+  return tracks;
+}
+
+// Relative motion camera a -> camera b: X_b = R X_a + t.
+Pose relative(const Pose& a, const Pose& b) {
+  return {b.r * a.r.t(), b.t - b.r * a.r.t() * a.t};
+}
+
+}  // namespace camera_motion
+
+TEST(FivePoint, OneSolutionIsTheTrueEssentialMatrix) {
+  using namespace camera_motion;
+  cv::RNG rng(7);
+  for (int trial = 0; trial < 20; ++trial) {
+    const Pose second{
+        rotation(rng.uniform(-5.0, 5.0), rng.uniform(-5.0, 5.0), rng.uniform(-5.0, 5.0)),
+        cv::Vec3d(rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0), rng.uniform(-0.5, 0.5))};
+    const std::vector<cv::Point3d> points = scene_points(5, rng);
+    std::array<std::array<double, 2>, 5> a, b;
+    for (int k = 0; k < 5; ++k) {
+      const cv::Vec3d p(points[k].x, points[k].y, points[k].z);
+      const cv::Vec3d q = second.r * p + second.t;
+      a[k] = {p[0] / p[2], p[1] / p[2]};
+      b[k] = {q[0] / q[2], q[1] / q[2]};
+    }
+    const cv::Vec3d t = second.t / cv::norm(second.t);
+    const cv::Matx33d tx(0, -t[2], t[1], t[2], 0, -t[0], -t[1], t[0], 0);
+    const cv::Matx33d truth = tx * second.r * (1.0 / cv::norm(tx * second.r));
+    std::array<std::array<double, 9>, 10> solutions;
+    const int count = five_point_essentials(a, b, solutions);
+    ASSERT_GE(count, 1) << "trial " << trial;
+    ASSERT_LE(count, 10);
+    double best = 1e9;
+    for (int s = 0; s < count; ++s) {
+      const cv::Matx33d e(solutions[s].data());
+      // Every solution satisfies the five constraints and is an essential matrix.
+      for (int k = 0; k < 5; ++k)
+        EXPECT_NEAR((cv::Vec3d(b[k][0], b[k][1], 1).t() * e * cv::Vec3d(a[k][0], a[k][1], 1))(0), 0,
+                    1e-9);
+      EXPECT_NEAR(cv::determinant(e), 0, 1e-9);
+      best = std::min({best, cv::norm(e - truth), cv::norm(e + truth)});
+    }
+    EXPECT_LT(best, 1e-8) << "trial " << trial << ", " << count << " solutions";
+  }
+}
+
+TEST(CameraMotionEstimator, RecoversRotationTranslationAndRelativeScale) {
+  using namespace camera_motion;
+  const ScannerGeometry g = distorted_geometry();
+  cv::RNG rng(11);
+  const std::vector<cv::Point3d> points = scene_points(180, rng);
+  // Three camera poses: the second pair's translation is 1.6 times the first's.
+  const Pose p0{};
+  const Pose p1{rotation(0.8, -1.5, 0.4), cv::Vec3d(-0.06, 0.01, 0.02)};
+  const Pose p2{rotation(1.5, -2.6, 0.9), cv::Vec3d(-0.155, 0.03, 0.035)};
+  const Pose m01 = relative(p0, p1), m12 = relative(p1, p2);
+  const double true_scale = cv::norm(m12.t) / cv::norm(m01.t);
+  std::vector<cv::Point2f> f0 = project(points, p0, g, 0.3, rng);
+  std::vector<cv::Point2f> f1 = project(points, p1, g, 0.3, rng);
+  std::vector<cv::Point2f> f2 = project(points, p2, g, 0.3, rng);
+  // 20 % of the tracks go wrong: anywhere in the image.
+  std::vector<cv::Point2f> f1_seen = f1, f2_seen = f2;
+  for (std::size_t i = 0; i < points.size(); i += 5) {
+    f1_seen[i] = {static_cast<float>(rng.uniform(0.0, 1279.0)),
+                  static_cast<float>(rng.uniform(0.0, 1023.0))};
+    f2_seen[i + 2] = {static_cast<float>(rng.uniform(0.0, 1279.0)),
+                      static_cast<float>(rng.uniform(0.0, 1023.0))};
+  }
+
+  MotionOptions options;
+  CameraMotionEstimator estimator(options);
+  estimator.reset(g, 256);
+  const CameraMotion first = estimator.estimate(pair_tracks(f0, f1_seen), {});
+  ASSERT_TRUE(first.valid);
+  EXPECT_TRUE(std::isnan(first.relative_scale)) << "no previous pair";
+  const double r01 = angle_between(rotation_of(first), m01.r);
+  const double t01 = angle_between(translation_of(first), m01.t);
+  EXPECT_NEAR(cv::norm(translation_of(first)), 1.0, 1e-9);
+  // Where the points to follow are in the next frame: the same 3-D points (the estimator gives
+  // back the current positions of its inlier tracks).
+  std::vector<std::array<float, 2>> followed;
+  for (const std::array<float, 2>& p : estimator.to_follow()) {
+    std::size_t i = 0;
+    while (i < f1_seen.size() && !(f1_seen[i].x == p[0] && f1_seen[i].y == p[1]))
+      ++i;
+    ASSERT_LT(i, f1_seen.size());
+    followed.push_back({f2[i].x, f2[i].y});
+  }
+  EXPECT_EQ(followed.size(), static_cast<std::size_t>(options.scale_tracks));
+  // One followed point is lost.
+  followed[3] = {NAN, NAN};
+  const CameraMotion second = estimator.estimate(pair_tracks(f1, f2_seen), followed);
+  ASSERT_TRUE(second.valid);
+  const double r12 = angle_between(rotation_of(second), m12.r);
+  const double t12 = angle_between(translation_of(second), m12.t);
+  std::printf("pair 0-1: %d inliers of %zu, R error %.4f deg, t error %.3f deg\n", first.inliers,
+              points.size(), r01, t01);
+  std::printf(
+      "pair 1-2: %d inliers, R error %.4f deg, t error %.3f deg, relative scale %.4f "
+      "(true %.4f)\n",
+      second.inliers, r12, t12, second.relative_scale, true_scale);
+  EXPECT_LT(r01, 0.05);
+  EXPECT_LT(r12, 0.05);
+  EXPECT_LT(t01, 1.5);
+  EXPECT_LT(t12, 1.5);
+  EXPECT_GE(first.inliers, 130);
+  EXPECT_LE(first.inliers, 150) << "the outliers are not inliers";
+  EXPECT_NEAR(second.relative_scale, true_scale, 0.03 * true_scale);
+  // The inlier flags mark the tracks that went wrong as outliers.
+  const auto flags = estimator.inliers();
+  ASSERT_EQ(flags.size(), points.size());
+  for (std::size_t i = 2; i < points.size(); i += 5)
+    EXPECT_EQ(flags[i], 0) << i;
+}
+
+TEST(CameraMotionEstimator, PureRotationAndTooFewPointsAreInvalid) {
+  using namespace camera_motion;
+  const ScannerGeometry g = distorted_geometry();
+  cv::RNG rng(5);
+  const std::vector<cv::Point3d> points = scene_points(150, rng);
+  CameraMotionEstimator estimator;
+  estimator.reset(g, 256);
+  const std::vector<cv::Point2f> f0 = project(points, Pose{}, g, 0.3, rng);
+  // Rotation only: the translation's direction is not in the images.
+  const std::vector<cv::Point2f> rotated =
+      project(points, {rotation(1.0, -2.0, 0.5), {}}, g, 0.3, rng);
+  const CameraMotion rotation_only = estimator.estimate(pair_tracks(f0, rotated), {});
+  EXPECT_FALSE(rotation_only.valid);
+  EXPECT_TRUE(estimator.to_follow().empty());
+  // Still (no motion at all).
+  EXPECT_FALSE(estimator.estimate(pair_tracks(f0, project(points, Pose{}, g, 0.3, rng)), {}).valid);
+  // A translation of 2 mm at 1.2 - 3 m: under a pixel of parallax.
+  EXPECT_FALSE(estimator
+                   .estimate(pair_tracks(f0, project(points, {cv::Matx33d::eye(), {0.002, 0, 0}}, g,
+                                                     0.3, rng)),
+                             {})
+                   .valid);
+  // Four tracks: fewer than the five-point needs.
+  const std::vector<cv::Point2f> moved =
+      project(points, {rotation(0.5, 0, 0), {0.1, 0, 0}}, g, 0.3, rng);
+  std::vector<FeatureTrack> tracks = pair_tracks(f0, moved);
+  tracks.resize(4);
+  EXPECT_FALSE(estimator.estimate(tracks, {}).valid);
+  EXPECT_EQ(estimator.inliers().size(), 4u);
+  // Unrelated points: no motion explains them.
+  std::vector<cv::Point2f> random_points = f0;
+  for (cv::Point2f& p : random_points)
+    p = {static_cast<float>(rng.uniform(0.0, 1279.0)),
+         static_cast<float>(rng.uniform(0.0, 1023.0))};
+  const CameraMotion unrelated = estimator.estimate(pair_tracks(f0, random_points), {});
+  EXPECT_FALSE(unrelated.valid);
+  EXPECT_LT(unrelated.inliers, 12);
+  // And the real motion with all of them is found again.
+  EXPECT_TRUE(estimator.estimate(pair_tracks(f0, moved), {}).valid);
+}
+
+TEST(CameraMotionEstimator, EstimateDoesNotAllocate) {
+  using namespace camera_motion;
+  const ScannerGeometry g = distorted_geometry();
+  cv::RNG rng(3);
+  const std::vector<cv::Point3d> points = scene_points(192, rng);
+  const std::vector<FeatureTrack> a =
+      pair_tracks(project(points, Pose{}, g, 0.3, rng),
+                  project(points, {rotation(0.5, 1, 0), {0.1, 0, 0.02}}, g, 0.3, rng));
+  const std::vector<std::array<float, 2>> followed(64, std::array<float, 2>{600, 500});
+  CameraMotionEstimator estimator;
+  estimator.reset(g, 192);
+  ASSERT_TRUE(testing::allocation_counter_works());
+  testing::start_counting_allocations();
+  const bool valid = estimator.estimate(a, {}).valid;
+  const bool again = estimator.estimate(a, followed).valid;
+  EXPECT_EQ(testing::stop_counting_allocations().count, 0);
+  EXPECT_TRUE(valid);
+  EXPECT_TRUE(again);
 }
 
 }  // namespace
