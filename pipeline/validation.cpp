@@ -189,7 +189,6 @@ void match_by_chain_code(const SegmentedFrame& previous, const SegmentedFrame& c
     const float* b = previous.chain_code.data() + other.code_first - other.u_min;
     const double shorter = std::min(s.u_max - s.u_min, other.u_max - other.u_min);
     SegmentMatch best;
-    double best_correlation = options.min_correlation;
     // Offsets from 0 outwards, so that a tie (a straight segment fits at every offset) keeps the
     // smallest shift.
     for (int step = 0; step <= 2 * options.max_column_offset; ++step) {
@@ -197,7 +196,7 @@ void match_by_chain_code(const SegmentedFrame& previous, const SegmentedFrame& c
       const int lo = std::max(s.u_min, other.u_min + k);
       const int hi = std::min(s.u_max, other.u_max + k) - 1;  // last step
       const int length = hi - lo + 1;
-      if (length < min_overlap) continue;
+      if (length < min_overlap || length * 4 < shorter) continue;
       double ab = 0, aa = 0, bb = 0;
       for (int u = lo; u <= hi; ++u) {
         const double x = a[u], y = b[u - k];
@@ -205,20 +204,18 @@ void match_by_chain_code(const SegmentedFrame& previous, const SegmentedFrame& c
         aa += x * x;
         bb += y * y;
       }
-      // Normalised cross-correlation of the descriptors (1, w * code) where they overlap, times
-      // the part of the shorter segment that overlaps: 1 for the same shape over all of it. A
-      // piece of a segment split differently in the other frame (the laser line broken by
-      // relief, or joined to a neighbour) still matches.
+      // Normalised cross-correlation of the descriptors (1, w * code) where they overlap (at
+      // least a quarter of the shorter segment: a piece of a segment split differently in the
+      // other frame, the laser line broken by relief or joined to a neighbour, still matches).
       const double correlation =
-          (length + w * ab) / std::sqrt((length + w * aa) * (length + w * bb)) * length / shorter;
-      // A shift must be clearly better than a smaller one: noise on a nearly straight segment
-      // would otherwise pick any.
-      if (correlation > best_correlation + (best.previous >= 0 ? kShiftMargin : 0.0)) {
-        best_correlation = correlation;
-        // Matches rank by how many columns agree: a long segment is not matched to a short
-        // straight piece of texture that merely fits somewhere along it.
-        best = {static_cast<int>(t), static_cast<float>(k), 0.0f,
-                static_cast<float>(correlation * length)};
+          (length + w * ab) / std::sqrt((length + w * aa) * (length + w * bb));
+      if (correlation < options.min_correlation) continue;
+      // Ranked by how many columns agree: a long segment is not matched to a short straight
+      // piece of texture that merely fits somewhere along it. A shift must do clearly better
+      // than a smaller one: noise on a nearly straight segment would otherwise pick any.
+      const double support = correlation * length;
+      if (support > best.score * (1.0 + kShiftMargin)) {
+        best = {static_cast<int>(t), static_cast<float>(k), 0.0f, static_cast<float>(support)};
       }
     }
     if (best.previous >= 0) add_match(s, best);
@@ -415,8 +412,7 @@ void LineValidator::test_segments(SegmentedFrame& current, const SegmentedFrame&
           {double(u1), previous.row_at(*p, u1)}, options_.max_depth_baselines, x2, ray_gap);
       // Across the line only: the laser's shape slides along it as the relief passes.
       const float v1 = previous.row_at(*p, u1);
-      image_motion_[static_cast<std::size_t>(n)] =
-          std::max(std::abs(x.v - v1), std::abs(v1 - before.row_at(*q, u0)));
+      image_motion_[static_cast<std::size_t>(n)] = std::abs(x.v - v1);
       residuals_[static_cast<std::size_t>(n++)] =
           physical ? static_cast<float>(std::max(ray_gap, std::hypot(x2[0] - x.u, x2[1] - x.v)))
                    : std::numeric_limits<float>::infinity();
