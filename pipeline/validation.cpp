@@ -333,7 +333,7 @@ void LineValidator::validate(Profile& profile, const PairMotion& motion, const I
   }
   if (history_ >= 3) {
     test_segments(frame, frames_[previous], frames_[before], motions_[previous], motion);
-  } else if (history_ == 2 && options_.require_track) {
+  } else if (history_ == 2 && laser_tracks()) {
     // Only two frames so far: what is not tracked over those is not taken for the laser yet.
     for (LineSegment& s : frame.segments)
       s.background = s.match_count == 0;
@@ -380,7 +380,7 @@ void LineValidator::test_segments(SegmentedFrame& current, const SegmentedFrame&
   for (LineSegment& s : current.segments) {
     // Not tracked over the three frames: the laser line is a lasting structure, so what is seen
     // once is not taken for it.
-    s.background = options_.require_track;
+    s.background = laser_tracks();
     // Point association through the matches: each point of s that lies within a match in frame
     // n-1 whose own match in frame n-2 covers it.
     int n = 0;
@@ -428,8 +428,9 @@ void LineValidator::test_segments(SegmentedFrame& current, const SegmentedFrame&
     // Static scene: background. Not static but moving in the image more than the laser line can
     // (it moves with the camera: only as the depth along the sheet changes): not the laser either,
     // a wrong association of texture artefacts.
-    s.background = *mid <= options_.background_px ||
-                   (options_.max_laser_motion_px > 0 && *motion_mid > options_.max_laser_motion_px);
+    s.background =
+        *mid <= options_.background_px || (laser_tracks() && options_.max_laser_motion_px > 0 &&
+                                           *motion_mid > options_.max_laser_motion_px);
   }
 }
 

@@ -52,12 +52,13 @@ struct ValidationOptions {
   // measurable parallax: that is what a laser line, which moves with the camera, looks like under
   // translation. Such points are not static scene. 1000 baselines: 1.4 px of parallax at f = 1400.
   double max_depth_baselines = 1000.0;
-  // Segments not tracked over the three frames are rejected too (else they keep the front-end's
-  // verdict): texture artefacts of the background subtraction come and go, the laser line lasts.
+  // chain_code: segments not tracked over the three frames are rejected too (else they keep the
+  // front-end's verdict): texture artefacts of the background subtraction come and go, the laser
+  // line lasts. (image_features follows the texture, not the laser: untracked segments are kept.)
   bool require_track = true;
-  // A tracked segment that moves more than this per frame across the line (rows, median over its
-  // points) is not the laser line, which moves with the camera: its image moves across the line
-  // only as the depth along the sheet changes. 0: no such test.
+  // chain_code, with require_track: a tracked segment that moves more than this per frame across
+  // the line (rows, median over its points) is not the laser line, which moves with the camera: its
+  // image moves across the line only as the depth along the sheet changes. 0: no such test.
   double max_laser_motion_px = 4.0;
 };
 
@@ -188,6 +189,13 @@ class LineValidator {
   void test_segments(SegmentedFrame& current, const SegmentedFrame& previous,
                      const SegmentedFrame& before, const PairMotion& first,
                      const PairMotion& second);
+
+  // Whether the association follows the laser line as well as the texture: chain codes do (the
+  // line keeps its place and shape), image_features does not (it follows the texture, which the
+  // laser does not), so there untracked segments keep their verdict.
+  bool laser_tracks() const {
+    return options_.require_track && options_.association == SegmentAssociation::chain_code;
+  }
 
   ScannerGeometry geometry_;
   ValidationOptions options_;

@@ -4,10 +4,13 @@
 
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <functional>
 #include <vector>
 
+#include "pipeline/detector.hpp"
 #include "pipeline/validation.hpp"
+#include "tools/evaluation.hpp"
 
 namespace {
 
@@ -240,3 +243,40 @@ TEST(LineValidator, RejectsTheStaticCurveAndKeepsTheLaserOverThreeFrames) {
 }
 
 }  // namespace
+
+// The bar, on the simulated pier (relief of 5-30 cm, ambient light as bright as the laser,
+// vehicle moving while the PTU scans), end to end: motion estimated from the images, the
+// `backprojection` detector against `background`.
+TEST(BackprojectionDetector, RemovesMostOfBackgroundsFalsePositivesOnThePier) {
+  using laserline::tools::Scenario;
+  Scenario pier;
+  for (const Scenario& s : laserline::tools::standard_scenarios(1280, 1024))
+    if (s.name == "pier") pier = s;
+  ASSERT_EQ(pier.name, "pier");
+  pier.frames = 10;
+  const laserline::tools::Score background =
+      laserline::tools::evaluate(pier, "background", DetectorOptions{}, 2.0);
+  for (const SegmentAssociation association :
+       {SegmentAssociation::chain_code, SegmentAssociation::image_features}) {
+    DetectorOptions options;
+    options.validation.association = association;
+    const laserline::tools::Score validated =
+        laserline::tools::evaluate(pier, "backprojection", options, 2.0);
+    const long false_before = background.points - background.correct_points;
+    const long false_after = validated.points - validated.correct_points;
+    const double removed = 1.0 - static_cast<double>(false_after) / false_before;
+    const double recall_lost = background.recall() - validated.recall();
+    const bool chain_code = association == SegmentAssociation::chain_code;
+    std::printf("%s: false positives %ld -> %ld (%.1f%% removed), recall %.2f%% -> %.2f%%\n",
+                chain_code ? "chain_code" : "image_features", false_before, false_after,
+                100.0 * removed, 100.0 * background.recall(), 100.0 * validated.recall());
+    ASSERT_GT(false_before, 500) << "the scenario must leave background false positives to remove";
+    EXPECT_LE(recall_lost, 0.02);
+    // The default (the paper's chain codes with three-frame tracks) meets the bar; the
+    // image-feature association is kept as an option and measured: it removes less.
+    if (chain_code)
+      EXPECT_GE(removed, 0.75);
+    else
+      EXPECT_GE(removed, 0.4);
+  }
+}

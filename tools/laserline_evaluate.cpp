@@ -18,8 +18,11 @@ void usage(std::FILE* out) {
   std::fprintf(out,
                "usage: laserline-evaluate [--tolerance PX] [--frames N] [--size WxH] "
                "[--overlay-dir DIR] [--detector NAME]... [--scenario NAME]...\n"
+               "                          [--validation chain_code|image_features]\n"
                "Scores detectors on simulated scenarios (ground truth exact): recall, precision\n"
-               "within the tolerance (default 2 px), RMS error and bias of the found points.\n");
+               "within the tolerance (default 2 px), RMS error and bias of the found points.\n"
+               "--validation: how backprojection associates segments between frames (default\n"
+               "chain_code, the paper's; image_features tracks the segment's box in the image).\n");
 }
 
 }  // namespace
@@ -31,6 +34,7 @@ int main(int argc, char** argv) {
   int width = 1280, height = 1024;
   std::string overlay_dir;
   std::vector<std::string> detectors, scenarios;
+  pipeline::DetectorOptions options;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     auto value = [&]() -> std::string {
@@ -55,6 +59,15 @@ int main(int argc, char** argv) {
         overlay_dir = value();
       } else if (arg == "--detector") {
         detectors.push_back(value());
+      } else if (arg == "--validation") {
+        const std::string v = value();
+        if (v == "chain_code") {
+          options.validation.association = pipeline::SegmentAssociation::chain_code;
+        } else if (v == "image_features") {
+          options.validation.association = pipeline::SegmentAssociation::image_features;
+        } else {
+          throw std::invalid_argument(v);
+        }
       } else if (arg == "--scenario") {
         scenarios.push_back(value());
       } else if (arg == "--help" || arg == "-h") {
@@ -88,14 +101,15 @@ int main(int argc, char** argv) {
     for (const std::string& name : detectors) {
       tools::Score score;
       try {
-        score = tools::evaluate(scenario, name, {}, tolerance, [&](const tools::ScoredFrame& f) {
-          if (!overlay_dir.empty() && f.index == frames / 2) {
-            const std::string path = overlay_dir + "/" + scenario.name + "-" + name + ".png";
-            if (!tools::write_overlay(path, f, tolerance)) {
-              std::fprintf(stderr, "laserline-evaluate: cannot write %s\n", path.c_str());
-            }
-          }
-        });
+        score =
+            tools::evaluate(scenario, name, options, tolerance, [&](const tools::ScoredFrame& f) {
+              if (!overlay_dir.empty() && f.index == frames / 2) {
+                const std::string path = overlay_dir + "/" + scenario.name + "-" + name + ".png";
+                if (!tools::write_overlay(path, f, tolerance)) {
+                  std::fprintf(stderr, "laserline-evaluate: cannot write %s\n", path.c_str());
+                }
+              }
+            });
       } catch (const std::exception& e) {
         std::fprintf(stderr, "laserline-evaluate: %s on %s: %s\n", name.c_str(),
                      scenario.name.c_str(), e.what());
