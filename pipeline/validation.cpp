@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
+#include <utility>
 
 namespace laserline::pipeline {
 
@@ -454,28 +455,38 @@ bool LineValidator::track_box(const LineSegment& s, const ImageView& image,
       cv + half_v + sv + r >= height_) {
     return false;
   }
-  // Sum of absolute differences over every other pixel, at each shift of the window.
+  // Sum of absolute differences over every other pixel, at every shift of the window.
   constexpr int kMaxWindow = 2 * 32 + 1;
-  std::array<std::uint32_t, kMaxWindow * kMaxWindow> sad{};
+  constexpr std::uint32_t kUnknown = 0xffffffffu;
+  std::array<std::uint32_t, kMaxWindow * kMaxWindow> sad;  // only window^2 entries are used
   const int window = 2 * r + 1;
   if (window > kMaxWindow) return false;
+  std::fill_n(sad.begin(), window * window, kUnknown);
+  auto cost = [&](int ox, int oy) {
+    std::uint32_t& total = sad[static_cast<std::size_t>((oy + r) * window + ox + r)];
+    if (total != kUnknown) return total;
+    total = 0;
+    for (int y = -half_v; y <= half_v; y += 2) {
+      const std::uint8_t* a = image.row(cv + y) + cu;
+      const std::uint8_t* b = previous_image_.data() +
+                              static_cast<std::size_t>(cv + y + sv + oy) * width_ + cu + su + ox;
+      for (int x = -half_u; x <= half_u; x += 2)
+        total += static_cast<std::uint32_t>(std::abs(int(a[x]) - int(b[x])));
+    }
+    return total;
+  };
+  int bx = r, by = r;  // window coordinates of the best shift
   for (int oy = -r; oy <= r; ++oy) {
     for (int ox = -r; ox <= r; ++ox) {
-      std::uint32_t total = 0;
-      for (int y = -half_v; y <= half_v; y += 2) {
-        const std::uint8_t* a = image.row(cv + y) + cu;
-        const std::uint8_t* b = previous_image_.data() +
-                                static_cast<std::size_t>(cv + y + sv + oy) * width_ + cu + su + ox;
-        for (int x = -half_u; x <= half_u; x += 2)
-          total += static_cast<std::uint32_t>(std::abs(int(a[x]) - int(b[x])));
+      if (cost(ox, oy) < cost(bx - r, by - r)) {
+        bx = ox + r;
+        by = oy + r;
       }
-      sad[static_cast<std::size_t>((oy + r) * window + ox + r)] = total;
     }
   }
-  int best = 0;
-  for (int i = 1; i < window * window; ++i)
-    if (sad[static_cast<std::size_t>(i)] < sad[static_cast<std::size_t>(best)]) best = i;
-  const int by = best / window, bx = best % window;
+  // Neighbours for the sub-pixel fit.
+  for (const auto& [x, y] : {std::pair{bx - 1, by}, {bx + 1, by}, {bx, by - 1}, {bx, by + 1}})
+    if (x >= 0 && x < window && y >= 0 && y < window) cost(x - r, y - r);
   // Sub-pixel: a parabola through the best and its neighbours, along each axis.
   auto vertex = [](double left, double centre, double right) {
     const double curvature = left - 2 * centre + right;
