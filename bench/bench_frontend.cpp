@@ -298,13 +298,16 @@ void BM_frontend_backprojection_detector(benchmark::State& state) {
   detector.reset(kWidth, kHeight);
   pipeline::Profile profile(detector.max_points(kWidth, kHeight));
   std::uint64_t sequence = 0;
+  std::size_t valid = 0;
   for (auto _ : state) {
     const std::size_t k = sequence % f.pixels.size();
     detector.detect(view(f.pixels[k]), {sequence, true}, profile);
     ++sequence;
     benchmark::DoNotOptimize(profile.points().data());
+    for (const pipeline::ProfilePoint& p : profile.points())
+      valid += p.valid ? 1 : 0;
   }
-  state.counters["points"] = static_cast<double>(profile.size());
+  state.counters["valid_points"] = static_cast<double>(valid) / static_cast<double>(sequence);
 }
 BENCHMARK(BM_frontend_backprojection_detector)->Unit(benchmark::kMillisecond);
 
