@@ -8,6 +8,10 @@
 #include <functional>
 #include <vector>
 
+#include "allocation_counter.hpp"
+#include "daemon/config.hpp"
+#include "hal/sim/sim_scene.hpp"
+#include "pipeline/backprojection_detector.hpp"
 #include "pipeline/detector.hpp"
 #include "pipeline/validation.hpp"
 #include "tools/evaluation.hpp"
@@ -278,5 +282,39 @@ TEST(BackprojectionDetector, RemovesMostOfBackgroundsFalsePositivesOnThePier) {
       EXPECT_GE(removed, 0.75);
     else
       EXPECT_GE(removed, 0.4);
+  }
+}
+
+// Once reset, validating a frame allocates nothing, on the full path (tracks over three frames,
+// camera motion estimated, back-projection), with either association.
+TEST(BackprojectionDetector, DoesNotAllocatePerFrame) {
+  ASSERT_TRUE(laserline::testing::allocation_counter_works());
+  laserline::tools::Scenario pier;
+  for (const laserline::tools::Scenario& s : laserline::tools::standard_scenarios(1280, 1024))
+    if (s.name == "pier") pier = s;
+  laserline::hal::SimScene scene(pier.scene);
+  const int width = 1280, height = 1024;
+  std::vector<std::vector<std::uint8_t>> frames(5, std::vector<std::uint8_t>(width * height));
+  for (std::size_t i = 0; i < frames.size(); ++i)
+    scene.render(i, true, frames[i]);
+  for (const SegmentAssociation association :
+       {SegmentAssociation::chain_code, SegmentAssociation::image_features}) {
+    DetectorOptions options;
+    options.geometry = laserline::daemon::scanner_geometry(pier.scene.calibration);
+    options.validation.association = association;
+    BackprojectionDetector detector(options);
+    detector.reset(width, height);
+    Profile out(detector.max_points(width, height));
+    detector.detect({frames[0].data(), width, height, width}, {0, true}, out);
+    laserline::testing::start_counting_allocations();
+    int tested = 0;
+    for (std::uint64_t i = 1; i < frames.size(); ++i) {
+      detector.detect({frames[i].data(), width, height, width}, {i, true}, out);
+      for (const LineSegment& s : detector.validator().segments().segments)
+        tested += s.tested ? 1 : 0;
+    }
+    const laserline::testing::Allocations counted = laserline::testing::stop_counting_allocations();
+    EXPECT_EQ(counted.count, 0) << counted.bytes << " bytes";
+    EXPECT_GT(tested, 10) << "the back-projection must have run";
   }
 }
