@@ -1,6 +1,8 @@
 #include "hal/registry.hpp"
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <functional>
 
@@ -201,6 +203,12 @@ SimSceneOptions read_sim_options(YamlMap& sim, const Calibration& calibration,
                  o.relief_height_m);
   o.relief_per_m2 = sim.number("relief_per_m2", o.relief_per_m2, 0.0, 100.0);
   o.relief_max_slope = sim.number("relief_max_slope", o.relief_max_slope, 0.05, 1.0);
+  if (o.relief_height_m > 0.72 * o.relief_max_slope) {
+    char least[32];
+    std::snprintf(least, sizeof least, "%.3f", std::ceil(o.relief_height_m / 0.72 * 1000) / 1000);
+    sim.fail("relief_max_slope", std::string("must be at least relief_height_m / 0.72 = ") + least +
+                                     " (features must fit the 5.12 m relief tile)");
+  }
   o.vehicle_speed_m_s = sim.number("vehicle_speed_m_s", o.vehicle_speed_m_s, -10.0, 10.0);
   return o;
 }

@@ -86,6 +86,9 @@ TEST(Config, OutOfRangeNamesTheLimits) {
             "test.yaml:3: camera.sim.relief_max_slope: must be between 0.05 and 1, got 2");
   EXPECT_EQ(error_of("camera:\n  sim:\n    vehicle_speed_m_s: 20\n"),
             "test.yaml:3: camera.sim.vehicle_speed_m_s: must be between -10 and 10, got 20");
+  EXPECT_EQ(error_of("camera:\n  sim: {relief_height_m: 0.3, relief_max_slope: 0.3}\n"),
+            "test.yaml:2: camera.sim.relief_max_slope: must be at least relief_height_m / 0.72 = "
+            "0.417 (features must fit the 5.12 m relief tile)");
   EXPECT_EQ(error_of("camera:\n  sim: {relief_height_m: 0.3, relief_per_m2: 0.5, "
                      "relief_max_slope: 0.8, vehicle_speed_m_s: 0.4}\n"),
             "");

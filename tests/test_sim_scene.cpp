@@ -834,6 +834,7 @@ TEST(SimSceneRelief, RejectsImpossibleReliefOptions) {
   rejects([](SimSceneOptions& o) { o.relief_per_m2 = -1; });
   rejects([](SimSceneOptions& o) { o.relief_max_slope = 1.5; });
   rejects([](SimSceneOptions& o) { o.relief_max_slope = 0; });
+  rejects([](SimSceneOptions& o) { o.relief_max_slope = 0.3; });  // 30 cm features too wide
   rejects([](SimSceneOptions& o) { o.vehicle_speed_m_s = std::nan(""); });
   EXPECT_NO_THROW(SimScene{relief_options()});
 }

@@ -285,7 +285,7 @@ void relief_row(const float* __restrict tex, const float* __restrict relief, con
         const float height = top + ft[k] * (bottom - top);
         const float d_ds = (p01 - p00) + ft[k] * ((p11 - p10) - (p01 - p00));
         const float d_dt = bottom - top;
-        // g' <= -0.2 always where the slope limit holds; the floor only guards grazing rays.
+        // g' < 0 where the slope limit holds; the floor keeps grazing rays from dividing by ~0.
         const float slope = (d_ds * ks[k] + d_dt * kt[k]) * r.texel_to_cell - 1.0f;
         const float next = h[k] - (height - h[k]) / std::min(slope, -0.2f);
         h[k] = std::min(std::max(next, 0.0f), r.relief_max);
@@ -403,6 +403,11 @@ void validate(const SimSceneOptions& o) {
   require(
       std::isfinite(o.relief_max_slope) && o.relief_max_slope >= 0.05 && o.relief_max_slope <= 1.0,
       "relief_max_slope must be within [0.05, 1]");
+  // The widest feature (a pile 1.28 m long plus two flanks of 1.4 (pi / 2) height / slope)
+  // must fit in the relief tile with room to spare.
+  require(o.relief_height_m <= 0.72 * o.relief_max_slope,
+          "relief_height_m / relief_max_slope must be <= 0.72 m (features must fit the 5.12 m "
+          "relief tile)");
   require(std::isfinite(o.vehicle_speed_m_s) && std::abs(o.vehicle_speed_m_s) <= 10,
           "vehicle_speed_m_s must be within [-10, 10]");
 }

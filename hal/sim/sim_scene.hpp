@@ -50,7 +50,9 @@ struct SimSceneOptions {
   // [relief_min_height_m, relief_height_m]. Their flanks are no steeper than relief_max_slope
   // (rise over run): no part of the relief hides another from a ray (camera or laser) while
   // relief_max_slope * tan(ray's angle to the normal) < 1, e.g. up to 42 degrees at slope 0.9.
-  // relief_height_m = 0: the plane, exactly. The relief repeats every 5.12 m along the surface.
+  // Features are wider the higher and the gentler they are: relief_height_m / relief_max_slope
+  // must stay within 0.72 m, so that they fit the relief, which repeats every 5.12 m along the
+  // surface. relief_height_m = 0: the plane, exactly.
   double relief_height_m = 0.0;
   double relief_min_height_m = 0.05;
   double relief_per_m2 = 1.0;
