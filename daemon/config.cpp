@@ -71,6 +71,12 @@ void read_detector_options(hal::YamlMap& detector, pipeline::DetectorOptions& op
   m.inlier_px = motion.number("inlier_px", m.inlier_px, 0.05, 50.0);
   m.min_inliers = static_cast<int>(motion.integer("min_inliers", m.min_inliers, 4, 4096));
   m.laser_filter_ratio = motion.number("laser_filter_ratio", m.laser_filter_ratio, 1.0, 1000.0);
+  m.essential_ransac_iterations = static_cast<int>(
+      motion.integer("essential_ransac_iterations", m.essential_ransac_iterations, 1, 10000));
+  m.essential_inlier_px = motion.number("essential_inlier_px", m.essential_inlier_px, 0.05, 50.0);
+  m.essential_min_parallax_px =
+      motion.number("essential_min_parallax_px", m.essential_min_parallax_px, 0.0, 100.0);
+  m.scale_tracks = static_cast<int>(motion.integer("scale_tracks", m.scale_tracks, 0, 4096));
   motion.finish();
 
   pipeline::ValidationOptions& v = options.validation;

@@ -94,6 +94,37 @@ TEST(Config, OutOfRangeNamesTheLimits) {
             "");
 }
 
+TEST(Config, CameraMotionOptions) {
+  const DaemonConfig config =
+      parse_config(hal::load_yaml_text("detector:\n  motion: {essential_ransac_iterations: 50, "
+                                       "essential_inlier_px: 0.7, essential_min_parallax_px: 2, "
+                                       "scale_tracks: 0}\n",
+                                       "test.yaml"),
+                   "test.yaml");
+  const pipeline::MotionOptions& m = config.detector_options.motion;
+  EXPECT_EQ(m.essential_ransac_iterations, 50);
+  EXPECT_EQ(m.essential_inlier_px, 0.7);
+  EXPECT_EQ(m.essential_min_parallax_px, 2.0);
+  EXPECT_EQ(m.scale_tracks, 0);
+  const pipeline::MotionOptions shipped =
+      load_config_file(LASERLINE_SOURCE_DIR "/config/laserline.yaml").detector_options.motion;
+  const pipeline::MotionOptions builtin = builtin_config().detector_options.motion;
+  EXPECT_EQ(shipped.essential_ransac_iterations, builtin.essential_ransac_iterations);
+  EXPECT_EQ(shipped.essential_inlier_px, builtin.essential_inlier_px);
+  EXPECT_EQ(shipped.essential_min_parallax_px, builtin.essential_min_parallax_px);
+  EXPECT_EQ(shipped.scale_tracks, builtin.scale_tracks);
+  EXPECT_EQ(error_of("detector:\n  motion:\n    essential_ransac_iterations: 0\n"),
+            "test.yaml:3: detector.motion.essential_ransac_iterations: must be between 1 and "
+            "10000, got 0");
+  EXPECT_EQ(error_of("detector:\n  motion:\n    essential_inlier_px: 0\n"),
+            "test.yaml:3: detector.motion.essential_inlier_px: must be between 0.05 and 50, got 0");
+  EXPECT_EQ(error_of("detector:\n  motion:\n    essential_min_parallax_px: -1\n"),
+            "test.yaml:3: detector.motion.essential_min_parallax_px: must be between 0 and 100, "
+            "got -1");
+  EXPECT_EQ(error_of("detector:\n  motion:\n    scale_tracks: many\n"),
+            "test.yaml:3: detector.motion.scale_tracks: must be a whole number, got 'many'");
+}
+
 TEST(Config, ChoicesListTheAlternatives) {
   EXPECT_EQ(error_of("detector:\n  name: magic\n"),
             "test.yaml:2: detector.name: must be one of maxvalue, fir, background, backprojection, "

@@ -638,5 +638,110 @@ TEST(CameraMotionEstimator, EstimateDoesNotAllocate) {
   EXPECT_TRUE(again);
 }
 
+// The simulator's pier (bumps and piles of 5-30 cm, vehicle at 0.4 m/s, PTU scan, laser on)
+// through MotionEstimator with the intrinsics: the camera motion against the simulator's poses.
+TEST(MotionEstimator, CameraMotionOfSimulatedPierMatchesTheSimulator) {
+  using namespace camera_motion;
+  hal::SimSceneOptions o;
+  o.calibration.camera.width = kWidth;
+  o.calibration.camera.height = kHeight;
+  o.frame_rate_hz = 30;
+  o.distance_m = 1.2;
+  o.tilt_y_deg = 8;
+  o.sway_m = 0.01;
+  o.sway_deg = 0.3;
+  o.scan_rate_deg_s = 10;
+  o.ambient = 150;
+  o.texture_contrast = 0.6;
+  o.laser_peak = 100;
+  o.seed = 5;
+  o.relief_height_m = 0.30;
+  o.relief_min_height_m = 0.05;
+  o.relief_max_slope = 0.9;
+  o.vehicle_speed_m_s = 0.4;
+  hal::SimScene scene(o);
+  ScannerGeometry g;
+  g.width = kWidth;
+  g.height = kHeight;
+  const hal::CameraIntrinsics& cam = o.calibration.camera;
+  g.fx = cam.fx;
+  g.fy = cam.fy;
+  g.cx = cam.cx;
+  g.cy = cam.cy;
+
+  MotionEstimator estimator;
+  estimator.reset(kWidth, kHeight, &g);
+  cv::Mat frame(kHeight, kWidth, CV_8UC1);
+  const auto pose = [&](std::uint64_t n) {
+    const hal::SimCameraPose p = scene.camera_pose(n);
+    return Pose{cv::Matx33d(p.rotation.data()),
+                cv::Vec3d(p.translation[0], p.translation[1], p.translation[2])};
+  };
+  constexpr int kFrames = 16;
+  int valid = 0, scales = 0;
+  long allocations = 0;
+  ASSERT_TRUE(testing::allocation_counter_works());
+  std::vector<double> rotation_errors, translation_errors, scale_errors;
+  for (std::uint64_t n = 0; n < kFrames; ++n) {
+    scene.render(n, true, {frame.ptr<std::uint8_t>(0), frame.total()});
+    testing::start_counting_allocations();
+    const MotionEstimate e = estimator.update(view_of(frame));
+    allocations += testing::stop_counting_allocations().count;
+    if (n == 0 || !e.camera.valid) {
+      std::printf("frame %2d: camera motion invalid (%d inliers of %d tracks)\n",
+                  static_cast<int>(n), e.camera.inliers, e.tracked);
+      continue;
+    }
+    ++valid;
+    const Pose truth = relative(pose(n - 1), pose(n));
+    const double r_error = angle_between(rotation_of(e.camera), truth.r);
+    const double t_error = angle_between(translation_of(e.camera), truth.t);
+    rotation_errors.push_back(r_error);
+    translation_errors.push_back(t_error);
+    double true_scale = NAN;
+    if (n >= 2) true_scale = cv::norm(truth.t) / cv::norm(relative(pose(n - 2), pose(n - 1)).t);
+    if (std::isfinite(e.camera.relative_scale)) {
+      ++scales;
+      scale_errors.push_back(std::abs(e.camera.relative_scale / true_scale - 1));
+    }
+    std::printf(
+        "frame %2d: %3d inliers of %3d tracks, R error %.3f deg (motion %.3f deg), t "
+        "error %.2f deg, relative scale %.4f (true %.4f)\n",
+        static_cast<int>(n), e.camera.inliers, e.tracked, r_error,
+        angle_between(truth.r, cv::Matx33d::eye()), t_error, e.camera.relative_scale, true_scale);
+  }
+  const auto median = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v.empty() ? NAN : v[v.size() / 2];
+  };
+  std::printf(
+      "valid %d of %d pairs, median R error %.4f deg, median t error %.3f deg, %d relative "
+      "scales, median error %.2f %%\n",
+      valid, kFrames - 1, median(rotation_errors), median(translation_errors), scales,
+      100 * median(scale_errors));
+  EXPECT_GE(valid, kFrames - 3);
+  EXPECT_LT(median(rotation_errors), 0.05);
+  EXPECT_LT(median(translation_errors), 3.0);
+  EXPECT_GE(scales, valid - 3);
+  EXPECT_LT(median(scale_errors), 0.05);
+  EXPECT_EQ(allocations, 0) << "update() with the camera motion allocates";
+
+  // The PTU scan alone (the camera turns about its centre): nothing tells the translation's
+  // direction, the camera motion is invalid while the homography is found.
+  o.vehicle_speed_m_s = 0;
+  o.sway_m = 0;
+  hal::SimScene turning(o);
+  estimator.reset(kWidth, kHeight, &g);
+  int turning_valid = 0, homographies = 0;
+  for (std::uint64_t n = 0; n < 6; ++n) {
+    turning.render(n, true, {frame.ptr<std::uint8_t>(0), frame.total()});
+    const MotionEstimate e = estimator.update(view_of(frame));
+    turning_valid += e.camera.valid ? 1 : 0;
+    homographies += e.valid ? 1 : 0;
+  }
+  EXPECT_EQ(turning_valid, 0);
+  EXPECT_EQ(homographies, 5);
+}
+
 }  // namespace
 }  // namespace laserline::pipeline
