@@ -92,8 +92,7 @@ void BM_frontend_stages_after_homography(benchmark::State& state) {
   frontend.reset(kWidth, kHeight);
   pipeline::Profile profile(frontend.max_points(kWidth));
   for (auto _ : state) {
-    frontend.normalise_subtracting(view(f.current), view(f.previous), f.current_to_previous);
-    frontend.band_pass();
+    frontend.set_frame_minus_background(view(f.current), view(f.previous), f.current_to_previous);
     frontend.find_candidates(profile);
     benchmark::DoNotOptimize(profile.points().data());
     benchmark::ClobberMemory();

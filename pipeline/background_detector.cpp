@@ -42,8 +42,7 @@ void BackgroundDetector::detect(const ImageView& image, const FrameContext& fram
     Homography to_band = last_motion_.previous_to_current.inverse();
     for (int i = 0; i < 3; ++i)
       to_band.h[3 + i] -= band_first_ * to_band.h[6 + i];
-    frontend_.normalise_subtracting(image, background, to_band);
-    frontend_.band_pass();
+    frontend_.set_frame_minus_background(image, background, to_band);
     frontend_.find_candidates(out);
   }
   // This frame is the background of the next one.

@@ -63,8 +63,10 @@ class Detector {
 };
 
 std::vector<std::string> detector_names();
-// nullptr for an unknown name. Throws std::invalid_argument when the options cannot work (e.g. a
-// laser plane whose lines are not image rows), naming the option.
+// nullptr for an unknown name. Every detector's valid points come out triangulated (xyz in metres
+// in the camera frame, from options.geometry; NaN where not on the laser sheet). Throws
+// std::invalid_argument when the options cannot work (e.g. a laser plane whose lines are not image
+// rows), naming the option.
 std::unique_ptr<Detector> make_detector(const std::string& name, const DetectorOptions& options);
 
 }  // namespace laserline::pipeline

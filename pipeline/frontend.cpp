@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 #include <string>
 
@@ -17,6 +18,10 @@
 #else
 #define LASERLINE_DENSE_KERNEL
 #endif
+// Row kernels and the helpers of a dense kernel are inlined into it, so that they are compiled
+// for the target of each of its versions.
+#define LASERLINE_ROW_KERNEL __attribute__((always_inline)) inline
+#define LASERLINE_ROW_LAMBDA __attribute__((always_inline))
 
 namespace laserline::pipeline {
 
@@ -114,8 +119,15 @@ Frontend::Frontend(const ScannerGeometry& geometry, const FrontendOptions& optio
   noise_half_ = std::max(options.noise_rows / 2, guard_ + 1);
   noise_pad_ = std::max(options.noise_columns, 1) / 2;
   noise_norm_ = 1.0f / static_cast<float>(2 * (noise_half_ - guard_) * (2 * noise_pad_ + 1));
-  rows_ = RowNormalisation(geometry, options, outer_ / 2 + 2);
+  // Candidates are local maxima of the band-pass within one laser width along the column: the
+  // noise window (guard band excluded) is the same to within a row there, so these are the
+  // maxima of the SNR too.
+  reach_ = std::max(1, inner_ / 2 + 1);
+  margin_ = outer_ / 2 + 2;
+  rows_ = RowNormalisation(geometry, options, margin_);
 }
+
+namespace {}  // namespace
 
 void Frontend::reset(int width, int height) {
   if (width != geometry_.width || height != geometry_.height) {
@@ -131,11 +143,29 @@ void Frontend::reset(int width, int height) {
   width_ = width;
   height_ = height;
   stride_ = (width + kBlock - 1) / kBlock * kBlock;
-  const auto n = static_cast<std::size_t>(rows_.rows()) * stride_;
-  prefix_.assign(n + stride_, 0);
-  band_passed_.assign(n, 0.0f);
-  abs_prefix_.assign(n + stride_, 0.0f);
-  row_mask_.assign(static_cast<std::size_t>(stride_), 0u);
+  // Each strip's band-pass ring holds the rows from the oldest the noise window still drops
+  // (r - noise/2 - 1 for the block's first row r) to the newest the block's last row looks at;
+  // the normalised ring the rows the band-pass boxes of the block's rows reach.
+  const int look = std::max(noise_half_, reach_);
+  band_ring_rows_ = kRowBlock + look + noise_half_ + 2;
+  normalised_ring_rows_ = kRowBlock + look + outer_ + 2;
+  const int strips = (width + kStripColumns - 1) / kStripColumns;
+  ring_stride_ = (kStripColumns + 2 * noise_pad_ + kBlock - 1) / kBlock * kBlock;
+  const auto ring = static_cast<std::size_t>(ring_stride_);
+  const auto s = static_cast<std::size_t>(stride_);
+  normalised_ring_.assign(static_cast<std::size_t>(normalised_ring_rows_) * s, 0);
+  band_ring_.assign(static_cast<std::size_t>(strips * band_ring_rows_) * ring, 0.0f);
+  inner_sum_.assign(strips * ring, 0);
+  outer_sum_.assign(strips * ring, 0);
+  noise_sum_.assign(strips * ring, 0.0f);
+  const auto blocks = static_cast<std::size_t>((width + kWarpBlock - 1) / kWarpBlock);
+  warp_source_.assign(blocks, 0);
+  warp_first_.assign(blocks, 0);
+  warp_end_.assign(blocks, 0);
+  warp_weights_.assign(4 * blocks, 0);
+  zero_normalised_.assign(s, 0);
+  zero_band_.assign(ring, 0.0f);
+  row_mask_.assign(ring + 8, 0u);
   column_best_.assign(static_cast<std::size_t>(width) * options_.max_candidates_per_column, {});
   column_count_.assign(static_cast<std::size_t>(width), 0);
 }
@@ -144,75 +174,97 @@ namespace {
 
 // The normalised image is held in fixed point, 1/256 grey level: interpolation weights of 8 bit
 // and 16-bit lanes (twice the floats per vector), clipping at 0 by a saturating subtraction, and
-// exact 32-bit column prefix sums (no rounding drift down a column).
+// exact 32-bit running box sums (no rounding drift down a column).
 constexpr int kFixedOne = 256;
 
 inline std::uint16_t fixed_weight(float t) {
   return static_cast<std::uint16_t>(std::clamp(t, 0.0f, 1.0f) * kFixedOne + 0.5f);
 }
 
-// One row of the normalised image accumulated into the column prefix sums: sum = above + value,
-// value = the current frame interpolated between rows a and b (weight fb of b).
-void accumulate_row(const std::uint8_t* __restrict a, const std::uint8_t* __restrict b,
-                    std::uint16_t fb, const std::int32_t* __restrict above, int count,
-                    std::int32_t* __restrict sum) {
+// Row kernels. Each runs over whole rows with __restrict pointers so that GCC vectorises it.
+
+// A normalised row: the current frame interpolated between rows a and b (weight fb of b).
+LASERLINE_ROW_KERNEL void interpolate_row(const std::uint8_t* __restrict a,
+                                          const std::uint8_t* __restrict b, std::uint16_t fb,
+                                          int count, std::uint16_t* __restrict out) {
   const auto fa = static_cast<std::uint16_t>(kFixedOne - fb);
-  for (int u = 0; u < count; ++u) {
-    const auto value = static_cast<std::uint16_t>(a[u] * fa + b[u] * fb);
-    sum[u] = above[u] + value;
-  }
+  for (int u = 0; u < count; ++u)
+    out[u] = static_cast<std::uint16_t>(a[u] * fa + b[u] * fb);
 }
 
-// The same for one warp block, minus the background sampled bilinearly at a constant sub-pixel
-// shift (rows p and q of the background, weights w summing to 256), clipped at 0.
-void accumulate_difference(const std::uint8_t* __restrict a, const std::uint8_t* __restrict b,
-                           std::uint16_t fb, const std::uint8_t* __restrict p,
-                           const std::uint8_t* __restrict q, const std::array<std::uint16_t, 4>& w,
-                           const std::int32_t* __restrict above, std::int32_t* __restrict sum) {
+// `count` pixels of one warp block, minus the background sampled bilinearly at a constant
+// sub-pixel shift (rows p and q of the background, weights w summing to 256), clipped at 0.
+LASERLINE_ROW_KERNEL void difference_block(const std::uint8_t* __restrict a,
+                                           const std::uint8_t* __restrict b, std::uint16_t fb,
+                                           const std::uint8_t* __restrict p,
+                                           const std::uint8_t* __restrict q,
+                                           const std::array<std::uint16_t, 4>& w, int count,
+                                           std::uint16_t* __restrict out) {
   const auto fa = static_cast<std::uint16_t>(kFixedOne - fb);
   const std::uint16_t w00 = w[0], w01 = w[1], w10 = w[2], w11 = w[3];
-  for (int k = 0; k < Frontend::kWarpBlock; ++k) {
+  for (int k = 0; k < count; ++k) {
     const auto current = static_cast<std::uint16_t>(a[k] * fa + b[k] * fb);
     const auto warped =
         static_cast<std::uint16_t>(p[k] * w00 + p[k + 1] * w01 + q[k] * w10 + q[k + 1] * w11);
-    const auto difference = static_cast<std::uint16_t>(current > warped ? current - warped : 0);
-    sum[k] = above[k] + difference;
+    out[k] = static_cast<std::uint16_t>(current > warped ? current - warped : 0);
   }
 }
 
-// One row of the band-pass from box sums over the column prefix sums (inner minus outer mean),
-// and the prefix sums of its magnitude.
-void band_pass_row(const std::int32_t* __restrict i_hi, const std::int32_t* __restrict i_lo,
-                   float wi, const std::int32_t* __restrict o_hi,
-                   const std::int32_t* __restrict o_lo, float wo, const float* __restrict abs_above,
-                   int count, float* __restrict out, float* __restrict abs_sum) {
+// The band-pass row from the box sums of the normalised rows, each box sliding one row on:
+// sum += entering - leaving (rows of zeros beyond the ends), inner mean minus outer mean.
+LASERLINE_ROW_KERNEL void band_pass_row(std::int32_t* __restrict inner,
+                                        const std::uint16_t* __restrict inner_entering,
+                                        const std::uint16_t* __restrict inner_leaving, float wi,
+                                        std::int32_t* __restrict outer,
+                                        const std::uint16_t* __restrict outer_entering,
+                                        const std::uint16_t* __restrict outer_leaving, float wo,
+                                        int count, float* __restrict out) {
   for (int u = 0; u < count; ++u) {
-    const float band =
-        static_cast<float>(i_hi[u] - i_lo[u]) * wi - static_cast<float>(o_hi[u] - o_lo[u]) * wo;
-    out[u] = band;
-    abs_sum[u] = abs_above[u] + std::abs(band);
+    const std::int32_t i = inner[u] + inner_entering[u] - inner_leaving[u];
+    const std::int32_t o = outer[u] + outer_entering[u] - outer_leaving[u];
+    inner[u] = i;
+    outer[u] = o;
+    out[u] = static_cast<float>(i) * wi - static_cast<float>(o) * wo;
   }
 }
 
-// Flags the pixels of a band-pass row at or above the threshold and above their neighbours in the
-// rows above and below. 32-bit flags: what a vector float comparison yields, so it vectorises.
-void mark_peaks(const float* __restrict row, const float* __restrict up,
-                const float* __restrict down, float threshold, int count,
-                std::uint32_t* __restrict mask) {
+// The noise sum of a row: |band-pass| over the noise window minus over the guard band within it,
+// sliding one row on (rows entering and leaving the window and the guard band). With it the
+// candidates of the row: band-pass at or above `threshold` (the noise is at least 1, so nothing
+// below can pass the SNR threshold) and a maximum against the rows one up and down. 8-bit flags,
+// so that a block of them is checked with one load.
+LASERLINE_ROW_KERNEL void noise_and_peaks_row(
+    float* __restrict noise, const float* __restrict noise_entering,
+    const float* __restrict noise_leaving, const float* __restrict guard_entering,
+    const float* __restrict guard_leaving, const float* __restrict row, const float* __restrict up,
+    const float* __restrict down, float threshold, int count, std::uint8_t* __restrict mask) {
+  for (int u = 0; u < count; ++u) {
+    noise[u] += (std::abs(noise_entering[u]) - std::abs(noise_leaving[u])) -
+                (std::abs(guard_entering[u]) - std::abs(guard_leaving[u]));
+    const float x = row[u];
+    mask[u] = static_cast<std::uint8_t>((x >= threshold) & (x > up[u]) & (x >= down[u]));
+  }
+}
+
+// Only the noise sum (rows where no candidate is looked for).
+LASERLINE_ROW_KERNEL void noise_row(float* __restrict noise, const float* __restrict noise_entering,
+                                    const float* __restrict noise_leaving,
+                                    const float* __restrict guard_entering,
+                                    const float* __restrict guard_leaving, int count) {
+  for (int u = 0; u < count; ++u) {
+    noise[u] += (std::abs(noise_entering[u]) - std::abs(noise_leaving[u])) -
+                (std::abs(guard_entering[u]) - std::abs(guard_leaving[u]));
+  }
+}
+
+// Keeps the flags of pixels above their neighbours `k` rows up and at least those as far down.
+LASERLINE_ROW_KERNEL void keep_local_maxima(const float* __restrict row, const float* __restrict up,
+                                            const float* __restrict down, int count,
+                                            std::uint8_t* __restrict mask) {
   for (int u = 0; u < count; ++u) {
     const float x = row[u];
-    mask[u] = (x >= threshold ? 1u : 0u) & (x > up[u] ? 1u : 0u) & (x >= down[u] ? 1u : 0u);
+    mask[u] &= static_cast<std::uint8_t>((x > up[u]) & (x >= down[u]));
   }
-}
-
-inline std::array<std::uint16_t, 4> bilinear_weights(float tx, float ty) {
-  const float one = kFixedOne;
-  const auto w00 = static_cast<std::uint16_t>((1.0f - tx) * (1.0f - ty) * one + 0.5f);
-  const auto w01 = static_cast<std::uint16_t>(tx * (1.0f - ty) * one + 0.5f);
-  const auto w10 = static_cast<std::uint16_t>((1.0f - tx) * ty * one + 0.5f);
-  // The four sum to 256 (w11 absorbs the rounding; it cannot go below 0 by more than rounding).
-  const int w11 = std::max(kFixedOne - w00 - w01 - w10, 0);
-  return {w00, w01, w10, static_cast<std::uint16_t>(w11)};
 }
 
 // The two rows of the frame a normalised row is interpolated from, and the weight of the lower.
@@ -222,141 +274,287 @@ struct SourceRow {
     const int v0 = std::min(static_cast<int>(v), last);
     a = image.row(v0);
     b = image.row(std::min(v0 + 1, last));
-    f = v - static_cast<float>(v0);
-    fb = fixed_weight(f);
+    fb = fixed_weight(v - static_cast<float>(v0));
   }
   const std::uint8_t* a;
   const std::uint8_t* b;
-  float f;
   std::uint16_t fb;
 };
 
 }  // namespace
 
-LASERLINE_DENSE_KERNEL
-void Frontend::normalise(const ImageView& current) {
+void Frontend::set_frame(const ImageView& current) {
   current_ = current;
   subtracting_ = false;
-  const std::size_t s = static_cast<std::size_t>(stride_);
-  for (int r = 0; r < rows_.rows(); ++r) {
-    const SourceRow row(current, rows_.source_row(r));
-    accumulate_row(row.a, row.b, row.fb, prefix_.data() + r * s, width_,
-                   prefix_.data() + (r + 1) * s);
-  }
 }
 
-LASERLINE_DENSE_KERNEL
-void Frontend::normalise_subtracting(const ImageView& current, const ImageView& background,
-                                     const Homography& current_to_background) {
+void Frontend::set_frame_minus_background(const ImageView& current, const ImageView& background,
+                                          const Homography& current_to_background) {
   current_ = current;
   background_ = background;
   to_background_ = current_to_background;
   subtracting_ = true;
-  // The background may be a band of rows of the frame (its own size; the homography says where).
-  const auto bg_width = static_cast<float>(background.width);
-  const auto bg_height = static_cast<float>(background.height);
-  const std::size_t s = static_cast<std::size_t>(stride_);
-  for (int r = 0; r < rows_.rows(); ++r) {
-    const float v = rows_.source_row(r);
-    const SourceRow row(current, v);
-    const std::uint8_t* a = row.a;
-    const std::uint8_t* b = row.b;
-    const float f = row.f;
-    const std::uint16_t fb = row.fb;
-    const std::int32_t* above = prefix_.data() + r * s;
-    std::int32_t* sum = prefix_.data() + (r + 1) * s;
-    // Along the row the background position is a ratio of linear functions of u: numerators and
-    // denominator at u = 0, and their steps per pixel.
-    const auto& g = current_to_background.h;
-    const auto xn0 = static_cast<float>(g[1] * v + g[2]), xnu = static_cast<float>(g[0]);
-    const auto yn0 = static_cast<float>(g[4] * v + g[5]), ynu = static_cast<float>(g[3]);
-    const auto wn0 = static_cast<float>(g[7] * v + g[8]), wnu = static_cast<float>(g[6]);
-    for (int u0 = 0; u0 < width_; u0 += kWarpBlock) {
-      const int count = std::min(kWarpBlock, width_ - u0);
-      // Where the block's centre was in the background; the block moves as a whole.
-      const float centre = static_cast<float>(u0) + 0.5f * static_cast<float>(count - 1);
-      const float inv = 1.0f / (wn0 + wnu * centre);
-      const float y = (yn0 + ynu * centre) * inv;
-      const float x0 = (xn0 + xnu * centre) * inv - (centre - static_cast<float>(u0));
-      const float fx0 = std::floor(x0), fy0 = std::floor(y);
-      if (count != kWarpBlock || !(fx0 >= 0.0f && fx0 + static_cast<float>(count) < bg_width &&
-                                   fy0 >= 0.0f && fy0 + 1.0f < bg_height)) {
-        // At the border of the background frame, pixel by pixel; where there is nothing to
-        // compare with there is no signal.
-        for (int k = 0; k < count; ++k) {
-          const float xk = x0 + static_cast<float>(k);
-          const float x_cur = static_cast<float>(a[u0 + k]);
-          const float now = x_cur + f * (static_cast<float>(b[u0 + k]) - x_cur);
-          const bool inside =
-              xk >= 0.0f && xk < bg_width - 1.0f && y >= 0.0f && y < bg_height - 1.0f;
-          const float difference = inside ? now - bilinear(background, xk, y) : 0.0f;
-          sum[u0 + k] = above[u0 + k] + static_cast<std::int32_t>(
-                                            std::lround(std::max(difference, 0.0f) * kFixedOne));
-        }
-        continue;
-      }
-      const auto ix = static_cast<int>(fx0), iy = static_cast<int>(fy0);
-      const float tx = x0 - fx0, ty = y - fy0;
-      const std::uint8_t* p = background.row(iy) + ix;
-      accumulate_difference(a + u0, b + u0, fb, p, p + background.stride, bilinear_weights(tx, ty),
-                            above + u0, sum + u0);
-    }
-  }
-}
-
-float Frontend::normalised_at(int r, int u) const {
-  const std::size_t s = static_cast<std::size_t>(stride_);
-  return static_cast<float>(prefix_[(r + 1) * s + u] - prefix_[r * s + u]) / kFixedOne;
 }
 
 LASERLINE_DENSE_KERNEL
-void Frontend::band_pass() {
-  const int rows = rows_.rows();
-  const std::size_t s = static_cast<std::size_t>(stride_);
-  const int hi = inner_ / 2, ho = outer_ / 2;
-  // Boxes of any height from the column prefix sums (III-C's integral image), and the prefix
-  // sums of |band| for the noise of III-D, in one pass. At the ends the boxes are cut short and
-  // averaged over what they cover.
-  std::fill(abs_prefix_.begin(), abs_prefix_.begin() + stride_, 0.0f);
-  for (int r = 0; r < rows; ++r) {
-    const int i0 = std::max(r - hi, 0), i1 = std::min(r + hi + 1, rows);
-    const int o0 = std::max(r - ho, 0), o1 = std::min(r + ho + 1, rows);
-    const float wi = 1.0f / static_cast<float>((i1 - i0) * kFixedOne);
-    const float wo = 1.0f / static_cast<float>((o1 - o0) * kFixedOne);
-    const std::int32_t* __restrict i_hi = prefix_.data() + i1 * s;
-    const std::int32_t* __restrict i_lo = prefix_.data() + i0 * s;
-    const std::int32_t* __restrict o_hi = prefix_.data() + o1 * s;
-    const std::int32_t* __restrict o_lo = prefix_.data() + o0 * s;
-    band_pass_row(i_hi, i_lo, wi, o_hi, o_lo, wo, abs_prefix_.data() + r * s, stride_,
-                  band_passed_.data() + r * s, abs_prefix_.data() + (r + 1) * s);
+void Frontend::normalise_row(int r, int begin, int end_column, std::uint16_t* out) {
+  const float v = rows_.source_row(r);
+  const SourceRow row(current_, v);
+  if (!subtracting_) {
+    interpolate_row(row.a + begin, row.b + begin, row.fb, end_column - begin, out);
+    return;
+  }
+  // The background may be a band of rows of the frame (its own size; the homography says where).
+  const ImageView& background = background_;
+  const auto bg_width = static_cast<float>(background.width);
+  const auto bg_height = static_cast<float>(background.height);
+  // Along the row the background position is a ratio of linear functions of u: numerators and
+  // denominator at u = 0, and their steps per pixel.
+  const auto& g = to_background_.h;
+  const auto xn0 = static_cast<float>(g[1] * v + g[2]), xnu = static_cast<float>(g[0]);
+  const auto yn0 = static_cast<float>(g[4] * v + g[5]), ynu = static_cast<float>(g[3]);
+  const auto wn0 = static_cast<float>(g[7] * v + g[8]), wnu = static_cast<float>(g[6]);
+  // Where each block's centre was in the background (the block moves as a whole), for all
+  // blocks of the row at once, branch-free so that it vectorises: the first pixel's position in
+  // the background, the pixels [first, end) whose four background neighbours lie inside it (the
+  // others have nothing to compare with, so no signal) and the bilinear weights.
+  const int block_begin = begin / kWarpBlock, block_end = (end_column - 1) / kWarpBlock + 1;
+  const int width = width_, stride = background.stride, last_column = background.width - 1;
+  std::int32_t* __restrict source = warp_source_.data();
+  std::int32_t* __restrict first = warp_first_.data();
+  std::int32_t* __restrict end = warp_end_.data();
+  std::int32_t* __restrict weights = warp_weights_.data();
+  for (int j = block_begin; j < block_end; ++j) {
+    const int u0 = j * kWarpBlock;
+    const int count = std::min(kWarpBlock, width - u0);
+    const float centre = static_cast<float>(u0) + 0.5f * static_cast<float>(count - 1);
+    const float inv = 1.0f / (wn0 + wnu * centre);
+    const float y = (yn0 + ynu * centre) * inv;
+    const float x0 = (xn0 + xnu * centre) * inv - (centre - static_cast<float>(u0));
+    const float fx0 = std::floor(x0), fy0 = std::floor(y);
+    // Comparisons are false for NaN: a degenerate warp gives no signal.
+    const bool inside =
+        fy0 >= 0.0f && fy0 + 1.0f < bg_height && fx0 > -bg_width - kWarpBlock && fx0 < bg_width;
+    const int ix = inside ? static_cast<int>(fx0) : 0;
+    const int iy = inside ? static_cast<int>(fy0) : 0;
+    const int f = inside ? std::clamp(-ix, 0, count) : 0;
+    const int e = inside ? std::clamp(last_column - ix, f, count) : 0;
+    const float tx = inside ? x0 - fx0 : 0.0f, ty = inside ? y - fy0 : 0.0f;
+    source[j] = iy * stride + ix + f;
+    first[j] = f;
+    end[j] = e;
+    const float one = kFixedOne;
+    const auto w00 = static_cast<std::int32_t>((1.0f - tx) * (1.0f - ty) * one + 0.5f);
+    const auto w01 = static_cast<std::int32_t>(tx * (1.0f - ty) * one + 0.5f);
+    const auto w10 = static_cast<std::int32_t>((1.0f - tx) * ty * one + 0.5f);
+    // The four sum to 256 (w11 absorbs the rounding).
+    weights[4 * j] = w00;
+    weights[4 * j + 1] = w01;
+    weights[4 * j + 2] = w10;
+    weights[4 * j + 3] = std::max(kFixedOne - w00 - w01 - w10, 0);
+  }
+  for (int j = block_begin; j < block_end; ++j) {
+    // The block's pixels within [begin, end_column).
+    const int u0 = j * kWarpBlock;
+    const int lo = std::max(u0, begin), hi = std::min(u0 + kWarpBlock, end_column);
+    const int f = std::clamp(u0 + first[j], lo, hi), e = std::clamp(u0 + end[j], f, hi);
+    std::fill(out + (lo - begin), out + (f - begin), std::uint16_t{0});
+    std::fill(out + (e - begin), out + (hi - begin), std::uint16_t{0});
+    if (f == e) continue;
+    const std::uint8_t* p = background.data + source[j] + (f - u0 - first[j]);
+    const int k = f;
+    const std::array<std::uint16_t, 4> w{static_cast<std::uint16_t>(weights[4 * j]),
+                                         static_cast<std::uint16_t>(weights[4 * j + 1]),
+                                         static_cast<std::uint16_t>(weights[4 * j + 2]),
+                                         static_cast<std::uint16_t>(weights[4 * j + 3])};
+    difference_block(row.a + k, row.b + k, row.fb, p, p + stride, w, e - f, out + (k - begin));
   }
 }
 
-float Frontend::snr_at(int r, int u) const {
-  const int rows = rows_.rows();
-  const std::size_t s = static_cast<std::size_t>(stride_);
-  const float* n_hi = abs_prefix_.data() + std::min(r + noise_half_ + 1, rows) * s;
-  const float* n_lo = abs_prefix_.data() + std::max(r - noise_half_, 0) * s;
-  const float* g_hi = abs_prefix_.data() + std::min(r + guard_ + 1, rows) * s;
-  const float* g_lo = abs_prefix_.data() + std::max(r - guard_, 0) * s;
+struct Frontend::StageImages {
+  std::span<float> normalised, band_pass, signal_to_noise;
+};
+
+float Frontend::noise_level(const float* noise, int u, int begin) const {
   float sum = 0.0f;
-  for (int k = -noise_pad_; k <= noise_pad_; ++k) {
-    const int c = std::clamp(u + k, 0, width_ - 1);
-    sum += (n_hi[c] - n_lo[c]) - (g_hi[c] - g_lo[c]);
-  }
+  for (int k = -noise_pad_; k <= noise_pad_; ++k)
+    sum += noise[std::clamp(u + k, 0, width_ - 1) - begin];
   // III-D: the minimal noise level is 1.
-  return band_passed_[r * s + u] / std::max(sum * noise_norm_, 1.0f);
+  return std::max(sum * noise_norm_, 1.0f);
 }
 
-void Frontend::signal_to_noise_image(std::span<float> out) const {
-  const std::size_t s = static_cast<std::size_t>(stride_);
-  if (out.size() < static_cast<std::size_t>(rows_.rows()) * s) {
-    throw std::invalid_argument("signal_to_noise_image: output too small");
+LASERLINE_DENSE_KERNEL
+void Frontend::roll(const StageImages* images) {
+  const int rows = rows_.rows();
+  const int hi = inner_ / 2, ho = outer_ / 2, nh = noise_half_, gh = guard_;
+  const int look = std::max(nh, reach_);  // band-pass rows needed below the row under test
+  const auto image_stride = static_cast<std::size_t>(stride_);
+  const auto ring = static_cast<std::size_t>(ring_stride_);
+  const float threshold = std::pow(10.0f, static_cast<float>(options_.snr_threshold_db) / 20.0f);
+  const int per_column = options_.max_candidates_per_column;
+  const int strips = (width_ + kStripColumns - 1) / kStripColumns;
+  std::fill(column_count_.begin(), column_count_.end(), 0);
+  std::fill(inner_sum_.begin(), inner_sum_.end(), 0);
+  std::fill(outer_sum_.begin(), outer_sum_.end(), 0);
+  std::fill(noise_sum_.begin(), noise_sum_.end(), 0.0f);
+  const bool want_snr = images != nullptr && !images->signal_to_noise.empty();
+
+  // Rows beyond the ends are rows of zeros: a box cut short sums what it covers. The normalised
+  // ring is as wide as the image; each strip has its own band-pass ring and sums.
+  auto normalised = [&](int r) LASERLINE_ROW_LAMBDA -> const std::uint16_t* {
+    if (r < 0 || r >= rows) return zero_normalised_.data();
+    return normalised_ring_.data() +
+           static_cast<std::size_t>(r % normalised_ring_rows_) * image_stride;
+  };
+  int next_normalised = 0;
+  auto normalise_until = [&](int last) LASERLINE_ROW_LAMBDA {
+    for (; next_normalised <= std::min(last, rows - 1); ++next_normalised) {
+      std::uint16_t* out =
+          normalised_ring_.data() +
+          static_cast<std::size_t>(next_normalised % normalised_ring_rows_) * image_stride;
+      normalise_row(next_normalised, 0, width_, out);
+      if (images != nullptr && !images->normalised.empty()) {
+        float* dst = images->normalised.data() + next_normalised * image_stride;
+        for (int u = 0; u < width_; ++u)
+          dst[u] = static_cast<float>(out[u]) / kFixedOne;
+      }
+    }
+  };
+
+  // Rows go in blocks: the block's normalised rows across the whole image (long runs through the
+  // frame), then strip by strip the band-pass, noise and candidates of the block's rows (the
+  // strip's rings stay in the first-level cache for the whole block).
+  int next_band = 0;
+  for (int r_begin = 0; r_begin < rows; r_begin += kRowBlock) {
+    const int r_end = std::min(r_begin + kRowBlock, rows);
+    const int band_end = std::min(r_end + look, rows);  // band-pass rows [next_band, band_end)
+    normalise_until(band_end - 1 + ho);
+    for (int strip = 0; strip < strips; ++strip) {
+      // The strip's columns [c0, c1), and [begin, end_column) with the noise window's reach on
+      // either side: what its rings and sums hold.
+      const int c0 = strip * kStripColumns, c1 = std::min(c0 + kStripColumns, width_);
+      const int begin = std::max(c0 - noise_pad_, 0);
+      const int count = std::min(c1 + noise_pad_, width_) - begin;
+      const std::size_t state = static_cast<std::size_t>(strip) * ring;
+      std::int32_t* inner = inner_sum_.data() + state;
+      std::int32_t* outer = outer_sum_.data() + state;
+      float* noise = noise_sum_.data() + state;
+      float* band_ring = band_ring_.data() + state * static_cast<std::size_t>(band_ring_rows_);
+      auto band = [&](int r) LASERLINE_ROW_LAMBDA -> float* {
+        if (r < 0 || r >= rows) return zero_band_.data();
+        return band_ring + static_cast<std::size_t>(r % band_ring_rows_) * ring;
+      };
+      auto x = [&](int r) LASERLINE_ROW_LAMBDA {
+        return normalised(r) + (r < 0 || r >= rows ? 0 : begin);
+      };
+
+      // III-C: box means down the columns; at the ends the boxes are cut short and averaged over
+      // what they cover. The sums of row b are those of row b - 1 plus the row that enters the
+      // box and minus the one that leaves it; they start holding rows 0 .. half - 1.
+      if (next_band == 0) {
+        for (int j = 0; j < std::min(ho, rows); ++j) {
+          const std::uint16_t* row = x(j);
+          for (int u = 0; u < count; ++u) {
+            if (j < hi) inner[u] += row[u];
+            outer[u] += row[u];
+          }
+        }
+      }
+      for (int b = next_band; b < band_end; ++b) {
+        const int i0 = std::max(b - hi, 0), i1 = std::min(b + hi + 1, rows);
+        const int o0 = std::max(b - ho, 0), o1 = std::min(b + ho + 1, rows);
+        const float wi = 1.0f / static_cast<float>((i1 - i0) * kFixedOne);
+        const float wo = 1.0f / static_cast<float>((o1 - o0) * kFixedOne);
+        float* out = band(b);
+        band_pass_row(inner, x(b + hi), x(b - hi - 1), wi, outer, x(b + ho), x(b - ho - 1), wo,
+                      count, out);
+        if (images != nullptr && !images->band_pass.empty()) {
+          std::copy(out + (c0 - begin), out + (c1 - begin),
+                    images->band_pass.data() + b * image_stride + c0);
+        }
+      }
+      // III-D: the noise sum likewise starts holding band-pass rows 0 .. half - 1 (less the
+      // guard band's rows 0 .. guard - 1).
+      if (r_begin == 0) {
+        const float* zero = zero_band_.data();
+        for (int j = gh; j < std::min(nh, rows); ++j)
+          noise_row(noise, band(j), zero, zero, zero, count);
+      }
+      // III-D/E for the block's rows. Rows in the margins are outside the depth range: no
+      // candidates there.
+      for (int r = r_begin; r < r_end; ++r) {
+        const float* row = band(r);
+        const bool searched =
+            r >= std::max(margin_, reach_) && r < rows - std::max(margin_, reach_);
+        std::uint8_t* __restrict mask = row_mask_.data();
+        if (!searched) {
+          noise_row(noise, band(r + nh), band(r - nh - 1), band(r + gh), band(r - gh - 1), count);
+        } else {
+          // The dense part, branch-free so that it vectorises; the few pixels that pass go on.
+          noise_and_peaks_row(noise, band(r + nh), band(r - nh - 1), band(r + gh), band(r - gh - 1),
+                              row, band(r - 1), band(r + 1), threshold, count, mask);
+          for (int k = 2; k <= reach_; ++k)
+            keep_local_maxima(row, band(r - k), band(r + k), count, mask);
+        }
+        auto noise_at = [&](int u) LASERLINE_ROW_LAMBDA { return noise_level(noise, u, begin); };
+        if (want_snr) {
+          float* dst = images->signal_to_noise.data() + r * image_stride;
+          for (int u = c0; u < c1; ++u)
+            dst[u] = row[u - begin] / noise_at(u);
+        }
+        if (!searched) continue;
+        const float* up = band(r - 1);
+        const float* down = band(r + 1);
+        for (int i0 = c0 - begin; i0 < c1 - begin; i0 += 8) {
+          std::uint64_t any = 0;
+          std::memcpy(&any, mask + i0, sizeof any);
+          if (any == 0) continue;
+          for (int i = i0; i < std::min(i0 + 8, c1 - begin); ++i) {
+            if (!mask[i]) continue;
+            const int u = begin + i;
+            const float value = row[i];
+            const float snr = value / noise_at(u);
+            if (!(snr >= threshold)) continue;
+            // Keep the strongest few per column (bounded work and output). Strongest by
+            // band-pass amplitude: the laser adds light, while a faint texture edge in a quiet
+            // neighbourhood can have the higher SNR.
+            Peak* best = column_best_.data() + static_cast<std::size_t>(u) * per_column;
+            const int n = column_count_[u];
+            int slot = n;
+            if (n == per_column) {
+              slot = 0;
+              for (int j = 1; j < n; ++j)
+                if (best[j].band < best[slot].band) slot = j;
+              if (best[slot].band >= value) continue;
+            } else {
+              column_count_[u] = static_cast<std::uint8_t>(n + 1);
+            }
+            // Sub-row position of the band-pass peak, mapped back to an original row: the
+            // guess the refinement starts from.
+            const float a = up[i], c = down[i];
+            const float curvature = a - 2.0f * value + c;
+            const float offset =
+                curvature < 0.0f ? std::clamp(0.5f * (a - c) / curvature, -0.5f, 0.5f) : 0.0f;
+            best[slot] = Peak{static_cast<float>(r) + offset, snr, value};
+          }
+        }
+      }
+    }
+    next_band = band_end;
   }
-  for (int r = 0; r < rows_.rows(); ++r) {
-    for (int u = 0; u < width_; ++u)
-      out[r * s + u] = snr_at(r, u);
+}
+
+void Frontend::stage_images(std::span<float> normalised, std::span<float> band_pass,
+                            std::span<float> signal_to_noise) {
+  const std::size_t size = static_cast<std::size_t>(rows_.rows()) * stride_;
+  for (std::span<float> image : {normalised, band_pass, signal_to_noise}) {
+    if (!image.empty() && image.size() < size) {
+      throw std::invalid_argument("Frontend::stage_images: an output is smaller than " +
+                                  std::to_string(rows_.rows()) + " x " + std::to_string(stride_));
+    }
   }
+  const StageImages images{normalised, band_pass, signal_to_noise};
+  roll(&images);
 }
 
 namespace {
@@ -461,71 +659,15 @@ float Frontend::refine_row(int u, float v_guess) const {
   return static_cast<float>(best) + static_cast<float>(spacing) * gaussian_offset(a, b, c);
 }
 
-LASERLINE_DENSE_KERNEL
 void Frontend::find_candidates(Profile& out) {
   out.clear();
-  const int rows = rows_.rows();
+  roll(nullptr);
   const int per_column = options_.max_candidates_per_column;
-  std::fill(column_count_.begin(), column_count_.end(), 0);
-  const float threshold = std::pow(10.0f, static_cast<float>(options_.snr_threshold_db) / 20.0f);
-  const std::size_t s = static_cast<std::size_t>(stride_);
-  // Candidates are local maxima of the band-pass within one laser width along the column: the
-  // noise window (guard band excluded) is the same to within a row there, so these are the
-  // maxima of the SNR too. Rows in the margins are outside the depth range.
-  const int reach = std::max(1, inner_ / 2 + 1);
-  const int margin = outer_ / 2 + 2;
-  std::uint32_t* __restrict mask = row_mask_.data();
-  for (int r = std::max(margin, reach); r < rows - std::max(margin, reach); ++r) {
-    const float* __restrict row = band_passed_.data() + r * s;
-    const float* __restrict up = row - s;
-    const float* __restrict down = row + s;
-    // The dense part, branch-free so that it vectorises: above the threshold and above the
-    // direct neighbours. The wider window is checked on the few pixels that pass.
-    mark_peaks(row, up, down, threshold, stride_, mask);
-    for (int u0 = 0; u0 < width_; u0 += kBlock) {
-      std::uint32_t any = 0;
-      for (int k = 0; k < kBlock; ++k)
-        any |= mask[u0 + k];
-      if (any == 0) continue;
-      for (int u = u0; u < std::min(u0 + kBlock, width_); ++u) {
-        if (!mask[u]) continue;
-        const float value = row[u];
-        bool peak = true;
-        for (int k = 2; k <= reach && peak; ++k) {
-          peak = value > row[u - static_cast<std::ptrdiff_t>(k * s)] &&
-                 value >= row[u + static_cast<std::ptrdiff_t>(k * s)];
-        }
-        if (!peak) continue;
-        const float snr = snr_at(r, u);
-        if (!(snr >= threshold)) continue;
-        // Keep the strongest few per column (bounded work and output). Strongest by band-pass
-        // amplitude: the laser adds light, while a faint texture edge in a quiet
-        // neighbourhood can have the higher SNR.
-        Peak* best = column_best_.data() + static_cast<std::size_t>(u) * per_column;
-        const int n = column_count_[u];
-        int slot = n;
-        if (n == per_column) {
-          slot = 0;
-          for (int i = 1; i < n; ++i)
-            if (best[i].band < best[slot].band) slot = i;
-          if (best[slot].band >= value) continue;
-        } else {
-          column_count_[u] = static_cast<std::uint8_t>(n + 1);
-        }
-        // Sub-row position of the band-pass peak, mapped back to an original row: the guess
-        // the refinement starts from.
-        const float a = up[u], c = down[u];
-        const float curvature = a - 2.0f * value + c;
-        const float offset =
-            curvature < 0.0f ? std::clamp(0.5f * (a - c) / curvature, -0.5f, 0.5f) : 0.0f;
-        best[slot] = Peak{static_cast<float>(rows_.to_source(r + offset)), snr, value};
-      }
-    }
-  }
   for (int u = 0; u < width_; ++u) {
     Peak* best = column_best_.data() + static_cast<std::size_t>(u) * per_column;
     const int n = column_count_[u];
-    std::sort(best, best + n, [](const Peak& a, const Peak& b) { return a.v < b.v; });
+    // By row (normalised rows grow with the original rows).
+    std::sort(best, best + n, [](const Peak& a, const Peak& b) { return a.r < b.r; });
     // One laser point per epipolar line: the strongest candidate is the front-end's choice; the
     // others stay in the profile, not valid, for validation (Section IV) to reconsider.
     int strongest = 0;
@@ -536,7 +678,8 @@ void Frontend::find_candidates(Profile& out) {
       point.u = u;
       // Only the chosen point gets the sub-pixel fit (the costly part of this stage); the others
       // keep the band-pass peak's row, good to about half a laser width.
-      point.v = i == strongest ? refine_row(u, best[i].v) : best[i].v;
+      const auto v = static_cast<float>(rows_.to_source(best[i].r));
+      point.v = i == strongest ? refine_row(u, v) : v;
       point.snr_db = 20.0f * std::log10(best[i].snr);
       point.valid = i == strongest;
       if (!out.add(point)) return;

@@ -40,16 +40,18 @@ class RowNormalisation {
   std::vector<float> source_row_;
 };
 
-// The front-end of Section III on one frame, as separately callable stages over preallocated
-// buffers of the normalised size (row-major, `stride()` values per row; the normalised image is
-// kept as 32-bit column prefix sums in 1/256 grey level, the band-pass as floats):
-//   normalise() or normalise_subtracting()  III-A/B  -> normalised_at()
-//   band_pass()                             III-C    -> band_passed()
-//   find_candidates()                       III-D/E  -> Profile in original coordinates
-// III-D is evaluated only where it matters: a pixel can pass the threshold only where the
-// band-pass itself exceeds it (the noise is at least 1), so the SNR is computed at the band-pass
-// peaks. snr_at() is the one formula; signal_to_noise_image() applies it everywhere, for pictures
-// and tests. reset() allocates; the stages do not. Thread context: one thread at a time.
+// The front-end of Section III on one frame. set_frame() or set_frame_minus_background() names
+// the input (III-A: the frame, or the frame minus the motion-compensated background); then
+// find_candidates() runs III-B to III-E in one pass down the normalised rows, each stage a row
+// kernel over small rings of rows that stay in the cache:
+//   normalised row r       III-B: frame (minus background) resampled to normalised row r
+//   band-pass row r        III-C: inner minus outer box mean down the columns (running sums)
+//   noise of row r         III-D: mean |band-pass| around the pixel, a guard band left out
+//   candidates of row r    III-E: band-pass peaks whose SNR passes the threshold
+// The band-pass of row r needs the normalised rows up to r + outer/2 and the noise of row r the
+// band-pass rows up to r + noise_rows/2, so the pass runs that far ahead. stage_images() runs the
+// same pass and keeps every row of the three intermediate images, for tests and pictures.
+// reset() allocates; the stages do not. Thread context: one thread at a time.
 class Frontend {
  public:
   Frontend(const ScannerGeometry& geometry, const FrontendOptions& options);
@@ -63,41 +65,50 @@ class Frontend {
   }
   void reset(int width, int height);
 
-  // III-B on the frame itself (the `fir` detector).
-  void normalise(const ImageView& current);
+  // III-B on the frame itself (the `fir` detector). The view must stay valid until the last call
+  // that reads it (find_candidates(), stage_images()).
+  void set_frame(const ImageView& current);
   // III-A + B: the frame minus the background frame seen through `current_to_background` (a
-  // pixel of the current frame to where the same scene point was in the background frame),
-  // resampled to normalised rows in one pass. Negative differences (the background was brighter:
-  // the laser of the previous frame, or texture moving in) are clipped to 0: the laser only adds
-  // light. The background may be any image (e.g. a band of rows of the previous frame): the
-  // homography says where a current pixel is in it. The warp is evaluated exactly once per block
-  // of kWarpBlock pixels and as a translation within it (error bound at kWarpBlock).
-  void normalise_subtracting(const ImageView& current, const ImageView& background,
-                             const Homography& current_to_background);
-  void band_pass();
+  // pixel of the current frame to where the same scene point was in the background frame).
+  // Negative differences (the background was brighter: the laser of the previous frame, or
+  // texture moving in) are clipped to 0: the laser only adds light. The background may be any
+  // image (e.g. a band of rows of the previous frame): the homography says where a current pixel
+  // is in it. The warp is evaluated exactly once per block of kWarpBlock pixels and as a
+  // translation within it (error bound at kWarpBlock).
+  void set_frame_minus_background(const ImageView& current, const ImageView& background,
+                                  const Homography& current_to_background);
+
   // Local maxima of the band-pass along each column whose SNR passes the threshold, at most
   // max_candidates_per_column (the strongest). The strongest is the valid point, refined to a
   // sub-pixel row in the original image (Gaussian 3-point fit on the background-free column; the
   // centre of the run where the core is clipped); the others are not valid and keep the row of
-  // their band-pass peak, good to half a laser width. Uses the frames given to the last
-  // normalise call; they must still be valid.
+  // their band-pass peak, good to half a laser width.
   void find_candidates(Profile& out);
+
+  // The intermediate images of the frame set last, rows() x stride() floats each (any may be
+  // empty, then it is not kept): normalised image (grey levels), band-pass (III-C), SNR (III-D:
+  // band-pass over the mean |band-pass| around the pixel, a guard band left out, the noise at
+  // least 1; amplitude ratio).
+  void stage_images(std::span<float> normalised, std::span<float> band_pass,
+                    std::span<float> signal_to_noise);
 
   int width() const { return width_; }
   int stride() const { return stride_; }
-  float normalised_at(int r, int u) const;
-  std::span<const float> band_passed() const { return band_passed_; }
-  // III-D: band-pass over the mean |band-pass| around the pixel (a guard band around it left
-  // out), the noise at least 1. Amplitude ratio.
-  float snr_at(int r, int u) const;
-  // snr_at() for every pixel into `out` (rows() x stride() floats).
-  void signal_to_noise_image(std::span<float> out) const;
 
   // Pixels warped as one block. Within a block the warp is a translation: exact to
   // kWarpBlock / 2 * max(|d(x - u)/du|, |dy/du|), 0.05 px for a roll of 0.2 degrees between frames.
   static constexpr int kWarpBlock = 32;
 
  private:
+  struct StageImages;
+  // The pass down the rows: candidates into column_best_ / column_count_, and the intermediate
+  // rows into `images` where given.
+  void roll(const StageImages* images);
+  // Normalised row r, columns [begin, end) into out[0, end - begin).
+  void normalise_row(int r, int begin, int end, std::uint16_t* out);
+  // III-D at column u from the noise sums of a row (which hold columns from `begin` on): the
+  // mean |band-pass| around it, a guard band left out, at least 1.
+  float noise_level(const float* noise, int u, int begin) const;
   float refine_row(int u, float v_guess) const;
 
   ScannerGeometry geometry_;
@@ -105,22 +116,40 @@ class Frontend {
   RowNormalisation rows_;
   int inner_ = 3, outer_ = 9;  // band-pass boxes, normalised rows (odd)
   int guard_ = 5, noise_half_ = 15, noise_pad_ = 4;
+  int reach_ = 2;   // a candidate is the maximum within this many rows up and down
+  int margin_ = 6;  // normalised rows beyond the depth range on each side (for the filters)
   float noise_norm_ = 1;
   int width_ = 0, height_ = 0, stride_ = 0;
 
-  // Inputs of the last normalise call (views, valid during the call to find_candidates).
+  // Inputs of the last set_frame call (views, valid during find_candidates).
   ImageView current_{};
   ImageView background_{};
   bool subtracting_ = false;
   Homography to_background_;
 
-  // (rows() + 1) x stride_: column prefix sums of the normalised image, 1/256 grey levels
-  std::vector<std::int32_t> prefix_;
-  std::vector<float> band_passed_;       // rows() x stride_
-  std::vector<float> abs_prefix_;        // (rows() + 1) x stride_: column prefix sums of |band|
-  std::vector<std::uint32_t> row_mask_;  // one row: band-pass peaks above the threshold
+  // The pass goes down the rows in blocks of kRowBlock and, within a block, across the image in
+  // strips of kStripColumns: a strip's band-pass ring (about 40 rows) then stays in the
+  // first-level cache while the block's rows are done.
+  static constexpr int kRowBlock = 8;
+  static constexpr int kStripColumns = 128;
+  // Rings of rows, indexed by row % ring rows: the normalised rows (stride_ values per row), and
+  // per strip the band-pass rows (ring_stride_ values per row); the per-strip sums below are as
+  // wide.
+  int normalised_ring_rows_ = 0, band_ring_rows_ = 0, ring_stride_ = 0;
+  std::vector<std::uint16_t> normalised_ring_;  // normalised rows, 1/256 grey levels
+  std::vector<float> band_ring_;                // band-pass rows, strip after strip
+  // Running column sums down the rows: the two boxes of the band-pass (of the normalised rows),
+  // and |band-pass| over the noise window less its guard band.
+  std::vector<std::int32_t> inner_sum_, outer_sum_;
+  std::vector<float> noise_sum_;
+  // Per warp block of the row being normalised: offset of its first pixel in the background,
+  // the pixels [first, end) that have a background, and the four bilinear weights.
+  std::vector<std::int32_t> warp_source_, warp_first_, warp_end_, warp_weights_;
+  std::vector<std::uint16_t> zero_normalised_;  // a row of zeros: the rows beyond the ends
+  std::vector<float> zero_band_;
+  std::vector<std::uint8_t> row_mask_;  // one row of a strip: candidates
   struct Peak {
-    float v = 0;     // first guess of the original row
+    float r = 0;     // normalised row of the band-pass peak (sub-row)
     float snr = 0;   // amplitude ratio
     float band = 0;  // band-pass amplitude
   };

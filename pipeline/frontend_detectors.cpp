@@ -14,8 +14,7 @@ void FirDetector::reset(int width, int height) {
 }
 
 void FirDetector::detect(const ImageView& image, const FrameContext& /*frame*/, Profile& out) {
-  frontend_.normalise(image);
-  frontend_.band_pass();
+  frontend_.set_frame(image);
   frontend_.find_candidates(out);
 }
 

@@ -236,7 +236,8 @@ TEST_F(DaemonOverLcm, ProfilesMatchTheSimulatorGroundTruth) {
   laserline::hal::SimGroundTruth truth;
   std::int64_t points = 0, far = 0, truth_columns = 0;
   double worst = 0, sum_sq = 0;
-  std::int64_t matched = 0;
+  std::int64_t matched = 0, not_triangulated = 0;
+  double worst_depth_m = 0;
   for (const auto& p : rx.profiles) {
     scene.ground_truth(static_cast<std::uint64_t>(p.sequence), true, truth);
     for (float row : truth.row)
@@ -252,10 +253,20 @@ TEST_F(DaemonOverLcm, ProfilesMatchTheSimulatorGroundTruth) {
         worst = std::max(worst, err);
         sum_sq += err * err;
         ++matched;
+        // Triangulated by the daemon: Z is the depth of the lit surface (0.5 px is 4 mm here).
+        const double depth = truth.depth_m[static_cast<std::size_t>(pt.u)];
+        if (std::isfinite(pt.xyz[0]) && std::isfinite(pt.xyz[1]) && std::isfinite(pt.xyz[2])) {
+          worst_depth_m = std::max(worst_depth_m, std::abs(pt.xyz[2] - depth));
+        } else {
+          ++not_triangulated;
+        }
       }
     }
   }
   EXPECT_EQ(far, 0) << "of " << points << " points, worst error " << worst << " px";
+  EXPECT_EQ(not_triangulated, 0) << "every valid point arrives with finite xyz";
+  EXPECT_LT(worst_depth_m, 0.005);
+  RecordProperty("worst_depth_error_m", std::to_string(worst_depth_m));
   EXPECT_GE(static_cast<double>(points), 0.95 * static_cast<double>(truth_columns))
       << "the line should be found in nearly every column where it is visible";
   RecordProperty("worst_error_px", std::to_string(worst));

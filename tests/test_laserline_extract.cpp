@@ -9,6 +9,7 @@
 #include <lcm/lcm-cpp.hpp>
 
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -648,6 +649,163 @@ TEST_F(LaserlineExtract, ConfigurationOptionsAreUsed) {
   r = extract(path("f.png"));
   EXPECT_EQ(r.exit_code, 0) << r.out;
   expect_frames_match(read_csv(path("points.csv")), {{0, 0}}, scene);
+}
+
+// x y z snr of every point of a PLY file as laserline-extract writes it, the header checked.
+std::vector<std::array<float, 4>> read_ply(const std::string& path) {
+  static_assert(std::endian::native == std::endian::little, "reads the floats as they are");
+  std::ifstream in(path, std::ios::binary);
+  std::vector<std::string> header;
+  std::string line;
+  while (std::getline(in, line) && line != "end_header")
+    header.push_back(line);
+  EXPECT_EQ(header.size(), 8u);
+  if (header.size() != 8u) return {};
+  EXPECT_EQ(header[0], "ply");
+  EXPECT_EQ(header[1], "format binary_little_endian 1.0");
+  EXPECT_EQ(header[3].rfind("element vertex ", 0), 0u);
+  EXPECT_EQ(header[4] + header[5] + header[6] + header[7],
+            "property float xproperty float yproperty float zproperty float scalar_snr");
+  const long count = std::stol(header[3].substr(15));
+  std::vector<std::array<float, 4>> points(static_cast<std::size_t>(count));
+  in.read(reinterpret_cast<char*>(points.data()), count * 16);
+  EXPECT_EQ(in.gcount(), count * 16);
+  EXPECT_EQ(in.peek(), EOF) << "nothing after the points";
+  return points;
+}
+
+// Valid points per frame of a CSV, in frame order (the order of the PLY's points).
+std::vector<std::size_t> valid_per_frame(const Csv& csv, long frames) {
+  std::vector<std::size_t> counts(static_cast<std::size_t>(frames), 0);
+  for (const auto& [frame, points] : csv.frames)
+    for (const auto& p : points)
+      counts.at(static_cast<std::size_t>(frame)) += p.valid == 1 ? 1 : 0;
+  return counts;
+}
+
+// Expects `fused` to be `camera` moved by (R(q_k), t_k) for the points of frame k.
+void expect_moved(const std::vector<std::array<float, 4>>& camera,
+                  const std::vector<std::array<float, 4>>& fused,
+                  const std::vector<std::size_t>& per_frame,
+                  const std::vector<cv::Matx33d>& rotations,
+                  const std::vector<cv::Vec3d>& translations) {
+  ASSERT_EQ(fused.size(), camera.size());
+  std::size_t i = 0;
+  for (std::size_t k = 0; k < per_frame.size(); ++k) {
+    for (std::size_t n = 0; n < per_frame[k]; ++n, ++i) {
+      const cv::Vec3d expected =
+          rotations[k] * cv::Vec3d(camera[i][0], camera[i][1], camera[i][2]) + translations[k];
+      for (int c = 0; c < 3; ++c)
+        ASSERT_NEAR(fused[i][static_cast<std::size_t>(c)], expected[c], 1e-5)
+            << "frame " << k << " point " << n;
+      ASSERT_EQ(fused[i][3], camera[i][3]) << "the SNR goes with the point";
+    }
+  }
+}
+
+// Images carry no time: frame k takes pose row k.
+TEST_F(LaserlineExtract, PlyPointCloudFusedWithPosesByFrameNumber) {
+  hal::SimScene scene(options_);
+  std::string inputs;
+  for (int k = 0; k < 3; ++k) {
+    ASSERT_TRUE(cv::imwrite(path("f" + std::to_string(k) + ".png"), render(scene, k)));
+    inputs += " " + path("f" + std::to_string(k) + ".png");
+  }
+  RunResult r = extract("--ply " + path("camera.ply") + inputs);
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const Csv csv = read_csv(path("points.csv"));
+  const auto per_frame = valid_per_frame(csv, 3);
+  const auto camera = read_ply(path("camera.ply"));
+  ASSERT_EQ(camera.size(), per_frame[0] + per_frame[1] + per_frame[2]);
+  EXPECT_NE(r.out.find(std::to_string(camera.size()) + " 3-D points in " + path("camera.ply") +
+                       " (camera frame)"),
+            std::string::npos)
+      << r.out;
+  // The same points as the CSV, in metres: Z is the scene's depth in that column.
+  std::size_t i = 0;
+  for (long k = 0; k < 3; ++k) {
+    const hal::SimGroundTruth truth = truth_of(scene, static_cast<std::uint64_t>(k));
+    for (const auto& p : csv.frames.at(k)) {
+      EXPECT_NEAR(camera[i][2], truth.depth_m[static_cast<std::size_t>(p.u)], 0.02);
+      EXPECT_NEAR(camera[i][3], p.snr_db, 0.01);
+      ++i;
+    }
+  }
+
+  const double h = std::sqrt(0.5);
+  std::ofstream(path("poses.csv")) << "timestamp,x,y,z,qw,qx,qy,qz\n"
+                                   << "0.0,0,0,0,1,0,0,0\n"
+                                   << "0.1,1,2,3,0,0,0,1\n"  // 180 deg about z
+                                   << "0.2,0,0,10," << h << "," << h << ",0,0\n";  // 90 about x
+  r = extract("--ply " + path("world.ply") + " --poses " + path("poses.csv") + inputs);
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  expect_moved(camera, read_ply(path("world.ply")), per_frame,
+               {cv::Matx33d::eye(), cv::Matx33d(-1, 0, 0, 0, -1, 0, 0, 0, 1),
+                cv::Matx33d(1, 0, 0, 0, 0, -1, 0, 1, 0)},
+               {cv::Vec3d(0, 0, 0), cv::Vec3d(1, 2, 3), cv::Vec3d(0, 0, 10)});
+
+  // Fewer rows than frames: the frame without a pose is named and left out of the cloud only.
+  std::ofstream(path("short.csv")) << "0.0,0,0,0,1,0,0,0\n0.1,0,0,0,1,0,0,0\n";
+  r = extract("--ply " + path("short.ply") + " --poses " + path("short.csv") + inputs);
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("laserline-extract: " + path("short.csv") + ": frame 2 (" + path("f2.png") +
+                       ", no timestamp) has no pose: the log has 2 rows (frames without a time "
+                       "take the row of their frame number); left out of " +
+                       path("short.ply") + "\n"),
+            std::string::npos)
+      << r.out;
+  EXPECT_EQ(read_ply(path("short.ply")).size(), per_frame[0] + per_frame[1]);
+  EXPECT_EQ(read_csv(path("points.csv")).rows, csv.rows);
+
+  // A bad pose file stops before any frame, naming file and line.
+  std::ofstream(path("bad.csv")) << "0.0,0,0,0,1,0,0,0\n0.1,0,abc,0,1,0,0,0\n";
+  r = extract("--ply " + path("bad.ply") + " --poses " + path("bad.csv") + inputs);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.out,
+            "laserline-extract: " + path("bad.csv") + ":2: y 'abc' is not a finite number\n");
+  r = extract("--poses " + path("poses.csv") + inputs);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.out.rfind("laserline-extract: --poses needs --ply\nusage:", 0), 0u) << r.out;
+}
+
+// LCM frames carry their exposure time: the pose is interpolated at it.
+TEST_F(LaserlineExtract, PlyFromLcmLogInterpolatesPosesAtTheFrameTime) {
+  hal::SimScene scene(options_);
+  const std::string log_path = path("scan.lcmlog");
+  {
+    lcm::LogFile log(log_path, "w");
+    ASSERT_TRUE(log.good());
+    for (int k = 0; k < 3; ++k) {
+      const cv::Mat image = render(scene, static_cast<std::uint64_t>(k));
+      laserline::image_t m = image_message(image, k);  // utime 1.7e15 us + k * 33333 us
+      m.pixelformat = laserline::image_t::PIXEL_FORMAT_GRAY;
+      m.row_stride = kWidth;
+      m.data.assign(image.data, image.data + static_cast<std::size_t>(kWidth) * kHeight);
+      m.size = static_cast<std::int32_t>(m.data.size());
+      write_event(log, "LASERLINE_IMAGE", encode(m), m.utime);
+    }
+  }
+  RunResult r = extract("--ply " + path("camera.ply") + " " + log_path);
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const auto per_frame = valid_per_frame(read_csv(path("points.csv")), 3);
+  const auto camera = read_ply(path("camera.ply"));
+
+  // Moving along x at 1 m/s; the log ends between frames 1 and 2.
+  std::ofstream(path("nav.csv")) << "1699999999.0,0,0,0,1,0,0,0\n"
+                                 << "1700000000.05,1.05,0,0,1,0,0,0\n";
+  r = extract("--ply " + path("world.ply") + " --poses " + path("nav.csv") + " " + log_path);
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("laserline-extract: " + path("nav.csv") + ": frame 2 (" + log_path +
+                       " event 2 (LASERLINE_IMAGE)) at t=1700000000.066666 s is outside the pose "
+                       "log's time span 1699999999.000000 .. 1700000000.050000 s; left out of " +
+                       path("world.ply") + "\n"),
+            std::string::npos)
+      << r.out;
+  auto two_frames = camera;
+  two_frames.resize(per_frame[0] + per_frame[1]);
+  expect_moved(two_frames, read_ply(path("world.ply")), {per_frame[0], per_frame[1]},
+               {cv::Matx33d::eye(), cv::Matx33d::eye()},
+               {cv::Vec3d(1.0, 0, 0), cv::Vec3d(1.033333, 0, 0)});
 }
 
 }  // namespace

@@ -18,8 +18,8 @@ namespace {
 // Plain functions rather than member handlers: GCC 12's UBSan misreports LCM's member dispatch.
 void on_profile(const lcm::ReceiveBuffer*, const std::string&, const laserline::profile_t* p,
                 void*) {
-  // Points carry sub-pixel rows v (pixel centres at integers, v down) and, once triangulated,
-  // xyz in metres in the camera frame (NaN until then).
+  // Points carry sub-pixel rows v (pixel centres at integers, v down) and xyz in metres in the
+  // camera frame (NaN for rejected points and where the ray misses the laser sheet).
   double v_sum = 0;
   int valid = 0;
   for (const auto& point : p->points) {

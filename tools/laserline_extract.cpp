@@ -1,6 +1,8 @@
 // laserline-extract: runs a laserline detector over recorded frames (image files, folders of
 // images, videos, LCM logs of laserline.image_t) and writes the laser points to a CSV file, with
-// an optional overlay PNG per frame. Same calibration, configuration and detectors as laserlined.
+// an optional overlay PNG per frame, and optionally the 3-D points of all frames as one PLY point
+// cloud (in the camera frame, or fused into the world frame with a pose log). Same calibration,
+// configuration and detectors as laserlined.
 //
 // Single-threaded. Every frame's points are written and flushed before the next frame is read,
 // so an interruption or a bad input never loses what was already extracted.
@@ -32,6 +34,7 @@
 #include "daemon/config.hpp"
 #include "hal/calibration.hpp"
 #include "pipeline/detector.hpp"
+#include "tools/point_cloud.hpp"
 
 namespace {
 
@@ -40,7 +43,8 @@ using laserline::hal::ConfigError;
 
 constexpr const char* kUsage =
     "usage: laserline-extract --calib FILE [--config FILE] --detector NAME [--overlay-dir DIR]\n"
-    "                         [--all-candidates] --output points.csv INPUT...\n"
+    "                         [--all-candidates] [--output points.csv]\n"
+    "                         [--ply cloud.ply [--poses poses.csv]] INPUT...\n"
     "  --calib FILE       calibration (camera and laser); images must have its size\n"
     "  --config FILE      laserlined configuration whose detector options are used\n"
     "                     (default: the built-in configuration)\n"
@@ -49,6 +53,18 @@ constexpr const char* kUsage =
     "                     with its points (accepted green, rejected red)\n"
     "  --all-candidates   also write rejected candidates (valid = 0)\n"
     "  --output FILE      CSV: frame,u,v,snr_db,segment,valid\n"
+    "  --ply FILE         the valid points of all frames as one point cloud: binary PLY,\n"
+    "                     float x y z (metres) and scalar_snr (SNR in dB; CloudCompare shows\n"
+    "                     it as the scalar field \"snr\"), for CloudCompare, MeshLab, PCL;\n"
+    "                     in the camera frame unless --poses is given\n"
+    "  --poses FILE       CSV timestamp,x,y,z,qw,qx,qy,qz (header line allowed): the pose of\n"
+    "                     the camera in the world frame (X_world = R(q) X_camera + (x,y,z)),\n"
+    "                     timestamps in seconds, increasing. Frames with a time (LCM logs:\n"
+    "                     utime) get the pose interpolated at it (position linear, rotation\n"
+    "                     slerp); frames without (images, videos) take the row of their frame\n"
+    "                     number. The PLY is then in the world frame (float: keep the world\n"
+    "                     origin near the scan, e.g. a local frame rather than UTM)\n"
+    "  (at least one of --output and --ply)\n"
     "  INPUT              image files, folders of images (sorted by name), videos (.avi .mp4\n"
     "                     .mkv .mov ...), LCM logs of laserline.image_t messages\n"
     "Colour frames: the green channel (the laser's colour) is used; 16-bit frames are scaled\n"
@@ -132,7 +148,7 @@ class Progress {
 };
 
 struct Options {
-  std::string calib, config, detector, overlay_dir, output;
+  std::string calib, config, detector, overlay_dir, output, ply, poses;
   bool all_candidates = false;
   std::vector<std::string> inputs;
 };
@@ -140,14 +156,18 @@ struct Options {
 // Runs the detector on frames and writes what it finds; counts what failed.
 class Extractor {
  public:
+  // csv, ply and poses may be null (not asked for).
   Extractor(const Options& options, const laserline::hal::Calibration& calibration,
-            std::unique_ptr<laserline::pipeline::Detector> detector, FILE* csv)
+            std::unique_ptr<laserline::pipeline::Detector> detector, FILE* csv,
+            laserline::tools::PlyWriter* ply, const laserline::tools::PoseLog* poses)
       : options_(options),
         width_(calibration.camera.width),
         height_(calibration.camera.height),
         detector_(std::move(detector)),
         profile_(detector_->max_points(width_, height_)),
-        csv_(csv) {}
+        csv_(csv),
+        ply_(ply),
+        poses_(poses) {}
 
   Progress& progress() { return progress_; }
 
@@ -164,8 +184,10 @@ class Extractor {
   // folder): detectors that use earlier frames start afresh.
   void start_sequence() { detector_->reset(width_, height_); }
 
-  // One frame, as read (8 or 16 bit; 1 to 4 channels). `where` names it in messages.
-  void frame(const cv::Mat& raw, const std::string& where, bool laser_on) {
+  // One frame, as read (8 or 16 bit; 1 to 4 channels). `where` names it in messages; `utime`
+  // is its exposure time (microseconds since the epoch) where the input has one.
+  void frame(const cv::Mat& raw, const std::string& where, bool laser_on,
+             std::optional<std::int64_t> utime = std::nullopt) {
     const std::int64_t index = next_frame_++;
     std::string problem;
     if (!to_mono8(raw, mono_, problem)) {
@@ -182,18 +204,21 @@ class Extractor {
                                               static_cast<int>(mono_.step[0])};
     detector_->detect(view, {static_cast<std::uint64_t>(index), laser_on}, profile_);
     if (profile_.overflowed()) ++overflowed_frames_;
-    for (const auto& p : profile_.points()) {
-      if (!p.valid && !options_.all_candidates) continue;
-      std::fprintf(csv_, "%lld,%d,%.4f,%.2f,%d,%d\n", static_cast<long long>(index), p.u, p.v,
-                   p.snr_db, p.segment, p.valid ? 1 : 0);
-      ++points_written_;
-      valid_written_ += p.valid ? 1 : 0;
+    if (csv_ != nullptr) {
+      for (const auto& p : profile_.points()) {
+        if (!p.valid && !options_.all_candidates) continue;
+        std::fprintf(csv_, "%lld,%d,%.4f,%.2f,%d,%d\n", static_cast<long long>(index), p.u, p.v,
+                     p.snr_db, p.segment, p.valid ? 1 : 0);
+        ++points_written_;
+        valid_written_ += p.valid ? 1 : 0;
+      }
+      if (std::fflush(csv_) != 0 || std::ferror(csv_) != 0) {
+        progress_.message("laserline-extract: " + options_.output +
+                          ": write failed: " + std::strerror(errno));
+        std::exit(1);
+      }
     }
-    if (std::fflush(csv_) != 0 || std::ferror(csv_) != 0) {
-      progress_.message("laserline-extract: " + options_.output +
-                        ": write failed: " + std::strerror(errno));
-      std::exit(1);
-    }
+    if (ply_ != nullptr) add_to_cloud(index, where, utime);
     ++processed_;
     laser_off_frames_ += laser_on ? 0 : 1;
     if (!options_.overlay_dir.empty()) write_overlay(index, where);
@@ -227,6 +252,43 @@ class Extractor {
   std::int64_t overflowed_frames() const { return overflowed_frames_; }
 
  private:
+  // The frame's triangulated points into the point cloud, moved into the world frame when there
+  // are poses. A frame without a pose is reported and left out of the cloud (not of the CSV).
+  void add_to_cloud(std::int64_t index, const std::string& where,
+                    std::optional<std::int64_t> utime) {
+    laserline::tools::Pose pose;
+    if (poses_ != nullptr) {
+      if (utime) {
+        const double t = static_cast<double>(*utime) * 1e-6;
+        if (!poses_->at_time(t, pose)) {
+          char span[160];
+          std::snprintf(span, sizeof span,
+                        "at t=%.6f s is outside the pose log's time span %.6f .. %.6f s", t,
+                        poses_->first_time(), poses_->last_time());
+          fail(poses_->path() + ": frame " + std::to_string(index) + " (" + where + ") " + span +
+               "; left out of " + options_.ply);
+          return;
+        }
+      } else if (!poses_->at_index(static_cast<std::size_t>(index), pose)) {
+        fail(poses_->path() + ": frame " + std::to_string(index) + " (" + where +
+             ", no timestamp) has no pose: the log has " + std::to_string(poses_->size()) +
+             " rows (frames without a time take the row of their frame number); left out of " +
+             options_.ply);
+        return;
+      }
+    }
+    for (const auto& p : profile_.points()) {
+      if (!p.valid || !std::isfinite(p.xyz[2])) continue;
+      const std::array<double, 3> camera{p.xyz[0], p.xyz[1], p.xyz[2]};
+      ply_->add(poses_ != nullptr ? pose.apply(camera) : camera, p.snr_db);
+    }
+    if (!ply_->commit()) {
+      progress_.message("laserline-extract: " + options_.ply +
+                        ": write failed: " + std::strerror(errno));
+      std::exit(1);
+    }
+  }
+
   // The laser is green (535 nm): colour frames give their green channel (OpenCV orders BGR).
   static bool to_mono8(const cv::Mat& raw, cv::Mat& out, std::string& problem) {
     if (raw.empty()) {
@@ -285,6 +347,8 @@ class Extractor {
   std::unique_ptr<laserline::pipeline::Detector> detector_;
   laserline::pipeline::Profile profile_;
   FILE* csv_;
+  laserline::tools::PlyWriter* ply_;
+  const laserline::tools::PoseLog* poses_;
   Progress progress_;
   cv::Mat mono_, overlay_;
   std::int64_t next_frame_ = 0, processed_ = 0, failures_ = 0, laser_off_frames_ = 0;
@@ -457,7 +521,7 @@ void extract_log(Extractor& x, const std::string& path, std::size_t input, std::
       x.unreadable_frame(where + ": " + problem + "; skipped");
     } else {
       const auto state = laser_on_by_sequence.find(message.sequence);
-      x.frame(image, where, state == laser_on_by_sequence.end() || state->second);
+      x.frame(image, where, state == laser_on_by_sequence.end() || state->second, message.utime);
     }
     x.progress().update(input, inputs, name, static_cast<double>(n) / static_cast<double>(images),
                         x.frames());
@@ -512,6 +576,10 @@ Options parse_arguments(int argc, char** argv) {
       o.overlay_dir = value();
     } else if (arg == "--output") {
       o.output = value();
+    } else if (arg == "--ply") {
+      o.ply = value();
+    } else if (arg == "--poses") {
+      o.poses = value();
     } else if (arg == "--all-candidates") {
       o.all_candidates = true;
     } else if (arg == "--") {
@@ -525,7 +593,8 @@ Options parse_arguments(int argc, char** argv) {
   }
   if (o.calib.empty()) usage_error("--calib is required");
   if (o.detector.empty()) usage_error("--detector is required (one of: " + detector_list() + ")");
-  if (o.output.empty()) usage_error("--output is required");
+  if (o.output.empty() && o.ply.empty()) usage_error("--output or --ply is required");
+  if (!o.poses.empty() && o.ply.empty()) usage_error("--poses needs --ply");
   if (o.inputs.empty()) usage_error("no INPUT given");
   return o;
 }
@@ -572,14 +641,29 @@ int main(int argc, char** argv) {
             ": cannot be created: " + (ec ? ec.message() : std::string("not a directory")));
     }
   }
-  FILE* csv = std::fopen(options.output.c_str(), "w");
-  if (csv == nullptr) {
-    fatal("--output " + options.output + ": cannot be written: " + std::strerror(errno));
+  std::optional<laserline::tools::PoseLog> poses;
+  std::optional<laserline::tools::PlyWriter> ply;
+  try {
+    if (!options.poses.empty()) poses = laserline::tools::PoseLog::load(options.poses);
+    if (!options.ply.empty()) {
+      ply.emplace(options.ply, poses ? "laserline-extract: metres, world frame of " + options.poses
+                                     : std::string("laserline-extract: metres, camera frame"));
+    }
+  } catch (const laserline::tools::PointCloudError& e) {
+    fatal(e.what());
   }
-  std::fputs("frame,u,v,snr_db,segment,valid\n", csv);
-  std::fflush(csv);
+  FILE* csv = nullptr;
+  if (!options.output.empty()) {
+    csv = std::fopen(options.output.c_str(), "w");
+    if (csv == nullptr) {
+      fatal("--output " + options.output + ": cannot be written: " + std::strerror(errno));
+    }
+    std::fputs("frame,u,v,snr_db,segment,valid\n", csv);
+    std::fflush(csv);
+  }
 
-  Extractor x(options, calibration, std::move(detector), csv);
+  Extractor x(options, calibration, std::move(detector), csv, ply ? &*ply : nullptr,
+              poses ? &*poses : nullptr);
   bool in_image_run = false;  // consecutive image arguments are one sequence (a shell glob)
   for (std::size_t i = 0; i < options.inputs.size(); ++i) {
     const std::string& input = options.inputs[i];
@@ -633,16 +717,24 @@ int main(int argc, char** argv) {
     }
   }
   x.progress().clear();
-  std::fclose(csv);
+  if (csv != nullptr) std::fclose(csv);
   const std::string problems =
       x.failures() > 0 ? ", " + std::to_string(x.failures()) + " problems (see above)" : "";
+  std::string written;
+  if (csv != nullptr) {
+    written = ", " + std::to_string(x.points_written()) + " points written (" +
+              std::to_string(x.valid_written()) + " valid) to " + options.output;
+  }
   std::fprintf(stderr,
-               "laserline-extract: %lld frames from %zu inputs, %lld processed with %s, %lld "
-               "points written (%lld valid) to %s%s\n",
+               "laserline-extract: %lld frames from %zu inputs, %lld processed with %s%s%s\n",
                static_cast<long long>(x.frames()), options.inputs.size(),
-               static_cast<long long>(x.processed()), options.detector.c_str(),
-               static_cast<long long>(x.points_written()),
-               static_cast<long long>(x.valid_written()), options.output.c_str(), problems.c_str());
+               static_cast<long long>(x.processed()), options.detector.c_str(), written.c_str(),
+               problems.c_str());
+  if (ply) {
+    std::fprintf(stderr, "laserline-extract: %lld 3-D points in %s (%s)\n",
+                 static_cast<long long>(ply->count()), options.ply.c_str(),
+                 poses ? ("world frame of " + options.poses).c_str() : "camera frame");
+  }
   if (x.laser_off_frames() > 0) {
     std::fprintf(stderr,
                  "laserline-extract: %lld of the processed frames were exposed with the laser off "
