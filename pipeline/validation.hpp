@@ -33,8 +33,8 @@ struct ValidationOptions {
   double max_neighbour_gap_px = 5.0;
   int min_segment_points = 5;
   // IV-C: segments are compared when their bounding boxes are at most this far apart (pixels),
-  // shifted along the line by at most max_column_offset columns, overlapping by at least
-  // min_segment_points columns; a match needs at least min_correlation.
+  // shifted along the line by at most max_column_offset columns, overlapping by a quarter of the
+  // shorter one (and min_segment_points - 1 steps) at least; a match needs min_correlation there.
   double max_box_distance_px = 32.0;
   int max_column_offset = 24;
   double min_correlation = 0.6;
@@ -154,9 +154,11 @@ bool back_project(const ScannerGeometry& camera, const PairMotion& first, const 
 // Paper IV-B to IV-D over a stream of frames: segments the candidates of frame n, associates them
 // with those of n-1 (which were associated with n-2), triangulates each segment tracked over the
 // three frames, back-projects it into frame n and marks the points of segments consistent with the
-// static scene as not valid (background). Points of short segments (noise) are not valid either;
-// segments that cannot be tested (not tracked over three frames, no camera motion) keep the
-// front-end's verdict. Every candidate gets its segment id (-1: none). The verdict for frame n is
+// static scene as not valid (background). Points of short segments (noise) are not valid either,
+// nor (chain_code with require_track) those of segments not tracked over the frames seen so far or
+// moving across the line more than the laser can. Without a camera motion (and relative scale)
+// segments keep the front-end's verdict. Every candidate gets its segment id (-1: none), its index
+// in segments() of that frame. The verdict for frame n is
 // given when frame n is processed, from n-2, n-1 and n: a fixed latency of zero frames, with two
 // frames of history. reset() allocates; validate() does not.
 // Thread context: one thread at a time per instance.
