@@ -564,6 +564,70 @@ std::vector<float> make_texture(std::uint64_t seed, double contrast) {
   return albedo;
 }
 
+void validate_checkerboard(const SimSceneOptions& o) {
+  const SimSceneOptions::Checkerboard& board = o.checkerboard;
+  require(board.columns >= 0 && board.rows >= 0, "checkerboard columns and rows must be >= 0");
+  if (board.columns > 0 && board.rows > 0) {
+    const double texel = o.texture_scale_m / kFinestSpacing;
+    const double squares = board.square_m / texel;
+    require(std::isfinite(squares) && squares >= 1 &&
+                std::abs(squares - std::round(squares)) < 1e-6 * squares,
+            "checkerboard square_m must be a whole number of texels (texture_scale_m / " +
+                std::to_string(kFinestSpacing) + ")");
+    // The board and its margin (one square each side) must fit in the half of the wrapping
+    // texture tile around the surface point.
+    const double reach = std::round(squares) * (std::max(board.columns, board.rows) + 3) / 2.0 +
+                         std::max(std::abs(board.offset_x_m), std::abs(board.offset_y_m)) / texel;
+    require(std::isfinite(reach) && reach <= kTextureSize / 2,
+            "checkerboard with its margin and offset must lie within " +
+                std::to_string(kTextureSize / 2) + " texels of the surface point");
+    require(finite_nonneg(board.dark_albedo) && board.dark_albedo <= 1,
+            "checkerboard dark_albedo must be within [0, 1]");
+  }
+}
+
+// Paints the calibration checkerboard (if any) into the albedo tile. Texel i is the albedo at
+// texture coordinate i (wrapping), and bilinear sampling puts an edge between texels i - 1 and i
+// exactly at i - 1/2: the board's edges are laid on half-integers so its squares are exact.
+void paint_checkerboard(std::vector<float>& albedo, const SimSceneOptions& o) {
+  validate_checkerboard(o);
+  const SimSceneOptions::Checkerboard& board = o.checkerboard;
+  if (board.columns <= 0 || board.rows <= 0) return;
+  const int square =
+      static_cast<int>(std::lround(board.square_m * kFinestSpacing / o.texture_scale_m));
+  const int squares_x = board.columns + 1, squares_y = board.rows + 1;
+  // Board coordinate (in texels from the board's top-left edge) of texel 0's centre.
+  const double texel = o.texture_scale_m / kFinestSpacing;
+  const int origin_x =
+      squares_x * square / 2 - static_cast<int>(std::lround(board.offset_x_m / texel));
+  const int origin_y =
+      squares_y * square / 2 - static_cast<int>(std::lround(board.offset_y_m / texel));
+  const auto dark = static_cast<float>(board.dark_albedo);
+  for (int y = 0; y < kTextureStride; ++y) {
+    for (int x = 0; x < kTextureStride; ++x) {
+      // The tile wraps: texel x stands for texture coordinate x or x - kTextureSize, whichever
+      // is nearer 0 (the board lies within half a tile of it).
+      const int sx = (x & (kTextureSize - 1)) < kTextureSize / 2
+                         ? (x & (kTextureSize - 1))
+                         : (x & (kTextureSize - 1)) - kTextureSize;
+      const int sy = (y & (kTextureSize - 1)) < kTextureSize / 2
+                         ? (y & (kTextureSize - 1))
+                         : (y & (kTextureSize - 1)) - kTextureSize;
+      // Texel centre in board coordinates is bx + 1/2: never on an edge (a multiple of square).
+      const int bx = sx + origin_x, by = sy + origin_y;
+      if (bx < -square || bx >= (squares_x + 1) * square || by < -square ||
+          by >= (squares_y + 1) * square) {
+        continue;  // outside board and margin: the texture stays
+      }
+      float value = 1.0f;  // margin
+      if (bx >= 0 && bx < squares_x * square && by >= 0 && by < squares_y * square) {
+        value = (bx / square + by / square) % 2 == 0 ? dark : 1.0f;
+      }
+      albedo[static_cast<std::size_t>(y) * kTextureStride + x] = value;
+    }
+  }
+}
+
 // round(16 * N(0, 1)) by Box-Muller over our own uniform generator (std::normal_distribution is
 // implementation-defined).
 std::vector<std::int8_t> make_noise_table(std::uint64_t seed) {
@@ -729,6 +793,7 @@ SimScene::SimScene(const SimSceneOptions& options) : options_(options) {
   const auto width = static_cast<std::size_t>(options_.calibration.camera.width);
   texture_size_ = kTextureSize;
   texture_ = make_texture(options_.seed, options_.texture_contrast);
+  paint_checkerboard(texture_, options_);
   noise_ = make_noise_table(options_.seed);
   // One image row, then the per-column 1 / Z of the lit point (for the backscatter glow), each
   // padded to whole kernel blocks; the padding never glows.
@@ -868,8 +933,9 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
       const double reach = std::max({std::abs(s_row), std::abs(s_row + g.h[0] * padded),
                                      std::abs(t_row), std::abs(t_row + g.h[3] * padded)});
       const float w_min = static_cast<float>(std::max(reach * 1e-7, 1e-30));
-      // On the relief the hit slides from the base-plane hit toward the camera's foot point, so
-      // with this floor lattice and texel coordinates stay below 1e6 (and the foot's).
+      // On the relief the hit slides from the base-plane hit toward the camera's foot point (by
+      // at most all the way: the height below is floored at the relief's), so with this floor
+      // lattice and texel coordinates stay below 1e6 or the foot's, whichever is larger.
       const double texel_to_cell = g.texel_m / kReliefCellM;
       const float relief_w_min =
           static_cast<float>(std::max(reach * std::max(1.0, texel_to_cell) * 1e-6, 1e-30));
@@ -888,7 +954,7 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
                           relief_w_min,
                           static_cast<float>(g.c1 / g.texel_m),
                           static_cast<float>(g.c2 / g.texel_m),
-                          static_cast<float>(1.0 / g.d_surface),
+                          static_cast<float>(1.0 / std::max(g.d_surface, options_.relief_height_m)),
                           static_cast<float>(texel_to_cell),
                           static_cast<float>(options_.relief_height_m),
                           ambient};

@@ -24,6 +24,22 @@ struct SimSceneOptions {
   // Texture painted on the surface (it moves with the surface, not with the camera).
   double texture_scale_m = 0.01;  // size of the finest texture features on the surface
   double texture_contrast = 0.5;  // albedo = 1 + contrast * noise, noise in [-1, 1], floored at 0
+  // A calibration target painted over the texture (none while columns or rows is 0): a
+  // checkerboard of (columns + 1) x (rows + 1) squares (columns x rows inner corners, OpenCV's
+  // pattern size) along the surface's x and y axes, centred on the surface point at distance_m
+  // plus the offset (to within half a texel), inside a white margin one square wide. Its squares
+  // have sharp edges only when square_m is a whole number of texels (texture_scale_m / 4);
+  // required.
+  struct Checkerboard {
+    int columns = 0;
+    int rows = 0;
+    double square_m = 0.03;
+    double dark_albedo = 0.1;  // the black squares; white squares and margin have albedo 1
+    // The board's centre on the surface, along its x and y axes from the surface point at
+    // distance_m (rounded to whole texels): a board near the image's edges and corners.
+    double offset_x_m = 0.0;
+    double offset_y_m = 0.0;
+  } checkerboard;
 
   // Light, in grey levels of the 8-bit image.
   double ambient = 40.0;  // ambient light on a surface of albedo 1

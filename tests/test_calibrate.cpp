@@ -1,0 +1,378 @@
+// Laser-plane calibration (tools/laser_plane_calibration, laserline-calibrate) on checkerboard
+// views rendered by the simulated scanner: the recovered plane against the plane the views were
+// rendered with, the calibration file's round trip, and the errors for bad inputs.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <numbers>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <string>
+#include <vector>
+
+#include "hal/calibration.hpp"
+#include "hal/sim/sim_scene.hpp"
+#include "tools/laser_plane_calibration.hpp"
+
+namespace laserline {
+namespace {
+
+namespace fs = std::filesystem;
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+struct BoardPose {
+  double distance_m, tilt_x_deg, tilt_y_deg;
+  double offset_x_m = 0, offset_y_m = 0;  // the board on the surface, off the optical axis
+};
+
+// The scanner the views are rendered with: a mount off the nominal one (0.25 m, 80 deg) and the
+// sheet turned 3 deg about the optical axis, so the plane has all of a, b, c.
+hal::Calibration true_calibration() {
+  hal::Calibration cal;
+  const double slope = std::tan(12.0 * kDeg);  // beta = 78 deg
+  const double norm = std::hypot(1.0, slope);
+  const double turn = 3.0 * kDeg;
+  const double b0 = 1.0 / norm, c0 = -slope / norm;
+  cal.laser.plane =
+      std::array<double, 4>{-std::sin(turn) * b0, std::cos(turn) * b0, c0, 0.22 / norm};
+  return cal;
+}
+
+hal::SimSceneOptions view_options(const BoardPose& pose) {
+  hal::SimSceneOptions o;
+  o.calibration = true_calibration();
+  o.seed = 7;
+  o.distance_m = pose.distance_m;
+  o.tilt_x_deg = pose.tilt_x_deg;
+  o.tilt_y_deg = pose.tilt_y_deg;
+  o.sway_m = 0;
+  o.sway_deg = 0;
+  o.scan_rate_deg_s = 0;
+  o.texture_scale_m = 0.004;  // texels of 1 mm: 30 per square
+  o.ambient = 100;
+  o.laser_peak = 120;  // white squares stay below saturation
+  o.checkerboard.columns = 9;
+  o.checkerboard.rows = 6;
+  o.checkerboard.square_m = 0.03;
+  o.checkerboard.offset_x_m = pose.offset_x_m;
+  o.checkerboard.offset_y_m = pose.offset_y_m;
+  return o;
+}
+
+cv::Mat render(hal::SimScene& scene, bool laser_on) {
+  const hal::FrameFormat f = scene.format();
+  cv::Mat image(f.height, f.width, CV_8UC1);
+  scene.render(0, laser_on, {image.data, f.bytes()});
+  return image;
+}
+
+tools::CalibrationView render_view(const BoardPose& pose, const std::string& name) {
+  hal::SimScene scene(view_options(pose));
+  return {name, render(scene, true), render(scene, false)};
+}
+
+// Eight poses with the line across the board, then four with the board in the image's corners
+// (no line on it) so that the distortion is measured out to the corners, as a user would.
+const std::vector<BoardPose> kPoses = {
+    {0.9, 20, 0},
+    {0.9, -20, 5},
+    {1.1, 0, 25},
+    {1.1, 5, -25},
+    {1.3, 15, 15},
+    {1.3, -15, -15},
+    {1.0, 10, -20},
+    {1.2, -10, 20},
+    {1.0, 10, 0, -0.25, -0.2},
+    {1.0, -10, 0, 0.25, -0.2},
+    {1.0, 0, 10, -0.25, 0.2},
+    {1.0, 0, -10, 0.25, 0.2},
+};
+constexpr std::size_t kLineViews = 8;
+
+class Calibrate : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    views_ = new std::vector<tools::CalibrationView>;
+    for (std::size_t i = 0; i < kPoses.size(); ++i)
+      views_->push_back(render_view(kPoses[i], "view" + std::to_string(i)));
+  }
+  static void TearDownTestSuite() {
+    delete views_;
+    views_ = nullptr;
+  }
+  static std::vector<tools::CalibrationView>* views_;
+};
+std::vector<tools::CalibrationView>* Calibrate::views_ = nullptr;
+
+// The simulator's board: its corners where it says it paints them. Facing the camera at 1 m,
+// texels of 1 mm, 30 per square: the board's left edge is at texture coordinate
+// -(10 * 30 / 2) - 1/2 texels, so inner corner c is at x = (30 (c + 1) - 150.5) mm (likewise y
+// with 7 squares: -(105) - 1/2).
+TEST(SimCheckerboard, CornersAreWhereTheBoardIsPainted) {
+  hal::SimScene scene(view_options({1.0, 0, 0}));
+  const cv::Mat image = render(scene, false);
+  std::vector<cv::Point2f> corners;
+  ASSERT_TRUE(cv::findChessboardCorners(image, cv::Size(9, 6), corners));
+  cv::cornerSubPix(image, corners, cv::Size(7, 7), cv::Size(-1, -1),
+                   cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 100, 1e-4));
+  const hal::CameraIntrinsics cam = true_calibration().camera;
+  double worst = 0;
+  for (const auto& found : corners) {
+    // Nearest painted corner (findChessboardCorners may start from either end).
+    double nearest = 1e9;
+    for (int r = 0; r < 6; ++r) {
+      for (int c = 0; c < 9; ++c) {
+        const double x = (30.0 * (c + 1) - 150.5) * 1e-3, y = (30.0 * (r + 1) - 105.5) * 1e-3;
+        const double u = cam.cx + cam.fx * x / 1.0, v = cam.cy + cam.fy * y / 1.0;
+        nearest = std::min(nearest, std::hypot(found.x - u, found.y - v));
+      }
+    }
+    worst = std::max(worst, nearest);
+  }
+  std::printf("simulated board: corners within %.3f px of where they are painted\n", worst);
+  EXPECT_LT(worst, 0.1);
+
+  hal::SimSceneOptions odd = view_options({1.0, 0, 0});
+  odd.checkerboard.square_m = 0.0305;  // not a whole number of 1 mm texels
+  EXPECT_THROW(hal::SimScene{odd}, std::invalid_argument);
+}
+
+struct PlaneError {
+  double angle_deg;
+  double offset_mm;
+};
+
+PlaneError plane_error(const std::array<double, 4>& got, const std::array<double, 4>& want) {
+  auto unit = [](const std::array<double, 4>& p) {
+    double n = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+    if (p[3] < 0) n = -n;  // same side convention: e > 0
+    return std::array<double, 4>{p[0] / n, p[1] / n, p[2] / n, p[3] / n};
+  };
+  const auto g = unit(got), w = unit(want);
+  const double cosine = std::clamp(g[0] * w[0] + g[1] * w[1] + g[2] * w[2], -1.0, 1.0);
+  return {std::acos(cosine) / kDeg, 1000.0 * std::abs(g[3] - w[3])};
+}
+
+tools::PlaneCalibrationOptions board_options() {
+  tools::PlaneCalibrationOptions o;
+  o.board_columns = 9;
+  o.board_rows = 6;
+  o.square_m = 0.03;
+  return o;  // the nominal mount (0.25 m, 80 deg) as the detector's prior, not the true one
+}
+
+void expect_plane_recovered(const tools::PlaneCalibrationResult& r, const char* what,
+                            int min_view_inliers = 200) {
+  const auto truth = true_calibration().laser.plane_coefficients();
+  const PlaneError err = plane_error(r.calibration.laser.plane_coefficients(), truth);
+  std::printf(
+      "%s: normal error %.4f deg, offset error %.3f mm; %d/%d points, residual RMS %.3f "
+      "mm (max %.3f), %.3f px (max %.3f); corners RMS %.3f px\n",
+      what, err.angle_deg, err.offset_mm, r.inliers, r.points, r.plane_rms_mm, r.plane_max_mm,
+      r.plane_rms_px, r.plane_max_px, r.corner_rms_px);
+  EXPECT_LT(err.angle_deg, 0.1);
+  EXPECT_LT(err.offset_mm, 1.0);
+  for (std::size_t i = 0; i < kLineViews; ++i)
+    EXPECT_GT(r.views[i].plane_inliers, min_view_inliers) << r.views[i].name;
+}
+
+TEST_F(Calibrate, RecoversThePlaneWithGivenIntrinsics) {
+  tools::PlaneCalibrationOptions o = board_options();
+  o.intrinsics = true_calibration().camera;
+  const auto r = tools::calibrate_laser_plane(*views_, o);
+  EXPECT_FALSE(r.intrinsics_estimated);
+  expect_plane_recovered(r, "given intrinsics");
+}
+
+TEST_F(Calibrate, RecoversThePlaneAndIntrinsics) {
+  const auto r = tools::calibrate_laser_plane(*views_, board_options());
+  ASSERT_TRUE(r.intrinsics_estimated);
+  const auto& c = r.calibration.camera;
+  const auto& t = true_calibration().camera;
+  std::printf(
+      "estimated intrinsics: fx %.2f fy %.2f cx %.2f cy %.2f (true %.1f %.1f %.1f %.1f), "
+      "k1 %.4f k2 %.4f, RMS %.3f px\n",
+      c.fx, c.fy, c.cx, c.cy, t.fx, t.fy, t.cx, t.cy, c.distortion[0], c.distortion[1],
+      r.camera_rms_px);
+  EXPECT_NEAR(c.fx, t.fx, 0.01 * t.fx);
+  EXPECT_NEAR(c.cy, t.cy, 5.0);
+  // The simulated lens has no distortion: what was estimated moves the image's corner by little.
+  const double x = (0 - c.cx) / c.fx, y = (0 - c.cy) / c.fy, r2 = x * x + y * y;
+  const auto& k = c.distortion;
+  const double shift_px = c.fx * std::sqrt(r2) * std::abs(r2 * (k[0] + r2 * (k[1] + r2 * k[4])));
+  std::printf("estimated distortion moves the image's corner by %.2f px; boards reach %.0f%%\n",
+              shift_px, 100.0 * r.corner_coverage);
+  EXPECT_LT(shift_px, 1.0);
+  expect_plane_recovered(r, "estimated intrinsics");
+}
+
+TEST_F(Calibrate, LaserOnImagesAloneWithGivenIntrinsics) {
+  // No laser-off images: corners and line both from the laser-on image, the board's own edges
+  // competing with the line.
+  std::vector<tools::CalibrationView> on_only;
+  for (const auto& v : *views_)
+    on_only.push_back({v.name, v.laser_on, cv::Mat()});
+  tools::PlaneCalibrationOptions o = board_options();
+  o.intrinsics = true_calibration().camera;
+  // The line is lost where it crosses a dark square next to an edge: fewer points per view.
+  const auto r = tools::calibrate_laser_plane(on_only, o);
+  expect_plane_recovered(r, "laser-on only", 80);
+  // Where no line crosses the board a square's edge may pass for one; it is not on the plane.
+  for (std::size_t i = kLineViews; i < r.views.size(); ++i)
+    EXPECT_EQ(r.views[i].plane_inliers, 0) << r.views[i].name;
+}
+
+TEST_F(Calibrate, WritesACalibrationFileTheDaemonReads) {
+  const auto r = tools::calibrate_laser_plane(*views_, board_options());
+  const fs::path path = fs::path(testing::TempDir()) /
+                        ("laserline_calibrate_roundtrip_" + std::to_string(getpid()) + ".yaml");
+  tools::write_calibration_file(path.string(), r, "test views");
+  const hal::Calibration back = hal::load_calibration_file(path.string());
+  const auto& c = r.calibration.camera;
+  EXPECT_EQ(back.camera.width, c.width);
+  EXPECT_EQ(back.camera.height, c.height);
+  EXPECT_NEAR(back.camera.fx, c.fx, 1e-6 * c.fx);
+  EXPECT_NEAR(back.camera.cy, c.cy, 1e-6 * c.fy);
+  for (std::size_t i = 0; i < 5; ++i)
+    EXPECT_NEAR(back.camera.distortion[i], c.distortion[i], 1e-9);
+  ASSERT_TRUE(back.laser.plane.has_value());
+  const auto want = r.calibration.laser.plane_coefficients();
+  for (std::size_t i = 0; i < 4; ++i)
+    EXPECT_NEAR((*back.laser.plane)[i], want[i], 1e-10);
+  // baseline_m and angle_deg give the same sheet in the paper's model (which has no a): on the
+  // camera's y-z plane (X = 0) both give the same Y at every depth.
+  hal::LaserMount model = back.laser;
+  model.plane.reset();
+  const auto m = model.plane_coefficients();
+  for (double z : {0.5, 1.0, 2.0}) {
+    EXPECT_NEAR(-(m[2] * z + m[3]) / m[1], -(want[2] * z + want[3]) / want[1], 1e-9) << z;
+  }
+  EXPECT_DOUBLE_EQ(back.laser.sheet_width_m, 0.003);
+  fs::remove(path);
+}
+
+std::string error_of(const std::vector<tools::CalibrationView>& views,
+                     const tools::PlaneCalibrationOptions& o) {
+  try {
+    tools::calibrate_laser_plane(views, o);
+  } catch (const tools::PlaneCalibrationError& e) {
+    const std::string message = e.what();
+    EXPECT_EQ(message.find('\n'), std::string::npos) << message;
+    return message;
+  }
+  ADD_FAILURE() << "no error";
+  return {};
+}
+
+TEST_F(Calibrate, BadViewsGiveOneLineErrors) {
+  const auto o = board_options();
+  EXPECT_NE(error_of({(*views_)[0]}, o).find("need at least 2 views"), std::string::npos);
+
+  // Boards only near the image's centre, five distortion terms: extrapolated, it folds.
+  const std::vector<tools::CalibrationView> central(views_->begin(), views_->begin() + kLineViews);
+  EXPECT_NE(error_of(central, o).find("the estimated distortion folds the image over"),
+            std::string::npos);
+
+  // A board of another size than asked for: named.
+  tools::PlaneCalibrationOptions wrong = o;
+  wrong.board_columns = 8;
+  EXPECT_NE(error_of(*views_, wrong).find("view0: no 8x6 checkerboard found"), std::string::npos);
+
+  // A view without a board.
+  hal::SimSceneOptions plain = view_options(kPoses[0]);
+  plain.checkerboard.columns = 0;
+  hal::SimScene plain_scene(plain);
+  std::vector<tools::CalibrationView> with_plain = {(*views_)[0],
+                                                    {"plain.png", render(plain_scene, true), {}}};
+  EXPECT_NE(error_of(with_plain, o).find("plain.png: no 9x6 checkerboard found"),
+            std::string::npos);
+
+  // Parallel boards at different distances.
+  const std::vector<tools::CalibrationView> parallel = {render_view({0.9, 10, 0}, "near"),
+                                                        render_view({1.2, 10, 0}, "far")};
+  EXPECT_NE(error_of(parallel, o).find("degenerate board poses"), std::string::npos);
+
+  // Images of different sizes.
+  std::vector<tools::CalibrationView> sizes = {(*views_)[0], (*views_)[1]};
+  sizes[1].laser_on = sizes[1].laser_on(cv::Rect(0, 0, 640, 512)).clone();
+  sizes[1].laser_off = cv::Mat();
+  EXPECT_NE(error_of(sizes, o).find("view1: image size 640x512 differs"), std::string::npos);
+}
+
+struct RunResult {
+  int exit_code = -1;
+  std::string out;
+};
+
+RunResult run(const std::string& command) {
+  RunResult r;
+  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
+  if (pipe == nullptr) return r;
+  std::array<char, 4096> buffer{};
+  while (std::fgets(buffer.data(), buffer.size(), pipe) != nullptr)
+    r.out += buffer.data();
+  const int status = pclose(pipe);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+// The executable on files: folders of laser-on and laser-off images, the written file, and the
+// one-line error for an unreadable image.
+TEST_F(Calibrate, ToolOnImageFiles) {
+  const fs::path dir =
+      fs::path(testing::TempDir()) / ("laserline_calibrate_tool_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir / "on");
+  fs::create_directories(dir / "off");
+  for (std::size_t i = 0; i < views_->size(); ++i) {
+    char name[32];
+    std::snprintf(name, sizeof name, "pose_%02zu.png", i);
+    ASSERT_TRUE(cv::imwrite((dir / "on" / name).string(), (*views_)[i].laser_on));
+    ASSERT_TRUE(cv::imwrite((dir / "off" / name).string(), (*views_)[i].laser_off));
+  }
+  const std::string tool = LASERLINE_CALIBRATE_PATH;
+  const std::string common =
+      tool + " --board 9x6 --square-m 0.03 --output " + (dir / "calibration.yaml").string();
+  const RunResult ok =
+      run(common + " --laser-off " + (dir / "off").string() + " " + (dir / "on").string());
+  ASSERT_EQ(ok.exit_code, 0) << ok.out;
+  EXPECT_NE(ok.out.find("distance to the plane: RMS"), std::string::npos) << ok.out;
+  const hal::Calibration written = hal::load_calibration_file((dir / "calibration.yaml").string());
+  ASSERT_TRUE(written.laser.plane.has_value());
+  const PlaneError err =
+      plane_error(*written.laser.plane, true_calibration().laser.plane_coefficients());
+  EXPECT_LT(err.angle_deg, 0.1);
+  EXPECT_LT(err.offset_mm, 1.0);
+
+  {
+    std::FILE* f = std::fopen((dir / "on" / "pose_99.png").string().c_str(), "w");
+    ASSERT_NE(f, nullptr);
+    std::fputs("not a png", f);
+    std::fclose(f);
+  }
+  const RunResult bad = run(common + " " + (dir / "on").string());
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_EQ(bad.out, "laserline-calibrate: " + (dir / "on" / "pose_99.png").string() +
+                         ": not a readable image (corrupt or unsupported format)\n");
+
+  const RunResult mismatch =
+      run(common + " --laser-off " + (dir / "off").string() + " " + (dir / "on").string());
+  EXPECT_EQ(mismatch.exit_code, 1);
+  EXPECT_NE(mismatch.out.find("--laser-off gives 12 images for 13 laser-on images"),
+            std::string::npos)
+      << mismatch.out;
+
+  const RunResult usage = run(tool + " --square-m 0.03 --output x.yaml " + (dir / "on").string());
+  EXPECT_EQ(usage.exit_code, 2);
+  EXPECT_EQ(usage.out.rfind("laserline-calibrate: --board is required\n", 0), 0u) << usage.out;
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace laserline
