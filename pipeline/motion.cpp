@@ -1261,18 +1261,23 @@ int five_point_essentials(const std::array<std::array<double, 2>, 5>& previous,
   action(8, 2) = 1;  // x * z = xz
   action(9, 6) = 1;  // x * 1 = x
   if (!action.allFinite()) return 0;
-  const Eigen::EigenSolver<Matrix10> eigen(action, true);
+  // Eigenvalues only (the Schur vectors cost as much again); the eigenvector of a real one
+  // from (action - x I) b = 0 with b's last entry 1, in the least-squares sense.
+  const Eigen::EigenSolver<Matrix10> eigen(action, false);
   if (eigen.info() != Eigen::Success) return 0;
-  // eigenvectors() computes them (complex) and returns them by value: once.
-  const Eigen::Matrix<std::complex<double>, 10, 10> vectors = eigen.eigenvectors();
   int count = 0;
   for (int k = 0; k < 10; ++k) {
     const std::complex<double> lambda = eigen.eigenvalues()(k);
     if (std::abs(lambda.imag()) > 1e-8 * (1 + std::abs(lambda.real()))) continue;
-    const auto v = vectors.col(k);
-    const double w = v(9).real();
-    if (std::abs(w) < 1e-12 * v.norm()) continue;
-    const double x = v(6).real() / w, y = v(7).real() / w, z = v(8).real() / w;
+    Eigen::Matrix<double, 10, 9> shifted = action.leftCols<9>();
+    for (int i = 0; i < 9; ++i)
+      shifted(i, i) -= lambda.real();
+    Eigen::Matrix<double, 10, 1> right = -action.col(9);
+    right(9) += lambda.real();
+    const Eigen::ColPivHouseholderQR<Eigen::Matrix<double, 10, 9>> solver(shifted);
+    if (solver.rank() < 9) continue;
+    const Eigen::Matrix<double, 9, 1> b = solver.solve(right);
+    const double x = b(6), y = b(7), z = b(8);
     std::array<double, 9>& out = essentials[count];
     double norm = 0;
     for (int i = 0; i < 9; ++i) {
@@ -1358,10 +1363,13 @@ CameraMotion CameraMotionEstimator::estimate(std::span<const FeatureTrack> track
   // MSAC cost over Sampson distances in pixels (focal length times the normalised distance).
   const double threshold = o.essential_inlier_px / focal_;
   const double threshold_squared = threshold * threshold;
-  const auto score = [&](const Matrix3& e, std::uint8_t* flags, int& count) {
+  // Stops early (flags and count then incomplete) once the cost reaches `limit`: most hypotheses
+  // of a sample are wrong, and a wrong one is out after a few outliers.
+  constexpr double kNoLimit = std::numeric_limits<double>::infinity();
+  const auto score = [&](const Matrix3& e, std::uint8_t* flags, int& count, double limit) {
     double cost = 0;
     count = 0;
-    for (int i = 0; i < n; ++i) {
+    for (int i = 0; i < n && cost < limit; ++i) {
       const double d = sampson_squared(e, x1_[i], y1_[i], x2_[i], y2_[i]);
       const bool inlier = d < threshold_squared;
       flags[i] = inlier ? 1 : 0;
@@ -1391,7 +1399,7 @@ CameraMotion CameraMotionEstimator::estimate(std::span<const FeatureTrack> track
       const Matrix3 e =
           Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(solutions[s].data());
       int inliers = 0;
-      const double cost = score(e, candidate_.data(), inliers);
+      const double cost = score(e, candidate_.data(), inliers, found ? best_cost : kNoLimit);
       if (found && cost >= best_cost) continue;
       found = true;
       best_cost = cost;
@@ -1426,7 +1434,7 @@ CameraMotion CameraMotionEstimator::estimate(std::span<const FeatureTrack> track
         Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(v.data()));
     if (!e.allFinite()) break;
     int inliers = 0;
-    const double cost = score(e, candidate_.data(), inliers);
+    const double cost = score(e, candidate_.data(), inliers, best_cost);
     if (cost >= best_cost) break;
     best_cost = cost;
     best_count = inliers;
@@ -1466,7 +1474,7 @@ CameraMotion CameraMotionEstimator::estimate(std::span<const FeatureTrack> track
   refine_motion(x1_.data(), y1_.data(), x2_.data(), y2_.data(), inlier_.data(), n, rotation,
                 translation);
   best_e = skew(translation) * rotation;
-  score(best_e, inlier_.data(), best_count);
+  score(best_e, inlier_.data(), best_count, kNoLimit);
   result.inliers = best_count;
   best_front = 0;
   for (int i = 0; i < n; ++i) {
