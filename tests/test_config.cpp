@@ -76,8 +76,9 @@ TEST(Config, OutOfRangeNamesTheLimits) {
             "test.yaml:2: pipeline.frame_slots: must be a power of two, got 6");
   EXPECT_EQ(error_of("detector:\n  maxvalue: {threshold: 300}\n"),
             "test.yaml:2: detector.maxvalue.threshold: must be between 1 and 255, got 300");
-  EXPECT_EQ(error_of("detector:\n  validation: {min_segment_points: 1}\n"),
-            "test.yaml:2: detector.validation.min_segment_points: must be between 2 and 1000, got 1");
+  EXPECT_EQ(
+      error_of("detector:\n  validation: {min_segment_points: 1}\n"),
+      "test.yaml:2: detector.validation.min_segment_points: must be between 2 and 1000, got 1");
   EXPECT_EQ(error_of("camera:\n  sim:\n    noise_sigma: -1\n"),
             "test.yaml:3: camera.sim.noise_sigma: must be between 0 and 50, got -1");
   EXPECT_EQ(error_of("camera:\n  sim:\n    relief_height_m: 0.1\n    relief_min_height_m: 0.2\n"),
