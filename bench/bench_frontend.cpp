@@ -6,6 +6,10 @@
 //                      per-column loop for the peaks
 //   frontend_background_detector: the whole `background` detector, homography estimation included
 //   frontend_fir_detector: the `fir` detector (no background subtraction)
+//   frontend_validation_stages/<association>: Section IV on the candidates `background` gives on
+//                      the pier scenario (segments, chain codes or image patches, matching,
+//                      back-projection), 0 = chain_code, 1 = image_features
+//   frontend_backprojection_detector: the whole `backprojection` detector on the pier
 // Run: build/default/bench/laserline_bench --benchmark_filter='frontend|naive'
 #include <benchmark/benchmark.h>
 
@@ -17,6 +21,7 @@
 
 #include "daemon/config.hpp"
 #include "hal/sim/sim_scene.hpp"
+#include "pipeline/backprojection_detector.hpp"
 #include "pipeline/frontend.hpp"
 #include "pipeline/frontend_detectors.hpp"
 #include "pipeline/subpixel.hpp"
@@ -200,5 +205,109 @@ void BM_frontend_fir_detector(benchmark::State& state) {
   state.counters["points"] = static_cast<double>(profile.size());
 }
 BENCHMARK(BM_frontend_fir_detector)->Unit(benchmark::kMillisecond);
+
+// The `pier` scenario of laserline-evaluate at 2048x1536: relief whose parallax leaves `background`
+// many false candidates, so the validation has work to do.
+hal::SimSceneOptions pier_scene() {
+  for (const tools::Scenario& s : tools::standard_scenarios(kWidth, kHeight))
+    if (s.name == "pier") return s.scene;
+  std::abort();
+}
+
+// Consecutive frames of the pier, the candidates `background` finds in each, and the camera motion
+// into each frame as the motion estimate gives it, for timing the validation alone.
+struct ValidationFrames {
+  static constexpr int kCount = 8;
+  std::vector<std::vector<std::uint8_t>> pixels;
+  std::vector<pipeline::Profile> candidates;
+  std::vector<pipeline::PairMotion> motion;
+  std::vector<std::array<double, 9>> homography;
+
+  ValidationFrames() {
+    const hal::SimSceneOptions scene = pier_scene();
+    hal::SimScene sim(scene);
+    pipeline::DetectorOptions o;
+    o.geometry = daemon::scanner_geometry(scene.calibration);
+    pipeline::BackgroundDetector detector(o, /*estimate_camera_motion=*/true);
+    detector.reset(kWidth, kHeight);
+    pipeline::Profile profile(detector.max_points(kWidth, kHeight));
+    for (int k = 0; k <= kCount; ++k) {
+      pixels.emplace_back(sim.format().bytes());
+      sim.render(10 + k, true, pixels.back());
+      detector.detect(view(pixels.back()), {static_cast<std::uint64_t>(10 + k), true}, profile);
+      if (k == 0) {  // the first frame only primes the detector
+        pixels.pop_back();
+        continue;
+      }
+      candidates.push_back(profile);
+      const pipeline::MotionEstimate& e = detector.last_motion();
+      pipeline::PairMotion m;
+      m.valid = e.valid && e.camera.valid;
+      m.rotation = e.camera.rotation;
+      m.translation = e.camera.translation;
+      m.relative_scale = e.camera.relative_scale;
+      motion.push_back(m);
+      homography.push_back(e.previous_to_current.h);
+    }
+  }
+};
+
+const ValidationFrames& validation_frames() {
+  static const ValidationFrames f;
+  return f;
+}
+
+// Section IV alone per frame (segmentation, association, back-projection), on the candidates of
+// consecutive frames of the scan; includes copying the candidates into the profile it rewrites.
+void BM_frontend_validation_stages(benchmark::State& state) {
+  const ValidationFrames& f = validation_frames();
+  pipeline::DetectorOptions o;
+  o.geometry = daemon::scanner_geometry(pier_scene().calibration);
+  o.validation.association = state.range(0) == 0 ? pipeline::SegmentAssociation::chain_code
+                                                 : pipeline::SegmentAssociation::image_features;
+  pipeline::LineValidator validator(o.geometry, o.validation);
+  validator.reset(kWidth, kHeight, f.candidates[0].capacity());
+  pipeline::Profile profile(f.candidates[0].capacity());
+  std::size_t k = 0, segments = 0, tested = 0, frames = 0;
+  for (auto _ : state) {
+    profile = f.candidates[k];
+    validator.validate(profile, f.motion[k], view(f.pixels[k]), &f.homography[k]);
+    benchmark::DoNotOptimize(profile.points().data());
+    segments += validator.segments().segments.size();
+    for (const pipeline::LineSegment& s : validator.segments().segments)
+      tested += s.tested ? 1 : 0;
+    ++frames;
+    k = (k + 1) % f.candidates.size();
+  }
+  state.SetLabel(state.range(0) == 0 ? "chain_code" : "image_features");
+  state.counters["candidates"] = static_cast<double>(f.candidates[0].size());
+  state.counters["segments"] = static_cast<double>(segments) / static_cast<double>(frames);
+  state.counters["tested"] = static_cast<double>(tested) / static_cast<double>(frames);
+}
+BENCHMARK(BM_frontend_validation_stages)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
+// The whole `backprojection` detector (motion with the essential matrix, `background`'s stages,
+// validation), fed the consecutive frames of the scan in turn (the sequence restarts every
+// ValidationFrames::kCount frames).
+void BM_frontend_backprojection_detector(benchmark::State& state) {
+  const ValidationFrames& f = validation_frames();
+  pipeline::DetectorOptions o;
+  o.geometry = daemon::scanner_geometry(pier_scene().calibration);
+  pipeline::BackprojectionDetector detector(o);
+  detector.reset(kWidth, kHeight);
+  pipeline::Profile profile(detector.max_points(kWidth, kHeight));
+  std::uint64_t sequence = 0;
+  std::size_t valid = 0;
+  for (auto _ : state) {
+    const std::size_t k = sequence % f.pixels.size();
+    detector.detect(view(f.pixels[k]), {sequence, true}, profile);
+    ++sequence;
+    benchmark::DoNotOptimize(profile.points().data());
+    for (const pipeline::ProfilePoint& p : profile.points())
+      valid += p.valid ? 1 : 0;
+  }
+  state.counters["valid_points"] = static_cast<double>(valid) / static_cast<double>(sequence);
+}
+BENCHMARK(BM_frontend_backprojection_detector)->Unit(benchmark::kMillisecond);
 
 }  // namespace

@@ -78,6 +78,34 @@ void read_detector_options(hal::YamlMap& detector, pipeline::DetectorOptions& op
       motion.number("essential_min_parallax_px", m.essential_min_parallax_px, 0.0, 100.0);
   m.scale_tracks = static_cast<int>(motion.integer("scale_tracks", m.scale_tracks, 0, 4096));
   motion.finish();
+
+  pipeline::ValidationOptions& v = options.validation;
+  hal::YamlMap validation = detector.map("validation");
+  const std::string association = validation.choice(
+      "association",
+      v.association == pipeline::SegmentAssociation::chain_code ? "chain_code" : "image_features",
+      {"chain_code", "image_features"});
+  v.association = association == "chain_code" ? pipeline::SegmentAssociation::chain_code
+                                              : pipeline::SegmentAssociation::image_features;
+  v.max_neighbour_gap_px =
+      validation.number("max_neighbour_gap_px", v.max_neighbour_gap_px, 1.0, 64.0);
+  v.min_segment_points =
+      static_cast<int>(validation.integer("min_segment_points", v.min_segment_points, 2, 1000));
+  v.max_box_distance_px =
+      validation.number("max_box_distance_px", v.max_box_distance_px, 0.0, 1000.0);
+  v.max_column_offset =
+      static_cast<int>(validation.integer("max_column_offset", v.max_column_offset, 0, 256));
+  v.min_correlation = validation.number("min_correlation", v.min_correlation, 0.0, 1.0);
+  v.feature_search_px =
+      static_cast<int>(validation.integer("feature_search_px", v.feature_search_px, 0, 32));
+  v.patch_columns = static_cast<int>(validation.integer("patch_columns", v.patch_columns, 4, 256));
+  v.patch_rows = static_cast<int>(validation.integer("patch_rows", v.patch_rows, 4, 256));
+  v.background_px = validation.number("background_px", v.background_px, 0.01, 100.0);
+  v.max_depth_baselines = validation.number("max_depth_baselines", v.max_depth_baselines, 1.0, 1e6);
+  v.require_track = validation.boolean("require_track", v.require_track);
+  v.max_laser_motion_px =
+      validation.number("max_laser_motion_px", v.max_laser_motion_px, 0.0, 1000.0);
+  validation.finish();
 }
 
 pipeline::ScannerGeometry scanner_geometry(const hal::Calibration& calibration) {

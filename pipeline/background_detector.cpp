@@ -6,8 +6,11 @@
 
 namespace laserline::pipeline {
 
-BackgroundDetector::BackgroundDetector(const DetectorOptions& options)
-    : frontend_(options.geometry, options.frontend), motion_(options.motion) {}
+BackgroundDetector::BackgroundDetector(const DetectorOptions& options, bool estimate_camera_motion)
+    : frontend_(options.geometry, options.frontend),
+      geometry_(options.geometry),
+      estimate_camera_motion_(estimate_camera_motion),
+      motion_(options.motion) {}
 
 std::size_t BackgroundDetector::max_points(int width, int /*height*/) const {
   return frontend_.max_points(width);
@@ -15,7 +18,7 @@ std::size_t BackgroundDetector::max_points(int width, int /*height*/) const {
 
 void BackgroundDetector::reset(int width, int height) {
   frontend_.reset(width, height);
-  motion_.reset(width, height);
+  motion_.reset(width, height, estimate_camera_motion_ ? &geometry_ : nullptr);
   // Only the rows the warp can reach are kept: those of the depth range, plus what the scene can
   // move between two frames (an eighth of the image: 3 degrees per frame at f = 2240 px).
   const RowNormalisation& rows = frontend_.rows();

@@ -9,6 +9,7 @@
 #include "pipeline/image_view.hpp"
 #include "pipeline/motion.hpp"
 #include "pipeline/profile.hpp"
+#include "pipeline/validation.hpp"
 
 namespace laserline::pipeline {
 
@@ -37,6 +38,7 @@ struct DetectorOptions {
   ScannerGeometry geometry;
   FrontendOptions frontend;
   MotionOptions motion;
+  ValidationOptions validation;  // `backprojection` (Section IV)
 };
 
 // What the pipeline may know about a frame besides its pixels.

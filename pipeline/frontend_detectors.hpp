@@ -33,7 +33,9 @@ class FirDetector final : public Detector {
 // points. Keeps a copy of the previous frame (of the rows the warp can reach).
 class BackgroundDetector final : public Detector {
  public:
-  explicit BackgroundDetector(const DetectorOptions& options);
+  // estimate_camera_motion: the motion estimate also gives the camera's rotation and translation
+  // (the essential matrix, from the geometry's intrinsics), for the validation of Section IV.
+  explicit BackgroundDetector(const DetectorOptions& options, bool estimate_camera_motion = false);
   const char* name() const override { return "background"; }
   std::size_t max_points(int width, int height) const override;
   void reset(int width, int height) override;
@@ -45,6 +47,8 @@ class BackgroundDetector final : public Detector {
 
  private:
   Frontend frontend_;
+  ScannerGeometry geometry_;
+  bool estimate_camera_motion_ = false;
   MotionEstimator motion_;
   MotionEstimate last_motion_;
   std::vector<std::uint8_t> background_;  // the previous frame's rows the warp can reach, packed

@@ -76,6 +76,9 @@ TEST(Config, OutOfRangeNamesTheLimits) {
             "test.yaml:2: pipeline.frame_slots: must be a power of two, got 6");
   EXPECT_EQ(error_of("detector:\n  maxvalue: {threshold: 300}\n"),
             "test.yaml:2: detector.maxvalue.threshold: must be between 1 and 255, got 300");
+  EXPECT_EQ(
+      error_of("detector:\n  validation: {min_segment_points: 1}\n"),
+      "test.yaml:2: detector.validation.min_segment_points: must be between 2 and 1000, got 1");
   EXPECT_EQ(error_of("camera:\n  sim:\n    noise_sigma: -1\n"),
             "test.yaml:3: camera.sim.noise_sigma: must be between 0 and 50, got -1");
   EXPECT_EQ(error_of("camera:\n  sim:\n    relief_height_m: 0.1\n    relief_min_height_m: 0.2\n"),
@@ -125,7 +128,11 @@ TEST(Config, CameraMotionOptions) {
 
 TEST(Config, ChoicesListTheAlternatives) {
   EXPECT_EQ(error_of("detector:\n  name: magic\n"),
-            "test.yaml:2: detector.name: must be one of maxvalue, fir, background, got 'magic'");
+            "test.yaml:2: detector.name: must be one of maxvalue, fir, background, backprojection, "
+            "got 'magic'");
+  EXPECT_EQ(error_of("detector:\n  validation:\n    association: shapes\n"),
+            "test.yaml:3: detector.validation.association: must be one of chain_code, "
+            "image_features, got 'shapes'");
   EXPECT_EQ(error_of("laser:\n  mode: blink\n"),
             "test.yaml:2: laser.mode: must be one of on, alternate, off, pattern, got 'blink'");
   EXPECT_EQ(error_of("camera:\n  backend: gige\n"),

@@ -18,8 +18,11 @@ void usage(std::FILE* out) {
   std::fprintf(out,
                "usage: laserline-evaluate [--tolerance PX] [--frames N] [--size WxH] "
                "[--overlay-dir DIR] [--detector NAME]... [--scenario NAME]...\n"
+               "                          [--validation chain_code|image_features]\n"
                "Scores detectors on simulated scenarios (ground truth exact): recall, precision\n"
-               "within the tolerance (default 2 px), RMS error and bias of the found points.\n");
+               "within the tolerance (default 2 px), RMS error and bias of the found points.\n"
+               "--validation: how backprojection associates segments between frames (default\n"
+               "chain_code, the paper's; image_features tracks the segment's box in the image).\n");
 }
 
 }  // namespace
@@ -31,6 +34,7 @@ int main(int argc, char** argv) {
   int width = 1280, height = 1024;
   std::string overlay_dir;
   std::vector<std::string> detectors, scenarios;
+  pipeline::DetectorOptions options;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     auto value = [&]() -> std::string {
@@ -55,6 +59,15 @@ int main(int argc, char** argv) {
         overlay_dir = value();
       } else if (arg == "--detector") {
         detectors.push_back(value());
+      } else if (arg == "--validation") {
+        const std::string v = value();
+        if (v == "chain_code") {
+          options.validation.association = pipeline::SegmentAssociation::chain_code;
+        } else if (v == "image_features") {
+          options.validation.association = pipeline::SegmentAssociation::image_features;
+        } else {
+          throw std::invalid_argument(v);
+        }
       } else if (arg == "--scenario") {
         scenarios.push_back(value());
       } else if (arg == "--help" || arg == "-h") {
@@ -77,7 +90,7 @@ int main(int argc, char** argv) {
   if (detectors.empty()) detectors = pipeline::detector_names();
   if (!overlay_dir.empty()) std::filesystem::create_directories(overlay_dir);
 
-  std::printf("%-18s %-11s %7s %9s %9s %8s %8s %8s\n", "scenario", "detector", "frames", "recall",
+  std::printf("%-18s %-14s %7s %9s %9s %8s %8s %8s\n", "scenario", "detector", "frames", "recall",
               "precision", "rms_px", "bias_px", "max_px");
   for (tools::Scenario scenario : tools::standard_scenarios(width, height)) {
     if (!scenarios.empty() &&
@@ -88,20 +101,21 @@ int main(int argc, char** argv) {
     for (const std::string& name : detectors) {
       tools::Score score;
       try {
-        score = tools::evaluate(scenario, name, {}, tolerance, [&](const tools::ScoredFrame& f) {
-          if (!overlay_dir.empty() && f.index == frames / 2) {
-            const std::string path = overlay_dir + "/" + scenario.name + "-" + name + ".png";
-            if (!tools::write_overlay(path, f, tolerance)) {
-              std::fprintf(stderr, "laserline-evaluate: cannot write %s\n", path.c_str());
-            }
-          }
-        });
+        score =
+            tools::evaluate(scenario, name, options, tolerance, [&](const tools::ScoredFrame& f) {
+              if (!overlay_dir.empty() && f.index == frames / 2) {
+                const std::string path = overlay_dir + "/" + scenario.name + "-" + name + ".png";
+                if (!tools::write_overlay(path, f, tolerance)) {
+                  std::fprintf(stderr, "laserline-evaluate: cannot write %s\n", path.c_str());
+                }
+              }
+            });
       } catch (const std::exception& e) {
         std::fprintf(stderr, "laserline-evaluate: %s on %s: %s\n", name.c_str(),
                      scenario.name.c_str(), e.what());
         return 1;
       }
-      std::printf("%-18s %-11s %7d %8.2f%% %8.2f%% %8.3f %8.3f %8.3f\n", scenario.name.c_str(),
+      std::printf("%-18s %-14s %7d %8.2f%% %8.2f%% %8.3f %8.3f %8.3f\n", scenario.name.c_str(),
                   name.c_str(), score.frames, 100.0 * score.recall(), 100.0 * score.precision(),
                   score.rms(), score.bias(), score.max_error);
     }
