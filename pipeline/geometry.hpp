@@ -27,6 +27,17 @@ struct ScannerGeometry {
   // Width of the projected sheet in pixels at row v of the centre column (paper eq. 3): linear
   // in v, f * l_w / Z.
   double line_width_px(double v) const { return fy * sheet_width_m * inverse_depth(cx, v); }
+
+  bool has_distortion() const {
+    return distortion[0] != 0.0 || distortion[1] != 0.0 || distortion[2] != 0.0 ||
+           distortion[3] != 0.0 || distortion[4] != 0.0;
+  }
+  // The lens (OpenCV's model k1 k2 p1 p2 k3): raw pixel (u, v) -> undistorted normalised image
+  // coordinates (x, y) = (X/Z, Y/Z) of its ray. False where the model cannot be inverted there
+  // (beyond the fold of a strongly distorting model, far outside the calibrated field).
+  bool normalised(double u, double v, double& x, double& y) const;
+  // And back: the raw pixel where the ray (x, y, 1) is seen.
+  std::array<double, 2> pixel(double x, double y) const;
 };
 
 }  // namespace laserline::pipeline

@@ -1318,24 +1318,11 @@ void CameraMotionEstimator::forget() {
 }
 
 std::array<double, 2> CameraMotionEstimator::normalise(double u, double v) const {
-  const ScannerGeometry& g = geometry_;
-  const double x0 = (u - g.cx) / g.fx, y0 = (v - g.cy) / g.fy;
-  const auto& [k1, k2, p1, p2, k3] = g.distortion;
-  if (k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0 && k3 == 0) return {x0, y0};
-  // The OpenCV model has no closed-form inverse: fixed-point iteration (as cv::undistortPoints),
-  // bounded; it converges for the distortion of real lenses within the image.
-  double x = x0, y = y0;
-  for (int iteration = 0; iteration < 20; ++iteration) {
-    const double r2 = x * x + y * y;
-    const double radial = 1 + ((k3 * r2 + k2) * r2 + k1) * r2;
-    const double dx = 2 * p1 * x * y + p2 * (r2 + 2 * x * x);
-    const double dy = p1 * (r2 + 2 * y * y) + 2 * p2 * x * y;
-    const double nx = (x0 - dx) / radial, ny = (y0 - dy) / radial;
-    const double change = std::abs(nx - x) + std::abs(ny - y);
-    x = nx;
-    y = ny;
-    if (change < 1e-12) break;
-  }
+  double x = 0, y = 0;
+  // Beyond the lens model's fold (far outside the calibrated field) the distorted ray is the best
+  // there is; its track then most likely ends as an outlier.
+  if (!geometry_.normalised(u, v, x, y))
+    return {(u - geometry_.cx) / geometry_.fx, (v - geometry_.cy) / geometry_.fy};
   return {x, y};
 }
 

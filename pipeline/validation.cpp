@@ -229,8 +229,12 @@ void match_by_chain_code(const SegmentedFrame& previous, const SegmentedFrame& c
 bool back_project(const ScannerGeometry& camera, const PairMotion& first, const PairMotion& second,
                   const std::array<double, 2>& x0, const std::array<double, 2>& x1,
                   double max_depth_baselines, std::array<double, 2>& x2, double& ray_gap_px) {
-  const Vec3 a{(x0[0] - camera.cx) / camera.fx, (x0[1] - camera.cy) / camera.fy, 1.0};
-  const Vec3 b{(x1[0] - camera.cx) / camera.fx, (x1[1] - camera.cy) / camera.fy, 1.0};
+  // Rays of the raw pixels (lens distortion removed).
+  Vec3 a{0, 0, 1}, b{0, 0, 1};
+  if (!camera.normalised(x0[0], x0[1], a[0], a[1]) ||
+      !camera.normalised(x1[0], x1[1], b[0], b[1])) {
+    return false;
+  }
   // In frame n-1: ray 0 from camera n-2's centre t1 along R1 a, ray 1 from the origin along b.
   const Vec3 d0 = rotate(first.rotation, a);
   const Vec3& t1 = first.translation;
@@ -252,10 +256,10 @@ bool back_project(const ScannerGeometry& camera, const PairMotion& first, const 
   const Vec3 rel{x[0] - t1[0], x[1] - t1[1], x[2] - t1[2]};
   const Vec3 in0 = rotate_back(first.rotation, rel);
   if (!(in0[2] > 0)) return false;
-  const double e0 = std::hypot(camera.fx * in0[0] / in0[2] + camera.cx - x0[0],
-                               camera.fy * in0[1] / in0[2] + camera.cy - x0[1]);
-  const double e1 = std::hypot(camera.fx * x[0] / x[2] + camera.cx - x1[0],
-                               camera.fy * x[1] / x[2] + camera.cy - x1[1]);
+  const auto p0 = camera.pixel(in0[0] / in0[2], in0[1] / in0[2]);
+  const auto p1 = camera.pixel(x[0] / x[2], x[1] / x[2]);
+  const double e0 = std::hypot(p0[0] - x0[0], p0[1] - x0[1]);
+  const double e1 = std::hypot(p1[0] - x1[0], p1[1] - x1[1]);
   ray_gap_px = std::max(e0, e1);
 
   // Into frame n, with the translation in the first pair's units.
@@ -264,7 +268,7 @@ bool back_project(const ScannerGeometry& camera, const PairMotion& first, const 
   const Vec3 in2{r[0] + scale * second.translation[0], r[1] + scale * second.translation[1],
                  r[2] + scale * second.translation[2]};
   if (!(in2[2] > 0)) return false;
-  x2 = {camera.fx * in2[0] / in2[2] + camera.cx, camera.fy * in2[1] / in2[2] + camera.cy};
+  x2 = camera.pixel(in2[0] / in2[2], in2[1] / in2[2]);
   return true;
 }
 

@@ -142,7 +142,8 @@ void add_match(LineSegment& s, const SegmentMatch& m);
 void match_by_chain_code(const SegmentedFrame& previous, const SegmentedFrame& current,
                          LineSegment& s, const ValidationOptions& options);
 
-// IV-D for one point: triangulates x0 (frame n-2) and x1 (frame n-1), pixels, with `first`
+// IV-D for one point: triangulates x0 (frame n-2) and x1 (frame n-1), raw pixels (the lens
+// distortion of `camera` is removed from their rays and applied to x2), with `first`
 // (n-2 -> n-1; midpoint of the two rays) and back-projects it into frame n with `second` (n-1 -> n,
 // its translation scaled by its relative_scale) as x2. `ray_gap_px` is how far the triangulated
 // point projects from x0 and x1 (the larger): rays that do not meet. False when the point cannot

@@ -211,6 +211,33 @@ TEST(BackProjection, StaticPointLandsWhereItIsSeenAndALaserPointDoesNot) {
                std::max(gap, std::hypot(x2[0] - 800, x2[1] - 400)) <= 2.0);
 }
 
+// Through a distorting lens the rays of the raw pixels are undistorted and the back-projection is
+// distorted again: a static point still lands where it is seen.
+TEST(BackProjection, StaticPointThroughADistortingLens) {
+  ScannerGeometry g;
+  g.distortion = {-0.28, 0.12, 0.0012, -0.0008, -0.03};
+  const Pose p0 = pose(0, 0.01, 0.3), p1 = pose(1, 0.01, 0.3), p2 = pose(2, 0.012, 0.3);
+  double l1 = 0, l2 = 0;
+  const PairMotion first = relative(p0, p1, l1, 0);
+  const PairMotion second = relative(p1, p2, l2, l1);
+  auto project = [&](const Pose& p, const Vec3& w) {
+    const Vec3 x = transform(p.r, w);
+    return g.pixel((x[0] + p.c[0]) / (x[2] + p.c[2]), (x[1] + p.c[1]) / (x[2] + p.c[2]));
+  };
+  const Vec3 w{0.4, -0.3, 1.3};  // towards a corner, where the lens moves it most
+  const auto seen = project(p2, w);
+  double x = 0, y = 0;
+  ASSERT_TRUE(g.normalised(seen[0], seen[1], x, y));
+  EXPECT_GT(std::hypot(g.fx * x + g.cx - seen[0], g.fy * y + g.cy - seen[1]), 10.0)
+      << "the lens must matter here for the test to mean something";
+  std::array<double, 2> x2{};
+  double gap = 0;
+  ASSERT_TRUE(back_project(g, first, second, project(p0, w), project(p1, w), 1000, x2, gap));
+  EXPECT_NEAR(x2[0], seen[0], 1e-6);
+  EXPECT_NEAR(x2[1], seen[1], 1e-6);
+  EXPECT_LT(gap, 1e-6);
+}
+
 TEST(LineValidator, RejectsTheStaticCurveAndKeepsTheLaserOverThreeFrames) {
   const ScannerGeometry g;
   ValidationOptions options;
