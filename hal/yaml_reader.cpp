@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <sstream>
 
 namespace laserline::hal {
@@ -45,6 +46,20 @@ YamlMap::YamlMap(YAML::Node node, std::string source, std::string path)
   if (node_.IsDefined() && !node_.IsNull() && !node_.IsMap()) {
     throw ConfigError(location(node_) + (path_.empty() ? std::string("top level") : path_) +
                       ": must be a mapping of keys");
+  }
+  // YAML forbids a key twice in one mapping, but the parser keeps both and a lookup finds the
+  // first: the line a user edited last could silently be ignored.
+  if (node_.IsMap()) {
+    std::map<std::string, int> first_line;
+    for (const auto& entry : node_) {
+      if (!entry.first.IsScalar()) continue;
+      const std::string key = entry.first.Scalar();
+      const auto [it, inserted] = first_line.emplace(key, entry.first.Mark().line + 1);
+      if (!inserted) {
+        throw ConfigError(location(entry.first) + key_path(key) + ": given twice (first on line " +
+                          std::to_string(it->second) + ")");
+      }
+    }
   }
 }
 

@@ -59,6 +59,12 @@ TEST(Config, UnknownKeyNamesFileLineAndKey) {
   EXPECT_EQ(error_of("lcm: {}\nbogus: 1\n").rfind("test.yaml:2: bogus: unknown key", 0), 0u);
 }
 
+TEST(Config, KeyGivenTwiceNamesBothLines) {
+  EXPECT_EQ(error_of("camera:\n  frame_rate_hz: 30\n  backend: sim\n  frame_rate_hz: 50\n"),
+            "test.yaml:4: camera.frame_rate_hz: given twice (first on line 2)");
+  EXPECT_EQ(error_of("lcm: {}\nlcm: {}\n"), "test.yaml:2: lcm: given twice (first on line 1)");
+}
+
 TEST(Config, WrongTypeNamesTheKey) {
   EXPECT_EQ(error_of("camera:\n  frame_rate_hz: fast\n"),
             "test.yaml:2: camera.frame_rate_hz: must be a number, got 'fast'");
