@@ -194,8 +194,10 @@ struct Plane {
   double e = 0;      // normal . X + e = 0
 };
 
-Plane fit_plane(const std::vector<cv::Vec3d>& points, const std::vector<char>& use) {
-  cv::Vec3d centroid(0, 0, 0);
+// The scatter matrix of the points in use about their centroid.
+cv::Matx33d scatter_of(const std::vector<cv::Vec3d>& points, const std::vector<char>& use,
+                       cv::Vec3d& centroid) {
+  centroid = cv::Vec3d(0, 0, 0);
   double n = 0;
   for (std::size_t i = 0; i < points.size(); ++i) {
     if (use[i]) {
@@ -211,6 +213,12 @@ Plane fit_plane(const std::vector<cv::Vec3d>& points, const std::vector<char>& u
       scatter += d * d.t();
     }
   }
+  return scatter;
+}
+
+Plane fit_plane(const std::vector<cv::Vec3d>& points, const std::vector<char>& use) {
+  cv::Vec3d centroid;
+  const cv::Matx33d scatter = scatter_of(points, use, centroid);
   cv::Matx31d values;
   cv::Matx33d vectors;
   cv::eigen(scatter, values, vectors);  // descending: the last row is the normal
@@ -529,22 +537,8 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
 
   // The inliers must span a plane, not a line: at least 2 views' lines in different places.
   {
-    cv::Vec3d centroid(0, 0, 0);
-    double n = 0;
-    for (std::size_t i = 0; i < points.size(); ++i) {
-      if (use[i]) {
-        centroid += points[i];
-        n += 1;
-      }
-    }
-    centroid /= n;
-    cv::Matx33d scatter = cv::Matx33d::zeros();
-    for (std::size_t i = 0; i < points.size(); ++i) {
-      if (use[i]) {
-        const cv::Vec3d d = points[i] - centroid;
-        scatter += d * d.t();
-      }
-    }
+    cv::Vec3d centroid;
+    const cv::Matx33d scatter = scatter_of(points, use, centroid);
     cv::Matx31d values;
     cv::eigen(scatter, values);
     if (!(values(1) > 1e-4 * values(0))) {
