@@ -2,8 +2,10 @@
 // views rendered by the simulated scanner: the recovered plane against the plane the views were
 // rendered with, the calibration file's round trip, and the errors for bad inputs.
 #include <gtest/gtest.h>
+
 #include <sys/wait.h>
 #include <unistd.h>
+#include "run_command.hpp"
 
 #include <array>
 #include <cmath>
@@ -305,22 +307,8 @@ TEST_F(Calibrate, BadViewsGiveOneLineErrors) {
   EXPECT_NE(error_of(sizes, o).find("view1: image size 640x512 differs"), std::string::npos);
 }
 
-struct RunResult {
-  int exit_code = -1;
-  std::string out;
-};
-
-RunResult run(const std::string& command) {
-  RunResult r;
-  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
-  if (pipe == nullptr) return r;
-  std::array<char, 4096> buffer{};
-  while (std::fgets(buffer.data(), buffer.size(), pipe) != nullptr)
-    r.out += buffer.data();
-  const int status = pclose(pipe);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+using RunResult = laserline::test_support::CommandResult;
+using laserline::test_support::run_command;
 
 // The executable on files: folders of laser-on and laser-off images, the written file, and the
 // one-line error for an unreadable image.
@@ -340,7 +328,7 @@ TEST_F(Calibrate, ToolOnImageFiles) {
   const std::string common =
       tool + " --board 9x6 --square-m 0.03 --output " + (dir / "calibration.yaml").string();
   const RunResult ok =
-      run(common + " --laser-off " + (dir / "off").string() + " " + (dir / "on").string());
+      run_command(common + " --laser-off " + (dir / "off").string() + " " + (dir / "on").string());
   ASSERT_EQ(ok.exit_code, 0) << ok.out;
   EXPECT_NE(ok.out.find("distance to the plane: RMS"), std::string::npos) << ok.out;
   const hal::Calibration written = hal::load_calibration_file((dir / "calibration.yaml").string());
@@ -356,19 +344,20 @@ TEST_F(Calibrate, ToolOnImageFiles) {
     std::fputs("not a png", f);
     std::fclose(f);
   }
-  const RunResult bad = run(common + " " + (dir / "on").string());
+  const RunResult bad = run_command(common + " " + (dir / "on").string());
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_EQ(bad.out, "laserline-calibrate: " + (dir / "on" / "pose_99.png").string() +
                          ": not a readable image (corrupt or unsupported format)\n");
 
   const RunResult mismatch =
-      run(common + " --laser-off " + (dir / "off").string() + " " + (dir / "on").string());
+      run_command(common + " --laser-off " + (dir / "off").string() + " " + (dir / "on").string());
   EXPECT_EQ(mismatch.exit_code, 1);
   EXPECT_NE(mismatch.out.find("--laser-off gives 12 images for 13 laser-on images"),
             std::string::npos)
       << mismatch.out;
 
-  const RunResult usage = run(tool + " --square-m 0.03 --output x.yaml " + (dir / "on").string());
+  const RunResult usage =
+      run_command(tool + " --square-m 0.03 --output x.yaml " + (dir / "on").string());
   EXPECT_EQ(usage.exit_code, 2);
   EXPECT_EQ(usage.out.rfind("laserline-calibrate: --board is required\n", 0), 0u) << usage.out;
   fs::remove_all(dir);

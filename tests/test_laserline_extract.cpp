@@ -2,11 +2,13 @@
 // written as PNG files, folders, videos and LCM logs; its CSV is checked against the simulator's
 // exact ground truth.
 #include <gtest/gtest.h>
+
 #include <sys/wait.h>
 #include <unistd.h>
 #include <laserline/image_t.hpp>
 #include <laserline/profile_t.hpp>
 #include <lcm/lcm-cpp.hpp>
+#include "run_command.hpp"
 
 #include <array>
 #include <bit>
@@ -32,22 +34,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct RunResult {
-  int exit_code = -1;
-  std::string out;  // stdout and stderr together
-};
-
-RunResult run_command(const std::string& command) {
-  RunResult r;
-  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
-  if (pipe == nullptr) return r;
-  std::array<char, 4096> buffer{};
-  while (std::fgets(buffer.data(), buffer.size(), pipe) != nullptr)
-    r.out += buffer.data();
-  const int status = pclose(pipe);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+using RunResult = laserline::test_support::CommandResult;
+using laserline::test_support::run_command;
 
 struct CsvPoint {
   int u = 0;

@@ -1,6 +1,8 @@
 // laserlined's command line and start-up validation, run as the real executable.
 #include <gtest/gtest.h>
+
 #include <sys/wait.h>
+#include "run_command.hpp"
 
 #include <array>
 #include <cstdio>
@@ -10,23 +12,12 @@
 
 namespace {
 
-struct CliResult {
-  int exit_code = -1;
-  std::string out;  // stdout and stderr together
-};
+using CliResult = laserline::test_support::CommandResult;
 
 // Runs laserlined with `args`, behind `prefix` (a command that wraps it, or "").
 CliResult run_prefixed(const std::string& prefix, const std::string& args) {
-  CliResult r;
-  const std::string command = prefix + " " + std::string(LASERLINED_PATH) + " " + args + " 2>&1";
-  FILE* pipe = popen(command.c_str(), "r");
-  if (pipe == nullptr) return r;
-  std::array<char, 4096> buffer{};
-  while (std::fgets(buffer.data(), buffer.size(), pipe) != nullptr)
-    r.out += buffer.data();
-  const int status = pclose(pipe);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
+  return laserline::test_support::run_command(prefix + " " + std::string(LASERLINED_PATH) + " " +
+                                              args);
 }
 
 CliResult run(const std::string& args) {
