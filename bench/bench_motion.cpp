@@ -27,14 +27,20 @@
 
 namespace {
 
-// Two frames a few apart, so that the camera has visibly moved; the laser is on.
-std::vector<std::vector<std::uint8_t>> sim_frames(int width, int height) {
-  laserline::hal::SimScene scene(sim_options(width, height));
+// Frames `first` and `second` of a simulated scan, the laser on.
+std::vector<std::vector<std::uint8_t>> render_pair(const laserline::hal::SimSceneOptions& o,
+                                                   std::uint64_t first, std::uint64_t second) {
+  laserline::hal::SimScene scene(o);
   std::vector<std::vector<std::uint8_t>> frames(2,
                                                 std::vector<std::uint8_t>(scene.format().bytes()));
-  scene.render(10, true, frames[0]);
-  scene.render(13, true, frames[1]);
+  scene.render(first, true, frames[0]);
+  scene.render(second, true, frames[1]);
   return frames;
+}
+
+// Two frames a few apart, so that the camera has visibly moved.
+std::vector<std::vector<std::uint8_t>> sim_frames(int width, int height) {
+  return render_pair(sim_options(width, height), 10, 13);
 }
 
 void BM_frontend_homography_estimation(benchmark::State& state) {
@@ -140,12 +146,7 @@ laserline::pipeline::ScannerGeometry geometry_of(const laserline::hal::SimSceneO
 }
 
 std::vector<std::vector<std::uint8_t>> pier_frames(const laserline::hal::SimSceneOptions& o) {
-  laserline::hal::SimScene scene(o);
-  std::vector<std::vector<std::uint8_t>> frames(2,
-                                                std::vector<std::uint8_t>(scene.format().bytes()));
-  scene.render(10, true, frames[0]);
-  scene.render(11, true, frames[1]);
-  return frames;
+  return render_pair(o, 10, 11);
 }
 
 void BM_frontend_camera_motion_estimation(benchmark::State& state) {
