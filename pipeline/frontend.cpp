@@ -1,7 +1,7 @@
 #include "pipeline/frontend.hpp"
 
 #include <algorithm>
-#include <array>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
@@ -143,25 +143,34 @@ void Frontend::reset(int width, int height) {
   width_ = width;
   height_ = height;
   stride_ = (width + kBlock - 1) / kBlock * kBlock;
-  // Each strip's band-pass ring holds the rows from the oldest the noise window still drops
-  // (r - noise/2 - 1 for the block's first row r) to the newest the block's last row looks at;
+  // Each strip's band-pass ring holds the rows from the oldest a peak is compared with (r -
+  // reach for the block's first row r) to the newest the block's last row looks at, its ring of
+  // prefix sums of |band-pass| from the row above the oldest noise window (r - noise/2 - 1) on;
   // the normalised ring the rows the band-pass boxes of the block's rows reach.
+  // Ring sizes are powers of two: a row's slot is a mask of its index.
   const int look = std::max(noise_half_, reach_);
-  band_ring_rows_ = kRowBlock + look + noise_half_ + 2;
-  normalised_ring_rows_ = kRowBlock + look + outer_ + 2;
+  band_ring_rows_ = static_cast<int>(std::bit_ceil(unsigned(kRowBlock + look + reach_ + 1)));
+  magnitude_ring_rows_ =
+      static_cast<int>(std::bit_ceil(unsigned(kRowBlock + look + noise_half_ + 2)));
+  normalised_ring_rows_ = static_cast<int>(std::bit_ceil(unsigned(kRowBlock + look + outer_ + 2)));
   const int strips = (width + kStripColumns - 1) / kStripColumns;
+  // A strip holds its columns and the noise window's reach on either side, the same count for
+  // every strip (a constant trip count for its kernels): the normalised rows are padded with
+  // zeros on both sides for the strips at the image's edges to read.
   ring_stride_ = (kStripColumns + 2 * noise_pad_ + kBlock - 1) / kBlock * kBlock;
+  normalised_pad_ = (noise_pad_ + kBlock - 1) / kBlock * kBlock;
+  normalised_stride_ = normalised_pad_ + strips * kStripColumns + ring_stride_;
   const auto ring = static_cast<std::size_t>(ring_stride_);
-  const auto s = static_cast<std::size_t>(stride_);
+  const auto s = static_cast<std::size_t>(normalised_stride_);
   normalised_ring_.assign(static_cast<std::size_t>(normalised_ring_rows_) * s, 0);
   band_ring_.assign(static_cast<std::size_t>(strips * band_ring_rows_) * ring, 0.0f);
+  band_hits_.assign(static_cast<std::size_t>(strips * band_ring_rows_), 0);
   inner_sum_.assign(strips * ring, 0);
   outer_sum_.assign(strips * ring, 0);
-  noise_sum_.assign(strips * ring, 0.0f);
+  magnitude_ring_.assign(static_cast<std::size_t>(strips * magnitude_ring_rows_) * ring, 0.0f);
   const auto blocks = static_cast<std::size_t>((width + kWarpBlock - 1) / kWarpBlock);
-  warp_source_.assign(blocks, 0);
-  warp_first_.assign(blocks, 0);
-  warp_end_.assign(blocks, 0);
+  warp_left_.assign(blocks, 0);
+  warp_top_.assign(blocks, 0);
   warp_weights_.assign(4 * blocks, 0);
   zero_normalised_.assign(s, 0);
   zero_band_.assign(ring, 0.0f);
@@ -194,11 +203,13 @@ LASERLINE_ROW_KERNEL void interpolate_row(const std::uint8_t* __restrict a,
 
 // `count` pixels of one warp block, minus the background sampled bilinearly at a constant
 // sub-pixel shift (rows p and q of the background, weights w summing to 256), clipped at 0.
+// Called with count = kWarpBlock for whole blocks (nearly all): a constant trip count, which
+// GCC turns into straight vector code.
 LASERLINE_ROW_KERNEL void difference_block(const std::uint8_t* __restrict a,
                                            const std::uint8_t* __restrict b, std::uint16_t fb,
                                            const std::uint8_t* __restrict p,
                                            const std::uint8_t* __restrict q,
-                                           const std::array<std::uint16_t, 4>& w, int count,
+                                           const std::uint16_t* __restrict w, int count,
                                            std::uint16_t* __restrict out) {
   const auto fa = static_cast<std::uint16_t>(kFixedOne - fb);
   const std::uint16_t w00 = w[0], w01 = w[1], w10 = w[2], w11 = w[3];
@@ -210,61 +221,76 @@ LASERLINE_ROW_KERNEL void difference_block(const std::uint8_t* __restrict a,
   }
 }
 
+// Sixteen 16-bit lanes (GCC vector extensions: one AVX2 register, or two SSE2 ones in the
+// baseline version), and the sixteen bytes from p widened to them.
+using Fixed16 = std::uint16_t __attribute__((vector_size(32)));
+using Bytes16 = std::uint8_t __attribute__((vector_size(16)));
+
+// (Through a reference: a vector returned by value changes the ABI between the two versions.)
+LASERLINE_ROW_KERNEL void widen(const std::uint8_t* p, Fixed16& out) {
+  Bytes16 bytes;
+  std::memcpy(&bytes, p, sizeof bytes);
+  out = __builtin_convertvector(bytes, Fixed16);
+}
+
+// difference_block() for a whole warp block, written out in vectors: GCC's own vectorisation of
+// the loop above spills to the stack in this register-hungry kernel.
+LASERLINE_ROW_KERNEL void difference_whole_block(const std::uint8_t* __restrict a,
+                                                 const std::uint8_t* __restrict b, std::uint16_t fb,
+                                                 const std::uint8_t* __restrict p,
+                                                 const std::uint8_t* __restrict q,
+                                                 const std::uint16_t* __restrict w,
+                                                 std::uint16_t* __restrict out) {
+  static_assert(Frontend::kWarpBlock % 16 == 0);
+  const auto fa = static_cast<std::uint16_t>(kFixedOne - fb);
+  for (int k = 0; k < Frontend::kWarpBlock; k += 16) {
+    Fixed16 a0, b0, p00, p01, q10, q11;
+    widen(a + k, a0);
+    widen(b + k, b0);
+    widen(p + k, p00);
+    widen(p + k + 1, p01);
+    widen(q + k, q10);
+    widen(q + k + 1, q11);
+    const Fixed16 current = a0 * fa + b0 * fb;
+    const Fixed16 warped = p00 * w[0] + p01 * w[1] + q10 * w[2] + q11 * w[3];
+    const Fixed16 difference = current > warped ? current - warped : Fixed16{};
+    std::memcpy(out + k, &difference, sizeof difference);
+  }
+}
+
 // The band-pass row from the box sums of the normalised rows, each box sliding one row on:
-// sum += entering - leaving (rows of zeros beyond the ends), inner mean minus outer mean.
-LASERLINE_ROW_KERNEL void band_pass_row(std::int32_t* __restrict inner,
-                                        const std::uint16_t* __restrict inner_entering,
-                                        const std::uint16_t* __restrict inner_leaving, float wi,
-                                        std::int32_t* __restrict outer,
-                                        const std::uint16_t* __restrict outer_entering,
-                                        const std::uint16_t* __restrict outer_leaving, float wo,
-                                        int count, float* __restrict out) {
+// sum += entering - leaving (rows of zeros beyond the ends), inner mean minus outer mean. With it
+// the column prefix sums of |band-pass| (this row's from the row above's): any window of rows of
+// the noise estimate is then the difference of two of them, wanted only where a candidate is.
+// `hits` counts the pixels at or above `threshold` (where candidates can be).
+LASERLINE_ROW_KERNEL void band_pass_row(
+    std::int32_t* __restrict inner, const std::uint16_t* __restrict inner_entering,
+    const std::uint16_t* __restrict inner_leaving, float wi, std::int32_t* __restrict outer,
+    const std::uint16_t* __restrict outer_entering, const std::uint16_t* __restrict outer_leaving,
+    float wo, const float* __restrict magnitude_above, float threshold, int count,
+    float* __restrict out, float* __restrict magnitude, int& hits) {
+  int n = 0;
   for (int u = 0; u < count; ++u) {
     const std::int32_t i = inner[u] + inner_entering[u] - inner_leaving[u];
     const std::int32_t o = outer[u] + outer_entering[u] - outer_leaving[u];
     inner[u] = i;
     outer[u] = o;
-    out[u] = static_cast<float>(i) * wi - static_cast<float>(o) * wo;
+    const float band = static_cast<float>(i) * wi - static_cast<float>(o) * wo;
+    out[u] = band;
+    magnitude[u] = magnitude_above[u] + std::abs(band);
+    n += band >= threshold;
   }
+  hits = n;
 }
 
-// The noise sum of a row: |band-pass| over the noise window minus over the guard band within it,
-// sliding one row on (rows entering and leaving the window and the guard band). With it the
-// candidates of the row: band-pass at or above `threshold` (the noise is at least 1, so nothing
-// below can pass the SNR threshold) and a maximum against the rows one up and down. 8-bit flags,
-// so that a block of them is checked with one load.
-LASERLINE_ROW_KERNEL void noise_and_peaks_row(
-    float* __restrict noise, const float* __restrict noise_entering,
-    const float* __restrict noise_leaving, const float* __restrict guard_entering,
-    const float* __restrict guard_leaving, const float* __restrict row, const float* __restrict up,
-    const float* __restrict down, float threshold, int count, std::uint8_t* __restrict mask) {
-  for (int u = 0; u < count; ++u) {
-    noise[u] += (std::abs(noise_entering[u]) - std::abs(noise_leaving[u])) -
-                (std::abs(guard_entering[u]) - std::abs(guard_leaving[u]));
-    const float x = row[u];
-    mask[u] = static_cast<std::uint8_t>((x >= threshold) & (x > up[u]) & (x >= down[u]));
-  }
-}
-
-// Only the noise sum (rows where no candidate is looked for).
-LASERLINE_ROW_KERNEL void noise_row(float* __restrict noise, const float* __restrict noise_entering,
-                                    const float* __restrict noise_leaving,
-                                    const float* __restrict guard_entering,
-                                    const float* __restrict guard_leaving, int count) {
-  for (int u = 0; u < count; ++u) {
-    noise[u] += (std::abs(noise_entering[u]) - std::abs(noise_leaving[u])) -
-                (std::abs(guard_entering[u]) - std::abs(guard_leaving[u]));
-  }
-}
-
-// Keeps the flags of pixels above their neighbours `k` rows up and at least those as far down.
-LASERLINE_ROW_KERNEL void keep_local_maxima(const float* __restrict row, const float* __restrict up,
-                                            const float* __restrict down, int count,
-                                            std::uint8_t* __restrict mask) {
-  for (int u = 0; u < count; ++u) {
-    const float x = row[u];
-    mask[u] &= static_cast<std::uint8_t>((x > up[u]) & (x >= down[u]));
-  }
+// Flags the pixels of a band-pass row at or above `threshold`: the noise is at least 1, so
+// nothing below can pass the SNR threshold. Few pixels pass (a few percent, about the line), so
+// the rest of the test runs on them alone. 8-bit flags, so that a block of them is checked with
+// one load.
+LASERLINE_ROW_KERNEL void threshold_row(const float* __restrict row, float threshold, int count,
+                                        std::uint8_t* __restrict mask) {
+  for (int u = 0; u < count; ++u)
+    mask[u] = static_cast<std::uint8_t>(row[u] >= threshold);
 }
 
 // The two rows of the frame a normalised row is interpolated from, and the weight of the lower.
@@ -297,11 +323,11 @@ void Frontend::set_frame_minus_background(const ImageView& current, const ImageV
 }
 
 LASERLINE_DENSE_KERNEL
-void Frontend::normalise_row(int r, int begin, int end_column, std::uint16_t* out) {
+void Frontend::normalise_row(int r, std::uint16_t* out) {
   const float v = rows_.source_row(r);
   const SourceRow row(current_, v);
   if (!subtracting_) {
-    interpolate_row(row.a + begin, row.b + begin, row.fb, end_column - begin, out);
+    interpolate_row(row.a, row.b, row.fb, width_, out);
     return;
   }
   // The background may be a band of rows of the frame (its own size; the homography says where).
@@ -318,56 +344,65 @@ void Frontend::normalise_row(int r, int begin, int end_column, std::uint16_t* ou
   // blocks of the row at once, branch-free so that it vectorises: the first pixel's position in
   // the background, the pixels [first, end) whose four background neighbours lie inside it (the
   // others have nothing to compare with, so no signal) and the bilinear weights.
-  const int block_begin = begin / kWarpBlock, block_end = (end_column - 1) / kWarpBlock + 1;
+  const int blocks = (width_ + kWarpBlock - 1) / kWarpBlock;
   const int width = width_, stride = background.stride, last_column = background.width - 1;
-  std::int32_t* __restrict source = warp_source_.data();
-  std::int32_t* __restrict first = warp_first_.data();
-  std::int32_t* __restrict end = warp_end_.data();
-  std::int32_t* __restrict weights = warp_weights_.data();
-  for (int j = block_begin; j < block_end; ++j) {
+  // Where each block's centre was in the background, for all blocks of the row at once,
+  // branch-free so that it vectorises: the block's first pixel's position there (the block moves
+  // as a whole), its integer part and the four bilinear weights. Positions are held within two
+  // background sizes (a NaN goes to the far left), so that they convert to int.
+  std::int32_t* __restrict left = warp_left_.data();
+  std::int32_t* __restrict top = warp_top_.data();
+  std::uint16_t* __restrict weights = warp_weights_.data();
+  const float far = 2.0f * std::max(bg_width, bg_height);
+  for (int j = 0; j < blocks; ++j) {
     const int u0 = j * kWarpBlock;
     const int count = std::min(kWarpBlock, width - u0);
     const float centre = static_cast<float>(u0) + 0.5f * static_cast<float>(count - 1);
     const float inv = 1.0f / (wn0 + wnu * centre);
     const float y = (yn0 + ynu * centre) * inv;
-    const float x0 = (xn0 + xnu * centre) * inv - (centre - static_cast<float>(u0));
-    const float fx0 = std::floor(x0), fy0 = std::floor(y);
-    // Comparisons are false for NaN: a degenerate warp gives no signal.
-    const bool inside =
-        fy0 >= 0.0f && fy0 + 1.0f < bg_height && fx0 > -bg_width - kWarpBlock && fx0 < bg_width;
-    const int ix = inside ? static_cast<int>(fx0) : 0;
-    const int iy = inside ? static_cast<int>(fy0) : 0;
-    const int f = inside ? std::clamp(-ix, 0, count) : 0;
-    const int e = inside ? std::clamp(last_column - ix, f, count) : 0;
-    const float tx = inside ? x0 - fx0 : 0.0f, ty = inside ? y - fy0 : 0.0f;
-    source[j] = iy * stride + ix + f;
-    first[j] = f;
-    end[j] = e;
+    const float x = (xn0 + xnu * centre) * inv - (centre - static_cast<float>(u0));
+    const float xs = x > -far ? (x < far ? x : far) : -far;
+    const float ys = y > -far ? (y < far ? y : far) : -far;
+    const float fx = std::floor(xs), fy = std::floor(ys);
+    left[j] = static_cast<std::int32_t>(fx);
+    top[j] = static_cast<std::int32_t>(fy);
+    const float tx = xs - fx, ty = ys - fy;
     const float one = kFixedOne;
     const auto w00 = static_cast<std::int32_t>((1.0f - tx) * (1.0f - ty) * one + 0.5f);
     const auto w01 = static_cast<std::int32_t>(tx * (1.0f - ty) * one + 0.5f);
     const auto w10 = static_cast<std::int32_t>((1.0f - tx) * ty * one + 0.5f);
     // The four sum to 256 (w11 absorbs the rounding).
-    weights[4 * j] = w00;
-    weights[4 * j + 1] = w01;
-    weights[4 * j + 2] = w10;
-    weights[4 * j + 3] = std::max(kFixedOne - w00 - w01 - w10, 0);
+    weights[4 * j] = static_cast<std::uint16_t>(w00);
+    weights[4 * j + 1] = static_cast<std::uint16_t>(w01);
+    weights[4 * j + 2] = static_cast<std::uint16_t>(w10);
+    weights[4 * j + 3] = static_cast<std::uint16_t>(std::max(kFixedOne - w00 - w01 - w10, 0));
   }
-  for (int j = block_begin; j < block_end; ++j) {
-    // The block's pixels within [begin, end_column).
+  const int last_row = background.height - 1;
+  for (int j = 0; j < blocks; ++j) {
     const int u0 = j * kWarpBlock;
-    const int lo = std::max(u0, begin), hi = std::min(u0 + kWarpBlock, end_column);
-    const int f = std::clamp(u0 + first[j], lo, hi), e = std::clamp(u0 + end[j], f, hi);
-    std::fill(out + (lo - begin), out + (f - begin), std::uint16_t{0});
-    std::fill(out + (e - begin), out + (hi - begin), std::uint16_t{0});
-    if (f == e) continue;
-    const std::uint8_t* p = background.data + source[j] + (f - u0 - first[j]);
-    const int k = f;
-    const std::array<std::uint16_t, 4> w{static_cast<std::uint16_t>(weights[4 * j]),
-                                         static_cast<std::uint16_t>(weights[4 * j + 1]),
-                                         static_cast<std::uint16_t>(weights[4 * j + 2]),
-                                         static_cast<std::uint16_t>(weights[4 * j + 3])};
-    difference_block(row.a + k, row.b + k, row.fb, p, p + stride, w, e - f, out + (k - begin));
+    const int count = std::min(kWarpBlock, width - u0);
+    const int ix = left[j], iy = top[j];
+    const std::uint16_t* w = weights + 4 * j;
+    if (iy < 0 || iy >= last_row) {  // no background rows above and below
+      std::fill(out + u0, out + u0 + count, std::uint16_t{0});
+      continue;
+    }
+    const std::ptrdiff_t offset = static_cast<std::ptrdiff_t>(iy) * stride + ix;
+    if (count == kWarpBlock && ix >= 0 && ix + kWarpBlock <= last_column) {
+      const std::uint8_t* p = background.data + offset;
+      difference_whole_block(row.a + u0, row.b + u0, row.fb, p, p + stride, w, out + u0);
+      continue;
+    }
+    // The pixels [f, e) of a block partly outside the background: where a pixel's four
+    // neighbours are not all inside it, there is nothing to compare with, so no signal.
+    const int f = std::clamp(-ix, 0, count), e = std::clamp(last_column - ix, f, count);
+    std::fill(out + u0, out + u0 + f, std::uint16_t{0});
+    std::fill(out + u0 + e, out + u0 + count, std::uint16_t{0});
+    if (f < e) {
+      const std::uint8_t* p = background.data + offset + f;
+      difference_block(row.a + u0 + f, row.b + u0 + f, row.fb, p, p + stride, w, e - f,
+                       out + u0 + f);
+    }
   }
 }
 
@@ -375,10 +410,12 @@ struct Frontend::StageImages {
   std::span<float> normalised, band_pass, signal_to_noise;
 };
 
-float Frontend::noise_level(const float* noise, int u, int begin) const {
+float Frontend::noise_level(const NoiseRows& rows, int u, int begin) const {
   float sum = 0.0f;
-  for (int k = -noise_pad_; k <= noise_pad_; ++k)
-    sum += noise[std::clamp(u + k, 0, width_ - 1) - begin];
+  for (int k = -noise_pad_; k <= noise_pad_; ++k) {
+    const int i = std::clamp(u + k, 0, width_ - 1) - begin;
+    sum += (rows.window_end[i] - rows.window_begin[i]) - (rows.guard_end[i] - rows.guard_begin[i]);
+  }
   // III-D: the minimal noise level is 1.
   return std::max(sum * noise_norm_, 1.0f);
 }
@@ -396,23 +433,24 @@ void Frontend::roll(const StageImages* images) {
   std::fill(column_count_.begin(), column_count_.end(), 0);
   std::fill(inner_sum_.begin(), inner_sum_.end(), 0);
   std::fill(outer_sum_.begin(), outer_sum_.end(), 0);
-  std::fill(noise_sum_.begin(), noise_sum_.end(), 0.0f);
   const bool want_snr = images != nullptr && !images->signal_to_noise.empty();
 
   // Rows beyond the ends are rows of zeros: a box cut short sums what it covers. The normalised
   // ring is as wide as the image; each strip has its own band-pass ring and sums.
+  // Column 0 of normalised row r.
+  auto normalised_slot = [&](int r) LASERLINE_ROW_LAMBDA -> std::uint16_t* {
+    return normalised_ring_.data() + normalised_pad_ +
+           static_cast<std::size_t>(r & (normalised_ring_rows_ - 1)) * normalised_stride_;
+  };
   auto normalised = [&](int r) LASERLINE_ROW_LAMBDA -> const std::uint16_t* {
-    if (r < 0 || r >= rows) return zero_normalised_.data();
-    return normalised_ring_.data() +
-           static_cast<std::size_t>(r % normalised_ring_rows_) * image_stride;
+    if (r < 0 || r >= rows) return zero_normalised_.data() + normalised_pad_;
+    return normalised_slot(r);
   };
   int next_normalised = 0;
   auto normalise_until = [&](int last) LASERLINE_ROW_LAMBDA {
     for (; next_normalised <= std::min(last, rows - 1); ++next_normalised) {
-      std::uint16_t* out =
-          normalised_ring_.data() +
-          static_cast<std::size_t>(next_normalised % normalised_ring_rows_) * image_stride;
-      normalise_row(next_normalised, 0, width_, out);
+      std::uint16_t* out = normalised_slot(next_normalised);
+      normalise_row(next_normalised, out);
       if (images != nullptr && !images->normalised.empty()) {
         float* dst = images->normalised.data() + next_normalised * image_stride;
         for (int u = 0; u < width_; ++u)
@@ -430,23 +468,28 @@ void Frontend::roll(const StageImages* images) {
     const int band_end = std::min(r_end + look, rows);  // band-pass rows [next_band, band_end)
     normalise_until(band_end - 1 + ho);
     for (int strip = 0; strip < strips; ++strip) {
-      // The strip's columns [c0, c1), and [begin, end_column) with the noise window's reach on
-      // either side: what its rings and sums hold.
+      // The strip's columns [c0, c1), and from `begin` on `count` columns with the noise
+      // window's reach on either side: what its rings and sums hold (beyond the image: zeros).
       const int c0 = strip * kStripColumns, c1 = std::min(c0 + kStripColumns, width_);
-      const int begin = std::max(c0 - noise_pad_, 0);
-      const int count = std::min(c1 + noise_pad_, width_) - begin;
+      const int begin = c0 - noise_pad_;
+      const int count = ring_stride_;
       const std::size_t state = static_cast<std::size_t>(strip) * ring;
+      int* hits = band_hits_.data() + static_cast<std::size_t>(strip) * band_ring_rows_;
       std::int32_t* inner = inner_sum_.data() + state;
       std::int32_t* outer = outer_sum_.data() + state;
-      float* noise = noise_sum_.data() + state;
       float* band_ring = band_ring_.data() + state * static_cast<std::size_t>(band_ring_rows_);
+      float* magnitude_ring =
+          magnitude_ring_.data() + state * static_cast<std::size_t>(magnitude_ring_rows_);
       auto band = [&](int r) LASERLINE_ROW_LAMBDA -> float* {
         if (r < 0 || r >= rows) return zero_band_.data();
-        return band_ring + static_cast<std::size_t>(r % band_ring_rows_) * ring;
+        return band_ring + static_cast<std::size_t>(r & (band_ring_rows_ - 1)) * ring;
       };
-      auto x = [&](int r) LASERLINE_ROW_LAMBDA {
-        return normalised(r) + (r < 0 || r >= rows ? 0 : begin);
+      // Sums of |band-pass| down the columns over rows [0, r] (none above row 0).
+      auto magnitude = [&](int r) LASERLINE_ROW_LAMBDA -> float* {
+        if (r < 0) return zero_band_.data();
+        return magnitude_ring + static_cast<std::size_t>(r & (magnitude_ring_rows_ - 1)) * ring;
       };
+      auto x = [&](int r) LASERLINE_ROW_LAMBDA { return normalised(r) + begin; };
 
       // III-C: box means down the columns; at the ends the boxes are cut short and averaged over
       // what they cover. The sums of row b are those of row b - 1 plus the row that enters the
@@ -466,43 +509,39 @@ void Frontend::roll(const StageImages* images) {
         const float wi = 1.0f / static_cast<float>((i1 - i0) * kFixedOne);
         const float wo = 1.0f / static_cast<float>((o1 - o0) * kFixedOne);
         float* out = band(b);
-        band_pass_row(inner, x(b + hi), x(b - hi - 1), wi, outer, x(b + ho), x(b - ho - 1), wo,
-                      count, out);
+        int& row_hits = hits[b & (band_ring_rows_ - 1)];
+        if (count == kRingColumns) {
+          band_pass_row(inner, x(b + hi), x(b - hi - 1), wi, outer, x(b + ho), x(b - ho - 1), wo,
+                        magnitude(b - 1), threshold, kRingColumns, out, magnitude(b), row_hits);
+        } else {
+          band_pass_row(inner, x(b + hi), x(b - hi - 1), wi, outer, x(b + ho), x(b - ho - 1), wo,
+                        magnitude(b - 1), threshold, count, out, magnitude(b), row_hits);
+        }
         if (images != nullptr && !images->band_pass.empty()) {
           std::copy(out + (c0 - begin), out + (c1 - begin),
                     images->band_pass.data() + b * image_stride + c0);
         }
       }
-      // III-D: the noise sum likewise starts holding band-pass rows 0 .. half - 1 (less the
-      // guard band's rows 0 .. guard - 1).
-      if (r_begin == 0) {
-        const float* zero = zero_band_.data();
-        for (int j = gh; j < std::min(nh, rows); ++j)
-          noise_row(noise, band(j), zero, zero, zero, count);
-      }
       // III-D/E for the block's rows. Rows in the margins are outside the depth range: no
       // candidates there.
       for (int r = r_begin; r < r_end; ++r) {
         const float* row = band(r);
-        const bool searched =
-            r >= std::max(margin_, reach_) && r < rows - std::max(margin_, reach_);
-        std::uint8_t* __restrict mask = row_mask_.data();
-        if (!searched) {
-          noise_row(noise, band(r + nh), band(r - nh - 1), band(r + gh), band(r - gh - 1), count);
-        } else {
-          // The dense part, branch-free so that it vectorises; the few pixels that pass go on.
-          noise_and_peaks_row(noise, band(r + nh), band(r - nh - 1), band(r + gh), band(r - gh - 1),
-                              row, band(r - 1), band(r + 1), threshold, count, mask);
-          for (int k = 2; k <= reach_; ++k)
-            keep_local_maxima(row, band(r - k), band(r + k), count, mask);
-        }
+        // The noise window of row r, rows [r - nh, r + nh], less its guard band, as differences
+        // of the prefix sums.
+        const NoiseRows noise{magnitude(r - nh - 1), magnitude(std::min(r + nh, rows - 1)),
+                              magnitude(r - gh - 1), magnitude(std::min(r + gh, rows - 1))};
         auto noise_at = [&](int u) LASERLINE_ROW_LAMBDA { return noise_level(noise, u, begin); };
         if (want_snr) {
           float* dst = images->signal_to_noise.data() + r * image_stride;
           for (int u = c0; u < c1; ++u)
             dst[u] = row[u - begin] / noise_at(u);
         }
-        if (!searched) continue;
+        const bool searched =
+            r >= std::max(margin_, reach_) && r < rows - std::max(margin_, reach_);
+        if (!searched || hits[r & (band_ring_rows_ - 1)] == 0) continue;
+        // The dense part, branch-free so that it vectorises; the few pixels that pass go on.
+        std::uint8_t* __restrict mask = row_mask_.data();
+        threshold_row(row, threshold, count, mask);
         const float* up = band(r - 1);
         const float* down = band(r + 1);
         for (int i0 = c0 - begin; i0 < c1 - begin; i0 += 8) {
@@ -511,8 +550,13 @@ void Frontend::roll(const StageImages* images) {
           if (any == 0) continue;
           for (int i = i0; i < std::min(i0 + 8, c1 - begin); ++i) {
             if (!mask[i]) continue;
-            const int u = begin + i;
+            // A candidate is a maximum of the band-pass within `reach` rows up and down.
             const float value = row[i];
+            bool peak = value > up[i] && value >= down[i];
+            for (int k = 2; k <= reach_ && peak; ++k)
+              peak = value > band(r - k)[i] && value >= band(r + k)[i];
+            if (!peak) continue;
+            const int u = begin + i;
             const float snr = value / noise_at(u);
             if (!(snr >= threshold)) continue;
             // Keep the strongest few per column (bounded work and output). Strongest by

@@ -104,11 +104,19 @@ class Frontend {
   // The pass down the rows: candidates into column_best_ / column_count_, and the intermediate
   // rows into `images` where given.
   void roll(const StageImages* images);
-  // Normalised row r, columns [begin, end) into out[0, end - begin).
-  void normalise_row(int r, int begin, int end, std::uint16_t* out);
-  // III-D at column u from the noise sums of a row (which hold columns from `begin` on): the
-  // mean |band-pass| around it, a guard band left out, at least 1.
-  float noise_level(const float* noise, int u, int begin) const;
+  // Normalised row r into out[0, width).
+  void normalise_row(int r, std::uint16_t* out);
+  // The prefix sums of |band-pass| (rows [0, r] summed down the columns) that bound the noise
+  // window of a row and its guard band: the window is the rows (window_begin, window_end].
+  struct NoiseRows {
+    const float* window_begin;
+    const float* window_end;
+    const float* guard_begin;
+    const float* guard_end;
+  };
+  // III-D at column u (rows holding columns from `begin` on): the mean |band-pass| around it, a
+  // guard band left out, at least 1.
+  float noise_level(const NoiseRows& rows, int u, int begin) const;
   float refine_row(int u, float v_guess) const;
 
   ScannerGeometry geometry_;
@@ -132,19 +140,25 @@ class Frontend {
   // first-level cache while the block's rows are done.
   static constexpr int kRowBlock = 8;
   static constexpr int kStripColumns = 128;
+  // The columns a strip's kernels run over when the noise window is at most 17 columns wide
+  // (the usual case: a constant trip count); wider windows take a generic path.
+  static constexpr int kRingColumns = 144;
   // Rings of rows, indexed by row % ring rows: the normalised rows (stride_ values per row), and
   // per strip the band-pass rows (ring_stride_ values per row); the per-strip sums below are as
   // wide.
-  int normalised_ring_rows_ = 0, band_ring_rows_ = 0, ring_stride_ = 0;
+  int normalised_ring_rows_ = 0, band_ring_rows_ = 0, magnitude_ring_rows_ = 0, ring_stride_ = 0;
+  // Normalised rows: zeros on either side of the image's columns, `normalised_pad_` on the left.
+  int normalised_pad_ = 0, normalised_stride_ = 0;
   std::vector<std::uint16_t> normalised_ring_;  // normalised rows, 1/256 grey levels
   std::vector<float> band_ring_;                // band-pass rows, strip after strip
-  // Running column sums down the rows: the two boxes of the band-pass (of the normalised rows),
-  // and |band-pass| over the noise window less its guard band.
+  std::vector<float> magnitude_ring_;           // sums of |band-pass| down the columns from row 0
+  std::vector<int> band_hits_;                  // per band-pass row of a strip: pixels >= threshold
+  // Running column sums down the rows: the two boxes of the band-pass (of the normalised rows).
   std::vector<std::int32_t> inner_sum_, outer_sum_;
-  std::vector<float> noise_sum_;
-  // Per warp block of the row being normalised: offset of its first pixel in the background,
-  // the pixels [first, end) that have a background, and the four bilinear weights.
-  std::vector<std::int32_t> warp_source_, warp_first_, warp_end_, warp_weights_;
+  // Per warp block of the row being normalised: where its first pixel lies in the background
+  // (integer column and row) and the four bilinear weights.
+  std::vector<std::int32_t> warp_left_, warp_top_;
+  std::vector<std::uint16_t> warp_weights_;
   std::vector<std::uint16_t> zero_normalised_;  // a row of zeros: the rows beyond the ends
   std::vector<float> zero_band_;
   std::vector<std::uint8_t> row_mask_;  // one row of a strip: candidates
