@@ -22,6 +22,11 @@
 // for the target of each of its versions.
 #define LASERLINE_ROW_KERNEL __attribute__((always_inline)) inline
 #define LASERLINE_ROW_LAMBDA __attribute__((always_inline))
+// Where auto-vectorisation falls short, a kernel is written in AVX2 intrinsics, in functions
+// compiled for AVX2 and chosen at run time (the CPU is asked once, in the constructor).
+#if LASERLINE_AVX2_KERNELS
+#include <immintrin.h>
+#endif
 
 namespace laserline::pipeline {
 
@@ -103,6 +108,9 @@ double RowNormalisation::to_source(double r) const {
 
 Frontend::Frontend(const ScannerGeometry& geometry, const FrontendOptions& options)
     : geometry_(geometry), options_(options) {
+#if LASERLINE_AVX2_KERNELS
+  avx2_ = __builtin_cpu_supports("avx2");
+#endif
   if (!(options.min_depth_m > 0) || !(options.max_depth_m > options.min_depth_m)) {
     throw std::invalid_argument("detector.frontend: need 0 < min_depth_m < max_depth_m");
   }
@@ -221,42 +229,38 @@ LASERLINE_ROW_KERNEL void difference_block(const std::uint8_t* __restrict a,
   }
 }
 
-// Sixteen 16-bit lanes (GCC vector extensions: one AVX2 register, or two SSE2 ones in the
-// baseline version), and the sixteen bytes from p widened to them.
-using Fixed16 = std::uint16_t __attribute__((vector_size(32)));
-using Bytes16 = std::uint8_t __attribute__((vector_size(16)));
-
-// (Through a reference: a vector returned by value changes the ABI between the two versions.)
-LASERLINE_ROW_KERNEL void widen(const std::uint8_t* p, Fixed16& out) {
-  Bytes16 bytes;
-  std::memcpy(&bytes, p, sizeof bytes);
-  out = __builtin_convertvector(bytes, Fixed16);
+#if LASERLINE_AVX2_KERNELS
+// Sixteen bytes widened to 16-bit lanes.
+__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i widen(const std::uint8_t* x) {
+  return _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(x)));
 }
 
-// difference_block() for a whole warp block, written out in vectors: GCC's own vectorisation of
-// the loop above spills to the stack in this register-hungry kernel.
-LASERLINE_ROW_KERNEL void difference_whole_block(const std::uint8_t* __restrict a,
-                                                 const std::uint8_t* __restrict b, std::uint16_t fb,
-                                                 const std::uint8_t* __restrict p,
-                                                 const std::uint8_t* __restrict q,
-                                                 const std::uint16_t* __restrict w,
-                                                 std::uint16_t* __restrict out) {
+// difference_block() for a whole warp block in AVX2, sixteen pixels to a register: GCC's own
+// vectorisation of this register-hungry loop widens each load in three steps and spills.
+// (Not forced inline: the function it is called from is also compiled for the baseline.)
+__attribute__((target("avx2"))) inline void difference_whole_block_avx2(
+    const std::uint8_t* a, const std::uint8_t* b, std::uint16_t fb, const std::uint8_t* p,
+    const std::uint8_t* q, const std::uint16_t* w, std::uint16_t* out) {
   static_assert(Frontend::kWarpBlock % 16 == 0);
-  const auto fa = static_cast<std::uint16_t>(kFixedOne - fb);
+  const __m256i fa_ = _mm256_set1_epi16(static_cast<short>(kFixedOne - fb));
+  const __m256i fb_ = _mm256_set1_epi16(static_cast<short>(fb));
+  const __m256i w00 = _mm256_set1_epi16(static_cast<short>(w[0]));
+  const __m256i w01 = _mm256_set1_epi16(static_cast<short>(w[1]));
+  const __m256i w10 = _mm256_set1_epi16(static_cast<short>(w[2]));
+  const __m256i w11 = _mm256_set1_epi16(static_cast<short>(w[3]));
   for (int k = 0; k < Frontend::kWarpBlock; k += 16) {
-    Fixed16 a0, b0, p00, p01, q10, q11;
-    widen(a + k, a0);
-    widen(b + k, b0);
-    widen(p + k, p00);
-    widen(p + k + 1, p01);
-    widen(q + k, q10);
-    widen(q + k + 1, q11);
-    const Fixed16 current = a0 * fa + b0 * fb;
-    const Fixed16 warped = p00 * w[0] + p01 * w[1] + q10 * w[2] + q11 * w[3];
-    const Fixed16 difference = current > warped ? current - warped : Fixed16{};
-    std::memcpy(out + k, &difference, sizeof difference);
+    const __m256i current = _mm256_add_epi16(_mm256_mullo_epi16(widen(a + k), fa_),
+                                             _mm256_mullo_epi16(widen(b + k), fb_));
+    const __m256i warped =
+        _mm256_add_epi16(_mm256_add_epi16(_mm256_mullo_epi16(widen(p + k), w00),
+                                          _mm256_mullo_epi16(widen(p + k + 1), w01)),
+                         _mm256_add_epi16(_mm256_mullo_epi16(widen(q + k), w10),
+                                          _mm256_mullo_epi16(widen(q + k + 1), w11)));
+    // The laser only adds light: clipped at 0 (a saturating subtraction).
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + k), _mm256_subs_epu16(current, warped));
   }
 }
+#endif
 
 // The band-pass row from the box sums of the normalised rows, each box sliding one row on:
 // sum += entering - leaving (rows of zeros beyond the ends), inner mean minus outer mean. With it
@@ -390,7 +394,14 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
     const std::ptrdiff_t offset = static_cast<std::ptrdiff_t>(iy) * stride + ix;
     if (count == kWarpBlock && ix >= 0 && ix + kWarpBlock <= last_column) {
       const std::uint8_t* p = background.data + offset;
-      difference_whole_block(row.a + u0, row.b + u0, row.fb, p, p + stride, w, out + u0);
+#if LASERLINE_AVX2_KERNELS
+      // Inlined into the AVX2 version of this function, a call never made in the other.
+      if (avx2_) {
+        difference_whole_block_avx2(row.a + u0, row.b + u0, row.fb, p, p + stride, w, out + u0);
+        continue;
+      }
+#endif
+      difference_block(row.a + u0, row.b + u0, row.fb, p, p + stride, w, kWarpBlock, out + u0);
       continue;
     }
     // The pixels [f, e) of a block partly outside the background: where a pixel's four
@@ -411,10 +422,17 @@ struct Frontend::StageImages {
 };
 
 float Frontend::noise_level(const NoiseRows& rows, int u, int begin) const {
+  auto column = [&](int i) LASERLINE_ROW_LAMBDA {
+    return (rows.window_end[i] - rows.window_begin[i]) - (rows.guard_end[i] - rows.guard_begin[i]);
+  };
   float sum = 0.0f;
-  for (int k = -noise_pad_; k <= noise_pad_; ++k) {
-    const int i = std::clamp(u + k, 0, width_ - 1) - begin;
-    sum += (rows.window_end[i] - rows.window_begin[i]) - (rows.guard_end[i] - rows.guard_begin[i]);
+  if (u >= noise_pad_ && u + noise_pad_ < width_) {
+    const int first = u - noise_pad_ - begin;
+    for (int i = first; i <= first + 2 * noise_pad_; ++i)
+      sum += column(i);
+  } else {  // at the image's sides the window repeats the edge column
+    for (int k = -noise_pad_; k <= noise_pad_; ++k)
+      sum += column(std::clamp(u + k, 0, width_ - 1) - begin);
   }
   // III-D: the minimal noise level is 1.
   return std::max(sum * noise_norm_, 1.0f);

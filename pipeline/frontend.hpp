@@ -10,6 +10,13 @@
 #include "pipeline/motion.hpp"
 #include "pipeline/profile.hpp"
 
+// AVX2 versions of the kernels GCC does not vectorise well, chosen at run time on x86-64.
+#if defined(__x86_64__) && defined(__GNUC__)
+#define LASERLINE_AVX2_KERNELS 1
+#else
+#define LASERLINE_AVX2_KERNELS 0
+#endif
+
 namespace laserline::pipeline {
 
 // Paper III-B, in the OpenCV convention (v down). The projected sheet width is linear in the row,
@@ -106,6 +113,9 @@ class Frontend {
   void roll(const StageImages* images);
   // Normalised row r into out[0, width).
   void normalise_row(int r, std::uint16_t* out);
+#if LASERLINE_AVX2_KERNELS
+  bool avx2_ = false;  // the CPU has AVX2
+#endif
   // The prefix sums of |band-pass| (rows [0, r] summed down the columns) that bound the noise
   // window of a row and its guard band: the window is the rows (window_begin, window_end].
   struct NoiseRows {
