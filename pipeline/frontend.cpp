@@ -663,12 +663,14 @@ float Frontend::refine_row(int u, float v_guess) const {
   const double width = std::max(rows_.width_px(v_guess), 1.0);
   const int last = height_ - 1;
   const double sigma = width / kFwhmToSigma;
-  const int spacing = std::max(1, static_cast<int>(std::lround(sigma)));
+  // Rounded by truncation after adding 0.5 (sigma > 0): what lround gives, without the call.
+  const int spacing = std::max(1, static_cast<int>(sigma + 0.5));
   const int edge = static_cast<int>(std::ceil(2.5 * sigma)) + 1;
   // The guess comes from a normalised row, good to about half a normalised width.
   const int reach =
       static_cast<int>(std::ceil(0.5 * width / options_.normalised_width_px + 0.5)) + 1;
-  const int centre = std::clamp(static_cast<int>(std::lround(v_guess)), 0, last);
+  // (Rounded likewise: a negative guess goes to row 0 either way.)
+  const int centre = std::clamp(static_cast<int>(v_guess + 0.5f), 0, last);
   const ColumnSampler at(current_, subtracting_ ? &background_ : nullptr, to_background_, u,
                          centre);
 
