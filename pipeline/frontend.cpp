@@ -1,11 +1,12 @@
 #include "pipeline/frontend.hpp"
 
 #include <algorithm>
-#include <bit>
 #include <cmath>
 #include <cstring>
+#include <numeric>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 
 #include "pipeline/subpixel.hpp"
 
@@ -33,6 +34,9 @@ namespace laserline::pipeline {
 namespace {
 
 constexpr double kFwhmToSigma = 2.3548200450309493;
+// Interpolation is done in fixed point, 1/256 grey level (see the row kernels).
+constexpr int kFixedOne = 256;
+constexpr int kFixedBits = 8;
 // Row kernels run over blocks of this many pixels with a constant trip count: what GCC needs to
 // vectorise them. Float rows are padded to a multiple of it.
 constexpr int kBlock = 16;
@@ -127,6 +131,25 @@ Frontend::Frontend(const ScannerGeometry& geometry, const FrontendOptions& optio
   noise_half_ = std::max(options.noise_rows / 2, guard_ + 1);
   noise_pad_ = std::max(options.noise_columns, 1) / 2;
   noise_norm_ = 1.0f / static_cast<float>(2 * (noise_half_ - guard_) * (2 * noise_pad_ + 1));
+  // The band-pass as an integer: inner mean - outer mean = g (a S_inner - b S_outer) /
+  // (inner outer one), with a = outer / g, b = inner / g (g their gcd) and one the normalised
+  // rows' fixed-point one. Its extremes are +-255 (1 - inner / outer) grey levels, so it fits
+  // 16-bit lanes when 255 one (outer - inner) inner / g does: with the most fractional bits of
+  // the normalised rows (at most 4, at least 2) for which that holds, else 32-bit lanes and 8.
+  const int g = std::gcd(inner_, outer_);
+  band_a_ = outer_ / g;
+  band_b_ = inner_ / g;
+  const long extreme = 255L * (outer_ - inner_) * inner_ / g;
+  int bits = kFixedBits;
+  narrow_band_ = false;
+  for (int narrow_bits = 4; narrow_bits >= 2 && !narrow_band_; --narrow_bits) {
+    if ((extreme << narrow_bits) <= 32767) {
+      narrow_band_ = true;
+      bits = narrow_bits;
+    }
+  }
+  normalised_shift_ = kFixedBits - bits;
+  band_unit_ = static_cast<float>(g) / static_cast<float>(inner_ * outer_ * (1 << bits));
   // Candidates are local maxima of the band-pass within one laser width along the column: the
   // noise window (guard band excluded) is the same to within a row there, so these are the
   // maxima of the SNR too.
@@ -155,12 +178,12 @@ void Frontend::reset(int width, int height) {
   // reach for the block's first row r) to the newest the block's last row looks at, its ring of
   // prefix sums of |band-pass| from the row above the oldest noise window (r - noise/2 - 1) on;
   // the normalised ring the rows the band-pass boxes of the block's rows reach.
-  // Ring sizes are powers of two: a row's slot is a mask of its index.
+  // (A row's slot in a ring is looked up once per block of rows, so the rings are no larger than
+  // they must be: they stay in the cache.)
   const int look = std::max(noise_half_, reach_);
-  band_ring_rows_ = static_cast<int>(std::bit_ceil(unsigned(kRowBlock + look + reach_ + 1)));
-  magnitude_ring_rows_ =
-      static_cast<int>(std::bit_ceil(unsigned(kRowBlock + look + noise_half_ + 2)));
-  normalised_ring_rows_ = static_cast<int>(std::bit_ceil(unsigned(kRowBlock + look + outer_ + 2)));
+  band_ring_rows_ = kRowBlock + look + reach_ + 1;
+  magnitude_ring_rows_ = kRowBlock + look + noise_half_ + 2;
+  normalised_ring_rows_ = kRowBlock + look + outer_ + 2;
   const int strips = (width + kStripColumns - 1) / kStripColumns;
   // A strip holds its columns and the noise window's reach on either side, the same count for
   // every strip (a constant trip count for its kernels): the normalised rows are padded with
@@ -171,17 +194,20 @@ void Frontend::reset(int width, int height) {
   const auto ring = static_cast<std::size_t>(ring_stride_);
   const auto s = static_cast<std::size_t>(normalised_stride_);
   normalised_ring_.assign(static_cast<std::size_t>(normalised_ring_rows_) * s, 0);
-  band_ring_.assign(static_cast<std::size_t>(strips * band_ring_rows_) * ring, 0.0f);
   band_hits_.assign(static_cast<std::size_t>(strips * band_ring_rows_), 0);
-  inner_sum_.assign(strips * ring, 0);
-  outer_sum_.assign(strips * ring, 0);
-  magnitude_ring_.assign(static_cast<std::size_t>(strips * magnitude_ring_rows_) * ring, 0.0f);
+  // Each strip's rings end with a row of zeros (the rows beyond the ends).
+  const auto band_ring = static_cast<std::size_t>(strips * (band_ring_rows_ + 1)) * ring;
+  narrow_.assign(narrow_band_ ? band_ring : 0, narrow_band_ ? strips * ring : 0);
+  wide_.assign(narrow_band_ ? 0 : band_ring, narrow_band_ ? 0 : strips * ring);
+  magnitude_ring_.assign(static_cast<std::size_t>(strips * (magnitude_ring_rows_ + 1)) * ring, 0);
+  band_rows_.assign(static_cast<std::size_t>(kRowBlock + look + 2 * reach_ + 1), 0);
+  magnitude_rows_.assign(static_cast<std::size_t>(kRowBlock + look + noise_half_ + 2), 0);
+  normalised_rows_.assign(static_cast<std::size_t>(kRowBlock + look + outer_ + 3), nullptr);
   const auto blocks = static_cast<std::size_t>((width + kWarpBlock - 1) / kWarpBlock);
   warp_left_.assign(blocks, 0);
   warp_top_.assign(blocks, 0);
   warp_weights_.assign(4 * blocks, 0);
   zero_normalised_.assign(s, 0);
-  zero_band_.assign(ring, 0.0f);
   row_mask_.assign(ring + 8, 0u);
   column_best_.assign(static_cast<std::size_t>(width) * options_.max_candidates_per_column, {});
   column_count_.assign(static_cast<std::size_t>(width), 0);
@@ -189,10 +215,13 @@ void Frontend::reset(int width, int height) {
 
 namespace {
 
-// The normalised image is held in fixed point, 1/256 grey level: interpolation weights of 8 bit
-// and 16-bit lanes (twice the floats per vector), clipping at 0 by a saturating subtraction, and
-// exact 32-bit running box sums (no rounding drift down a column).
-constexpr int kFixedOne = 256;
+// Interpolation is done in fixed point, 1/256 grey level: weights of 8 bit and 16-bit lanes,
+// clipping at 0 by a saturating subtraction. The normalised rows keep `precision` fractional bits
+// of it (fewer where the band-pass must fit 16-bit lanes, see Frontend::reset), rounded.
+
+LASERLINE_ROW_KERNEL std::uint16_t to_precision(unsigned value, int shift) {
+  return static_cast<std::uint16_t>((value + ((1u << shift) >> 1)) >> shift);
+}
 
 inline std::uint16_t fixed_weight(float t) {
   return static_cast<std::uint16_t>(std::clamp(t, 0.0f, 1.0f) * kFixedOne + 0.5f);
@@ -203,10 +232,10 @@ inline std::uint16_t fixed_weight(float t) {
 // A normalised row: the current frame interpolated between rows a and b (weight fb of b).
 LASERLINE_ROW_KERNEL void interpolate_row(const std::uint8_t* __restrict a,
                                           const std::uint8_t* __restrict b, std::uint16_t fb,
-                                          int count, std::uint16_t* __restrict out) {
+                                          int shift, int count, std::uint16_t* __restrict out) {
   const auto fa = static_cast<std::uint16_t>(kFixedOne - fb);
   for (int u = 0; u < count; ++u)
-    out[u] = static_cast<std::uint16_t>(a[u] * fa + b[u] * fb);
+    out[u] = to_precision(static_cast<std::uint16_t>(a[u] * fa + b[u] * fb), shift);
 }
 
 // `count` pixels of one warp block, minus the background sampled bilinearly at a constant
@@ -217,7 +246,7 @@ LASERLINE_ROW_KERNEL void difference_block(const std::uint8_t* __restrict a,
                                            const std::uint8_t* __restrict b, std::uint16_t fb,
                                            const std::uint8_t* __restrict p,
                                            const std::uint8_t* __restrict q,
-                                           const std::uint16_t* __restrict w, int count,
+                                           const std::uint16_t* __restrict w, int shift, int count,
                                            std::uint16_t* __restrict out) {
   const auto fa = static_cast<std::uint16_t>(kFixedOne - fb);
   const std::uint16_t w00 = w[0], w01 = w[1], w10 = w[2], w11 = w[3];
@@ -225,7 +254,7 @@ LASERLINE_ROW_KERNEL void difference_block(const std::uint8_t* __restrict a,
     const auto current = static_cast<std::uint16_t>(a[k] * fa + b[k] * fb);
     const auto warped =
         static_cast<std::uint16_t>(p[k] * w00 + p[k + 1] * w01 + q[k] * w10 + q[k + 1] * w11);
-    out[k] = static_cast<std::uint16_t>(current > warped ? current - warped : 0);
+    out[k] = to_precision(current > warped ? current - warped : 0u, shift);
   }
 }
 
@@ -240,7 +269,7 @@ __attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i widen(const std::ui
 // (Not forced inline: the function it is called from is also compiled for the baseline.)
 __attribute__((target("avx2"))) inline void difference_whole_block_avx2(
     const std::uint8_t* a, const std::uint8_t* b, std::uint16_t fb, const std::uint8_t* p,
-    const std::uint8_t* q, const std::uint16_t* w, std::uint16_t* out) {
+    const std::uint8_t* q, const std::uint16_t* w, int shift, std::uint16_t* out) {
   static_assert(Frontend::kWarpBlock % 16 == 0);
   const __m256i fa_ = _mm256_set1_epi16(static_cast<short>(kFixedOne - fb));
   const __m256i fb_ = _mm256_set1_epi16(static_cast<short>(fb));
@@ -248,6 +277,8 @@ __attribute__((target("avx2"))) inline void difference_whole_block_avx2(
   const __m256i w01 = _mm256_set1_epi16(static_cast<short>(w[1]));
   const __m256i w10 = _mm256_set1_epi16(static_cast<short>(w[2]));
   const __m256i w11 = _mm256_set1_epi16(static_cast<short>(w[3]));
+  const __m256i half = _mm256_set1_epi16(static_cast<short>((1 << shift) >> 1));
+  const __m128i bits = _mm_cvtsi32_si128(shift);
   for (int k = 0; k < Frontend::kWarpBlock; k += 16) {
     const __m256i current = _mm256_add_epi16(_mm256_mullo_epi16(widen(a + k), fa_),
                                              _mm256_mullo_epi16(widen(b + k), fb_));
@@ -257,31 +288,64 @@ __attribute__((target("avx2"))) inline void difference_whole_block_avx2(
                          _mm256_add_epi16(_mm256_mullo_epi16(widen(q + k), w10),
                                           _mm256_mullo_epi16(widen(q + k + 1), w11)));
     // The laser only adds light: clipped at 0 (a saturating subtraction).
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + k), _mm256_subs_epu16(current, warped));
+    const __m256i difference = _mm256_subs_epu16(current, warped);
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + k),
+                        _mm256_srl_epi16(_mm256_add_epi16(difference, half), bits));
   }
 }
 #endif
 
 // The band-pass row from the box sums of the normalised rows, each box sliding one row on:
-// sum += entering - leaving (rows of zeros beyond the ends), inner mean minus outer mean. With it
-// the column prefix sums of |band-pass| (this row's from the row above's): any window of rows of
-// the noise estimate is then the difference of two of them, wanted only where a candidate is.
+// sum += entering - leaving (rows of zeros beyond the ends). The band-pass, inner mean minus outer
+// mean, is held as the integer a * inner sum - b * outer sum (Frontend::reset() picks a and b and
+// the unit): exact, and in 16-bit lanes (sixteen to an AVX2 register) wherever it fits, the sums
+// then counted modulo 2^16 (only the band-pass, which fits, is read). With it the column prefix
+// sums of |band-pass| (this row's from the row above's), modulo 2^32: any window of rows of the
+// noise estimate is then the difference of two of them, wanted only where a candidate is.
 // `hits` counts the pixels at or above `threshold` (where candidates can be).
+template <class Lane, class Sum = std::make_unsigned_t<Lane>>
 LASERLINE_ROW_KERNEL void band_pass_row(
-    std::int32_t* __restrict inner, const std::uint16_t* __restrict inner_entering,
-    const std::uint16_t* __restrict inner_leaving, float wi, std::int32_t* __restrict outer,
+    Sum* __restrict inner, const std::uint16_t* __restrict inner_entering,
+    const std::uint16_t* __restrict inner_leaving, Sum* __restrict outer,
     const std::uint16_t* __restrict outer_entering, const std::uint16_t* __restrict outer_leaving,
-    float wo, const float* __restrict magnitude_above, float threshold, int count,
-    float* __restrict out, float* __restrict magnitude, int& hits) {
+    Sum a, Sum b, const std::uint32_t* __restrict magnitude_above, Lane threshold, int count,
+    Lane* __restrict out, std::uint32_t* __restrict magnitude, int& hits) {
   int n = 0;
   for (int u = 0; u < count; ++u) {
-    const std::int32_t i = inner[u] + inner_entering[u] - inner_leaving[u];
-    const std::int32_t o = outer[u] + outer_entering[u] - outer_leaving[u];
+    const auto i = static_cast<Sum>(inner[u] + inner_entering[u] - inner_leaving[u]);
+    const auto o = static_cast<Sum>(outer[u] + outer_entering[u] - outer_leaving[u]);
     inner[u] = i;
     outer[u] = o;
-    const float band = static_cast<float>(i) * wi - static_cast<float>(o) * wo;
+    const auto band = static_cast<Lane>(static_cast<Sum>(a * i - b * o));
     out[u] = band;
-    magnitude[u] = magnitude_above[u] + std::abs(band);
+    magnitude[u] = magnitude_above[u] + static_cast<std::uint32_t>(band < 0 ? -band : band);
+    n += band >= threshold;
+  }
+  hits = n;
+}
+
+// The same where a box is cut short by an end of the rows (a few rows at either end): the means
+// over what each box covers (inner weight wi, outer wo per unit of sum), in the band-pass's unit.
+template <class Lane, class Sum = std::make_unsigned_t<Lane>>
+LASERLINE_ROW_KERNEL void band_pass_row_cut_short(Sum* inner, const std::uint16_t* inner_entering,
+                                                  const std::uint16_t* inner_leaving, Sum* outer,
+                                                  const std::uint16_t* outer_entering,
+                                                  const std::uint16_t* outer_leaving, float wi,
+                                                  float wo, const std::uint32_t* magnitude_above,
+                                                  Lane threshold, int count, Lane* out,
+                                                  std::uint32_t* magnitude, int& hits) {
+  int n = 0;
+  for (int u = 0; u < count; ++u) {
+    const auto i = static_cast<Sum>(inner[u] + inner_entering[u] - inner_leaving[u]);
+    const auto o = static_cast<Sum>(outer[u] + outer_entering[u] - outer_leaving[u]);
+    inner[u] = i;
+    outer[u] = o;
+    const float exact = static_cast<float>(i) * wi - static_cast<float>(o) * wo;
+    // Rounded (through 32 bits: a conversion GCC vectorises).
+    const auto band =
+        static_cast<Lane>(static_cast<std::int32_t>(exact < 0.0f ? exact - 0.5f : exact + 0.5f));
+    out[u] = band;
+    magnitude[u] = magnitude_above[u] + static_cast<std::uint32_t>(band < 0 ? -band : band);
     n += band >= threshold;
   }
   hits = n;
@@ -291,7 +355,8 @@ LASERLINE_ROW_KERNEL void band_pass_row(
 // nothing below can pass the SNR threshold. Few pixels pass (a few percent, about the line), so
 // the rest of the test runs on them alone. 8-bit flags, so that a block of them is checked with
 // one load.
-LASERLINE_ROW_KERNEL void threshold_row(const float* __restrict row, float threshold, int count,
+template <class Lane>
+LASERLINE_ROW_KERNEL void threshold_row(const Lane* __restrict row, Lane threshold, int count,
                                         std::uint8_t* __restrict mask) {
   for (int u = 0; u < count; ++u)
     mask[u] = static_cast<std::uint8_t>(row[u] >= threshold);
@@ -331,7 +396,7 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
   const float v = rows_.source_row(r);
   const SourceRow row(current_, v);
   if (!subtracting_) {
-    interpolate_row(row.a, row.b, row.fb, width_, out);
+    interpolate_row(row.a, row.b, row.fb, normalised_shift_, width_, out);
     return;
   }
   // The background may be a band of rows of the frame (its own size; the homography says where).
@@ -397,11 +462,13 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
 #if LASERLINE_AVX2_KERNELS
       // Inlined into the AVX2 version of this function, a call never made in the other.
       if (avx2_) {
-        difference_whole_block_avx2(row.a + u0, row.b + u0, row.fb, p, p + stride, w, out + u0);
+        difference_whole_block_avx2(row.a + u0, row.b + u0, row.fb, p, p + stride, w,
+                                    normalised_shift_, out + u0);
         continue;
       }
 #endif
-      difference_block(row.a + u0, row.b + u0, row.fb, p, p + stride, w, kWarpBlock, out + u0);
+      difference_block(row.a + u0, row.b + u0, row.fb, p, p + stride, w, normalised_shift_,
+                       kWarpBlock, out + u0);
       continue;
     }
     // The pixels [f, e) of a block partly outside the background: where a pixel's four
@@ -411,8 +478,8 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
     std::fill(out + u0 + e, out + u0 + count, std::uint16_t{0});
     if (f < e) {
       const std::uint8_t* p = background.data + offset + f;
-      difference_block(row.a + u0 + f, row.b + u0 + f, row.fb, p, p + stride, w, e - f,
-                       out + u0 + f);
+      difference_block(row.a + u0 + f, row.b + u0 + f, row.fb, p, p + stride, w, normalised_shift_,
+                       e - f, out + u0 + f);
     }
   }
 }
@@ -422,10 +489,12 @@ struct Frontend::StageImages {
 };
 
 float Frontend::noise_level(const NoiseRows& rows, int u, int begin) const {
+  // Sums of |band-pass| over the window less its guard band, column by column (exact integers;
+  // the differences of the modulo-2^32 prefix sums are the true sums).
   auto column = [&](int i) LASERLINE_ROW_LAMBDA {
     return (rows.window_end[i] - rows.window_begin[i]) - (rows.guard_end[i] - rows.guard_begin[i]);
   };
-  float sum = 0.0f;
+  std::uint32_t sum = 0;
   if (u >= noise_pad_ && u + noise_pad_ < width_) {
     const int first = u - noise_pad_ - begin;
     for (int i = first; i <= first + 2 * noise_pad_; ++i)
@@ -435,30 +504,36 @@ float Frontend::noise_level(const NoiseRows& rows, int u, int begin) const {
       sum += column(std::clamp(u + k, 0, width_ - 1) - begin);
   }
   // III-D: the minimal noise level is 1.
-  return std::max(sum * noise_norm_, 1.0f);
+  return std::max(static_cast<float>(sum) * band_unit_ * noise_norm_, 1.0f);
 }
 
-LASERLINE_DENSE_KERNEL
-void Frontend::roll(const StageImages* images) {
+template <class Lane>
+LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRings<Lane>& rings) {
+  using Sum = std::make_unsigned_t<Lane>;
   const int rows = rows_.rows();
   const int hi = inner_ / 2, ho = outer_ / 2, nh = noise_half_, gh = guard_;
   const int look = std::max(nh, reach_);  // band-pass rows needed below the row under test
   const auto image_stride = static_cast<std::size_t>(stride_);
   const auto ring = static_cast<std::size_t>(ring_stride_);
   const float threshold = std::pow(10.0f, static_cast<float>(options_.snr_threshold_db) / 20.0f);
+  // In band-pass units: at or above it exactly where the band-pass is at or above the threshold.
+  const auto lane_threshold = static_cast<Lane>(std::ceil(threshold / band_unit_));
+  const float unit = band_unit_;
+  const auto a = static_cast<Sum>(band_a_), b_coefficient = static_cast<Sum>(band_b_);
   const int per_column = options_.max_candidates_per_column;
   const int strips = (width_ + kStripColumns - 1) / kStripColumns;
   std::fill(column_count_.begin(), column_count_.end(), 0);
-  std::fill(inner_sum_.begin(), inner_sum_.end(), 0);
-  std::fill(outer_sum_.begin(), outer_sum_.end(), 0);
+  std::fill(rings.inner.begin(), rings.inner.end(), Sum{0});
+  std::fill(rings.outer.begin(), rings.outer.end(), Sum{0});
   const bool want_snr = images != nullptr && !images->signal_to_noise.empty();
+  const float normalised_one = static_cast<float>(1 << (kFixedBits - normalised_shift_));
 
   // Rows beyond the ends are rows of zeros: a box cut short sums what it covers. The normalised
   // ring is as wide as the image; each strip has its own band-pass ring and sums.
   // Column 0 of normalised row r.
   auto normalised_slot = [&](int r) LASERLINE_ROW_LAMBDA -> std::uint16_t* {
     return normalised_ring_.data() + normalised_pad_ +
-           static_cast<std::size_t>(r & (normalised_ring_rows_ - 1)) * normalised_stride_;
+           static_cast<std::size_t>(r % normalised_ring_rows_) * normalised_stride_;
   };
   auto normalised = [&](int r) LASERLINE_ROW_LAMBDA -> const std::uint16_t* {
     if (r < 0 || r >= rows) return zero_normalised_.data() + normalised_pad_;
@@ -472,7 +547,7 @@ void Frontend::roll(const StageImages* images) {
       if (images != nullptr && !images->normalised.empty()) {
         float* dst = images->normalised.data() + next_normalised * image_stride;
         for (int u = 0; u < width_; ++u)
-          dst[u] = static_cast<float>(out[u]) / kFixedOne;
+          dst[u] = static_cast<float>(out[u]) / normalised_one;
       }
     }
   };
@@ -485,6 +560,21 @@ void Frontend::roll(const StageImages* images) {
     const int r_end = std::min(r_begin + kRowBlock, rows);
     const int band_end = std::min(r_end + look, rows);  // band-pass rows [next_band, band_end)
     normalise_until(band_end - 1 + ho);
+    // Where the rows the block touches are, the same in every strip: as offsets into a strip's
+    // rings (rows beyond the ends: the zero row after the ring's last), and the normalised rows.
+    const int band_base = r_begin - reach_, band_top = std::max(band_end, r_end + reach_);
+    for (int r = band_base; r < band_top; ++r) {
+      const int slot = r < 0 || r >= rows ? band_ring_rows_ : r % band_ring_rows_;
+      band_rows_[r - band_base] = static_cast<std::size_t>(slot) * ring;
+    }
+    const int magnitude_base = r_begin - nh - 1;
+    for (int r = magnitude_base; r < band_end; ++r) {
+      const int slot = r < 0 ? magnitude_ring_rows_ : r % magnitude_ring_rows_;
+      magnitude_rows_[r - magnitude_base] = static_cast<std::size_t>(slot) * ring;
+    }
+    const int normalised_base = next_band - ho - 1;
+    for (int r = normalised_base; r <= band_end + ho; ++r)
+      normalised_rows_[r - normalised_base] = normalised(r);
     for (int strip = 0; strip < strips; ++strip) {
       // The strip's columns [c0, c1), and from `begin` on `count` columns with the noise
       // window's reach on either side: what its rings and sums hold (beyond the image: zeros).
@@ -493,21 +583,20 @@ void Frontend::roll(const StageImages* images) {
       const int count = ring_stride_;
       const std::size_t state = static_cast<std::size_t>(strip) * ring;
       int* hits = band_hits_.data() + static_cast<std::size_t>(strip) * band_ring_rows_;
-      std::int32_t* inner = inner_sum_.data() + state;
-      std::int32_t* outer = outer_sum_.data() + state;
-      float* band_ring = band_ring_.data() + state * static_cast<std::size_t>(band_ring_rows_);
-      float* magnitude_ring =
-          magnitude_ring_.data() + state * static_cast<std::size_t>(magnitude_ring_rows_);
-      auto band = [&](int r) LASERLINE_ROW_LAMBDA -> float* {
-        if (r < 0 || r >= rows) return zero_band_.data();
-        return band_ring + static_cast<std::size_t>(r & (band_ring_rows_ - 1)) * ring;
+      Sum* inner = rings.inner.data() + state;
+      Sum* outer = rings.outer.data() + state;
+      Lane* band_ring = rings.band.data() + state * static_cast<std::size_t>(band_ring_rows_ + 1);
+      std::uint32_t* magnitude_ring =
+          magnitude_ring_.data() + state * static_cast<std::size_t>(magnitude_ring_rows_ + 1);
+      auto band = [&](int r) LASERLINE_ROW_LAMBDA -> Lane* {
+        return band_ring + band_rows_[r - band_base];
       };
       // Sums of |band-pass| down the columns over rows [0, r] (none above row 0).
-      auto magnitude = [&](int r) LASERLINE_ROW_LAMBDA -> float* {
-        if (r < 0) return zero_band_.data();
-        return magnitude_ring + static_cast<std::size_t>(r & (magnitude_ring_rows_ - 1)) * ring;
+      auto magnitude = [&](int r) LASERLINE_ROW_LAMBDA -> std::uint32_t* {
+        return magnitude_ring + magnitude_rows_[r - magnitude_base];
       };
-      auto x = [&](int r) LASERLINE_ROW_LAMBDA { return normalised(r) + begin; };
+      auto x = [&](int r)
+                   LASERLINE_ROW_LAMBDA { return normalised_rows_[r - normalised_base] + begin; };
 
       // III-C: box means down the columns; at the ends the boxes are cut short and averaged over
       // what they cover. The sums of row b are those of row b - 1 plus the row that enters the
@@ -516,34 +605,43 @@ void Frontend::roll(const StageImages* images) {
         for (int j = 0; j < std::min(ho, rows); ++j) {
           const std::uint16_t* row = x(j);
           for (int u = 0; u < count; ++u) {
-            if (j < hi) inner[u] += row[u];
-            outer[u] += row[u];
+            if (j < hi) inner[u] = static_cast<Sum>(inner[u] + row[u]);
+            outer[u] = static_cast<Sum>(outer[u] + row[u]);
           }
         }
       }
       for (int b = next_band; b < band_end; ++b) {
-        const int i0 = std::max(b - hi, 0), i1 = std::min(b + hi + 1, rows);
-        const int o0 = std::max(b - ho, 0), o1 = std::min(b + ho + 1, rows);
-        const float wi = 1.0f / static_cast<float>((i1 - i0) * kFixedOne);
-        const float wo = 1.0f / static_cast<float>((o1 - o0) * kFixedOne);
-        float* out = band(b);
-        int& row_hits = hits[b & (band_ring_rows_ - 1)];
-        if (count == kRingColumns) {
-          band_pass_row(inner, x(b + hi), x(b - hi - 1), wi, outer, x(b + ho), x(b - ho - 1), wo,
-                        magnitude(b - 1), threshold, kRingColumns, out, magnitude(b), row_hits);
+        Lane* out = band(b);
+        int& row_hits = hits[b % band_ring_rows_];
+        if (b >= ho && b + ho < rows) {
+          if (count == kRingColumns) {
+            band_pass_row(inner, x(b + hi), x(b - hi - 1), outer, x(b + ho), x(b - ho - 1), a,
+                          b_coefficient, magnitude(b - 1), lane_threshold, kRingColumns, out,
+                          magnitude(b), row_hits);
+          } else {
+            band_pass_row(inner, x(b + hi), x(b - hi - 1), outer, x(b + ho), x(b - ho - 1), a,
+                          b_coefficient, magnitude(b - 1), lane_threshold, count, out, magnitude(b),
+                          row_hits);
+          }
         } else {
-          band_pass_row(inner, x(b + hi), x(b - hi - 1), wi, outer, x(b + ho), x(b - ho - 1), wo,
-                        magnitude(b - 1), threshold, count, out, magnitude(b), row_hits);
+          const int i0 = std::max(b - hi, 0), i1 = std::min(b + hi + 1, rows);
+          const int o0 = std::max(b - ho, 0), o1 = std::min(b + ho + 1, rows);
+          const float wi = 1.0f / (static_cast<float>(i1 - i0) * normalised_one * unit);
+          const float wo = 1.0f / (static_cast<float>(o1 - o0) * normalised_one * unit);
+          band_pass_row_cut_short(inner, x(b + hi), x(b - hi - 1), outer, x(b + ho), x(b - ho - 1),
+                                  wi, wo, magnitude(b - 1), lane_threshold, count, out,
+                                  magnitude(b), row_hits);
         }
         if (images != nullptr && !images->band_pass.empty()) {
-          std::copy(out + (c0 - begin), out + (c1 - begin),
-                    images->band_pass.data() + b * image_stride + c0);
+          float* dst = images->band_pass.data() + b * image_stride;
+          for (int u = c0; u < c1; ++u)
+            dst[u] = static_cast<float>(out[u - begin]) * unit;
         }
       }
       // III-D/E for the block's rows. Rows in the margins are outside the depth range: no
       // candidates there.
       for (int r = r_begin; r < r_end; ++r) {
-        const float* row = band(r);
+        const Lane* row = band(r);
         // The noise window of row r, rows [r - nh, r + nh], less its guard band, as differences
         // of the prefix sums.
         const NoiseRows noise{magnitude(r - nh - 1), magnitude(std::min(r + nh, rows - 1)),
@@ -552,16 +650,15 @@ void Frontend::roll(const StageImages* images) {
         if (want_snr) {
           float* dst = images->signal_to_noise.data() + r * image_stride;
           for (int u = c0; u < c1; ++u)
-            dst[u] = row[u - begin] / noise_at(u);
+            dst[u] = static_cast<float>(row[u - begin]) * unit / noise_at(u);
         }
         const bool searched =
             r >= std::max(margin_, reach_) && r < rows - std::max(margin_, reach_);
-        if (!searched || hits[r & (band_ring_rows_ - 1)] == 0) continue;
-        // The dense part, branch-free so that it vectorises; the few pixels that pass go on.
+        if (!searched || hits[r % band_ring_rows_] == 0) continue;
         std::uint8_t* __restrict mask = row_mask_.data();
-        threshold_row(row, threshold, count, mask);
-        const float* up = band(r - 1);
-        const float* down = band(r + 1);
+        threshold_row(row, lane_threshold, count, mask);
+        const Lane* up = band(r - 1);
+        const Lane* down = band(r + 1);
         for (int i0 = c0 - begin; i0 < c1 - begin; i0 += 8) {
           std::uint64_t any = 0;
           std::memcpy(&any, mask + i0, sizeof any);
@@ -569,12 +666,13 @@ void Frontend::roll(const StageImages* images) {
           for (int i = i0; i < std::min(i0 + 8, c1 - begin); ++i) {
             if (!mask[i]) continue;
             // A candidate is a maximum of the band-pass within `reach` rows up and down.
-            const float value = row[i];
-            bool peak = value > up[i] && value >= down[i];
+            const Lane lane = row[i];
+            bool peak = lane > up[i] && lane >= down[i];
             for (int k = 2; k <= reach_ && peak; ++k)
-              peak = value > band(r - k)[i] && value >= band(r + k)[i];
+              peak = lane > band(r - k)[i] && lane >= band(r + k)[i];
             if (!peak) continue;
             const int u = begin + i;
+            const float value = static_cast<float>(lane) * unit;
             const float snr = value / noise_at(u);
             if (!(snr >= threshold)) continue;
             // Keep the strongest few per column (bounded work and output). Strongest by
@@ -593,10 +691,12 @@ void Frontend::roll(const StageImages* images) {
             }
             // Sub-row position of the band-pass peak, mapped back to an original row: the
             // guess the refinement starts from.
-            const float a = up[i], c = down[i];
-            const float curvature = a - 2.0f * value + c;
-            const float offset =
-                curvature < 0.0f ? std::clamp(0.5f * (a - c) / curvature, -0.5f, 0.5f) : 0.0f;
+            const auto above = static_cast<float>(up[i]), below = static_cast<float>(down[i]);
+            const auto centre = static_cast<float>(lane);
+            const float curvature = above - 2.0f * centre + below;
+            const float offset = curvature < 0.0f
+                                     ? std::clamp(0.5f * (above - below) / curvature, -0.5f, 0.5f)
+                                     : 0.0f;
             best[slot] = Peak{static_cast<float>(r) + offset, snr, value};
           }
         }
@@ -604,6 +704,24 @@ void Frontend::roll(const StageImages* images) {
     }
     next_band = band_end;
   }
+}
+
+void Frontend::roll(const StageImages* images) {
+  if (narrow_band_) {
+    roll_narrow(images);
+  } else {
+    roll_wide(images);
+  }
+}
+
+LASERLINE_DENSE_KERNEL
+void Frontend::roll_narrow(const StageImages* images) {
+  roll_with(images, narrow_);
+}
+
+LASERLINE_DENSE_KERNEL
+void Frontend::roll_wide(const StageImages* images) {
+  roll_with(images, wide_);
 }
 
 void Frontend::stage_images(std::span<float> normalised, std::span<float> band_pass,

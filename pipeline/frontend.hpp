@@ -2,6 +2,7 @@
 
 #include <cstdint>
 #include <span>
+#include <type_traits>
 #include <vector>
 
 #include "pipeline/detector.hpp"
@@ -99,6 +100,10 @@ class Frontend {
   void stage_images(std::span<float> normalised, std::span<float> band_pass,
                     std::span<float> signal_to_noise);
 
+  // The band-pass is exact in units of this many grey levels (an integer multiple of it); where a
+  // box is cut short by an end of the rows it is rounded to it.
+  float band_pass_unit() const { return band_unit_; }
+
   int width() const { return width_; }
   int stride() const { return stride_; }
 
@@ -109,20 +114,36 @@ class Frontend {
  private:
   struct StageImages;
   // The pass down the rows: candidates into column_best_ / column_count_, and the intermediate
-  // rows into `images` where given.
+  // rows into `images` where given. In 16- or 32-bit band-pass lanes (see the constructor).
   void roll(const StageImages* images);
+  void roll_narrow(const StageImages* images);
+  void roll_wide(const StageImages* images);
+  // The strips' band-pass rows and running box sums (modulo 2^bits).
+  template <class Lane>
+  struct BandRings {
+    std::vector<Lane> band;
+    std::vector<std::make_unsigned_t<Lane>> inner, outer;
+    void assign(std::size_t band_size, std::size_t sums_size) {
+      band.assign(band_size, 0);
+      inner.assign(sums_size, 0);
+      outer.assign(sums_size, 0);
+    }
+  };
+  template <class Lane>
+  void roll_with(const StageImages* images, BandRings<Lane>& rings);
   // Normalised row r into out[0, width).
   void normalise_row(int r, std::uint16_t* out);
 #if LASERLINE_AVX2_KERNELS
   bool avx2_ = false;  // the CPU has AVX2
 #endif
-  // The prefix sums of |band-pass| (rows [0, r] summed down the columns) that bound the noise
-  // window of a row and its guard band: the window is the rows (window_begin, window_end].
+  // The prefix sums of |band-pass| (rows [0, r] summed down the columns, modulo 2^32) that bound
+  // the noise window of a row and its guard band: the window is the rows (window_begin,
+  // window_end].
   struct NoiseRows {
-    const float* window_begin;
-    const float* window_end;
-    const float* guard_begin;
-    const float* guard_end;
+    const std::uint32_t* window_begin;
+    const std::uint32_t* window_end;
+    const std::uint32_t* guard_begin;
+    const std::uint32_t* guard_end;
   };
   // III-D at column u (rows holding columns from `begin` on): the mean |band-pass| around it, a
   // guard band left out, at least 1.
@@ -137,6 +158,11 @@ class Frontend {
   int reach_ = 2;   // a candidate is the maximum within this many rows up and down
   int margin_ = 6;  // normalised rows beyond the depth range on each side (for the filters)
   float noise_norm_ = 1;
+  // The band-pass, in units of band_unit_ grey levels: band_a_ S_inner - band_b_ S_outer of the
+  // normalised rows, which keep 8 - normalised_shift_ fractional bits; 16-bit lanes where it fits.
+  int band_a_ = 3, band_b_ = 1, normalised_shift_ = 4;
+  float band_unit_ = 1;
+  bool narrow_band_ = true;
   int width_ = 0, height_ = 0, stride_ = 0;
 
   // Inputs of the last set_frame call (views, valid during find_candidates).
@@ -160,17 +186,19 @@ class Frontend {
   // Normalised rows: zeros on either side of the image's columns, `normalised_pad_` on the left.
   int normalised_pad_ = 0, normalised_stride_ = 0;
   std::vector<std::uint16_t> normalised_ring_;  // normalised rows, 1/256 grey levels
-  std::vector<float> band_ring_;                // band-pass rows, strip after strip
-  std::vector<float> magnitude_ring_;           // sums of |band-pass| down the columns from row 0
-  std::vector<int> band_hits_;                  // per band-pass row of a strip: pixels >= threshold
-  // Running column sums down the rows: the two boxes of the band-pass (of the normalised rows).
-  std::vector<std::int32_t> inner_sum_, outer_sum_;
+  BandRings<std::int16_t> narrow_;
+  BandRings<std::int32_t> wide_;
+  std::vector<std::uint32_t> magnitude_ring_;  // sums of |band-pass| down the columns from row 0
+  std::vector<int> band_hits_;                 // per band-pass row of a strip: pixels >= threshold
   // Per warp block of the row being normalised: where its first pixel lies in the background
   // (integer column and row) and the four bilinear weights.
   std::vector<std::int32_t> warp_left_, warp_top_;
   std::vector<std::uint16_t> warp_weights_;
   std::vector<std::uint16_t> zero_normalised_;  // a row of zeros: the rows beyond the ends
-  std::vector<float> zero_band_;
+  // Per block of rows: where each row it touches is (offsets into a strip's rings, pointers to
+  // the normalised rows), from the first it touches on.
+  std::vector<std::size_t> band_rows_, magnitude_rows_;
+  std::vector<const std::uint16_t*> normalised_rows_;
   std::vector<std::uint8_t> row_mask_;  // one row of a strip: candidates
   struct Peak {
     float r = 0;     // normalised row of the band-pass peak (sub-row)
