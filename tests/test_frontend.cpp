@@ -125,10 +125,10 @@ TEST(Frontend, SignalToNoiseHasAMinimalNoiseOfOneAndMatchesTheImage) {
 
 // The pass goes down the rows in blocks and across in strips of columns, with running sums; the
 // same images computed directly, whole, from their definitions (III-C, III-D) must agree, across
-// strip edges and the cut-short boxes at the ends.
-TEST(Frontend, RollingPassMatchesTheStagesComputedWhole) {
+// strip edges and the cut-short boxes at the ends. `inner` and `outer` are the box sizes the
+// options give.
+void expect_pass_matches_stages_computed_whole(const FrontendOptions& o, int inner, int outer) {
   const ScannerGeometry g = small_geometry();  // 320 columns: three strips
-  FrontendOptions o;
   Frontend frontend(g, o);
   frontend.reset(g.width, g.height);
   Image image(g.width, g.height, 0);
@@ -143,7 +143,6 @@ TEST(Frontend, RollingPassMatchesTheStagesComputedWhole) {
   std::vector<float> normalised(size), band(size), snr(size);
   frontend.stage_images(normalised, band, snr);
 
-  const int inner = 3, outer = 9;  // normalised width 3, passband ratio 3
   auto box_mean = [&](int r, int u, int half) {
     double sum = 0;
     int n = 0;
@@ -151,7 +150,7 @@ TEST(Frontend, RollingPassMatchesTheStagesComputedWhole) {
       sum += normalised[j * stride + u];
     return sum / n;
   };
-  const int guard = inner / 2 + outer / 2, noise_half = o.noise_rows / 2;
+  const int guard = inner / 2 + outer / 2, noise_half = std::max(o.noise_rows / 2, guard + 1);
   const int pad = o.noise_columns / 2;
   // Exact where both boxes are whole; rounded to the band-pass's unit where one is cut short.
   double worst_band = 0, worst_cut_short = 0, worst_snr = 0;
@@ -181,6 +180,20 @@ TEST(Frontend, RollingPassMatchesTheStagesComputedWhole) {
   EXPECT_GT(worst_cut_short, 0.0);  // the rounding happened: those rows were checked
   EXPECT_LE(worst_cut_short, 0.5 * frontend.band_pass_unit() + 1e-4);
   EXPECT_LT(worst_snr, 1e-3);
+}
+
+TEST(Frontend, RollingPassMatchesTheStagesComputedWhole) {
+  // The default band (3 and 9 rows) fits 16-bit lanes with 4 fractional bits: unit 1/144.
+  const FrontendOptions narrow;
+  EXPECT_FLOAT_EQ(Frontend(small_geometry(), narrow).band_pass_unit(), 1.0f / 144.0f);
+  expect_pass_matches_stages_computed_whole(narrow, 3, 9);
+  // 5 and 19 rows (a passband ratio that is no odd whole number) do not: 32-bit lanes with the
+  // 8 fractional bits of the interpolation, unit 1 / (5 * 19 * 256).
+  FrontendOptions wide;
+  wide.normalised_width_px = 5;
+  wide.passband_ratio = 3.8;
+  EXPECT_FLOAT_EQ(Frontend(small_geometry(), wide).band_pass_unit(), 1.0f / (5 * 19 * 256));
+  expect_pass_matches_stages_computed_whole(wide, 5, 19);
 }
 
 TEST(Frontend, FindsAWideAndANarrowLineAtSubPixelRows) {
