@@ -1,6 +1,7 @@
 #include "pipeline/frontend.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <numeric>
@@ -46,10 +47,10 @@ int odd_at_least_one(double x) {
   return n % 2 == 1 ? n : n + 1;
 }
 
-// Bilinear sample of a mono8 image; (x, y) must lie within [0, w-1] x [0, h-1].
+// Bilinear sample of a mono8 image; (x, y) must lie within [0, w-1) x [0, h-1).
 inline float bilinear(const ImageView& image, float x, float y) {
-  const int ix = std::min(static_cast<int>(x), image.width - 2);
-  const int iy = std::min(static_cast<int>(y), image.height - 2);
+  const int ix = static_cast<int>(x);
+  const int iy = static_cast<int>(y);
   const float fx = x - static_cast<float>(ix), fy = y - static_cast<float>(iy);
   const std::uint8_t* p = image.row(iy) + ix;
   const float top = p[0] + fx * (static_cast<float>(p[1]) - p[0]);
@@ -206,6 +207,8 @@ void Frontend::reset(int width, int height) {
   const auto blocks = static_cast<std::size_t>((width + kWarpBlock - 1) / kWarpBlock);
   warp_left_.assign(blocks, 0);
   warp_top_.assign(blocks, 0);
+  warp_offset_.assign(blocks, 0);
+  warp_whole_.assign(blocks, 0);
   warp_weights_.assign(4 * blocks, 0);
   zero_normalised_.assign(s, 0);
   row_mask_.assign(ring + 8, 0u);
@@ -264,33 +267,43 @@ __attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i widen(const std::ui
   return _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(x)));
 }
 
-// difference_block() for a whole warp block in AVX2, sixteen pixels to a register: GCC's own
-// vectorisation of this register-hungry loop widens each load in three steps and spills.
-// (Not forced inline: the function it is called from is also compiled for the baseline.)
-__attribute__((target("avx2"))) inline void difference_whole_block_avx2(
-    const std::uint8_t* a, const std::uint8_t* b, std::uint16_t fb, const std::uint8_t* p,
-    const std::uint8_t* q, const std::uint16_t* w, int shift, std::uint16_t* out) {
+// difference_block() for the row's whole blocks (whole[j] != 0; the background's pixels of block
+// j from `background + offset[j]`, rows `stride` apart), in AVX2, sixteen pixels to a register:
+// GCC's own vectorisation of this register-hungry loop widens each load in three steps and
+// spills. (Not forced inline: the function it is called from is also compiled for the baseline.)
+__attribute__((target("avx2"))) inline void difference_whole_blocks_avx2(
+    const std::uint8_t* a, const std::uint8_t* b, std::uint16_t fb, const std::uint8_t* background,
+    int stride, const std::int32_t* whole, const std::int32_t* offset, const std::uint16_t* weights,
+    int blocks, int shift, std::uint16_t* out) {
   static_assert(Frontend::kWarpBlock % 16 == 0);
   const __m256i fa_ = _mm256_set1_epi16(static_cast<short>(kFixedOne - fb));
   const __m256i fb_ = _mm256_set1_epi16(static_cast<short>(fb));
-  const __m256i w00 = _mm256_set1_epi16(static_cast<short>(w[0]));
-  const __m256i w01 = _mm256_set1_epi16(static_cast<short>(w[1]));
-  const __m256i w10 = _mm256_set1_epi16(static_cast<short>(w[2]));
-  const __m256i w11 = _mm256_set1_epi16(static_cast<short>(w[3]));
   const __m256i half = _mm256_set1_epi16(static_cast<short>((1 << shift) >> 1));
   const __m128i bits = _mm_cvtsi32_si128(shift);
-  for (int k = 0; k < Frontend::kWarpBlock; k += 16) {
-    const __m256i current = _mm256_add_epi16(_mm256_mullo_epi16(widen(a + k), fa_),
-                                             _mm256_mullo_epi16(widen(b + k), fb_));
-    const __m256i warped =
-        _mm256_add_epi16(_mm256_add_epi16(_mm256_mullo_epi16(widen(p + k), w00),
-                                          _mm256_mullo_epi16(widen(p + k + 1), w01)),
-                         _mm256_add_epi16(_mm256_mullo_epi16(widen(q + k), w10),
-                                          _mm256_mullo_epi16(widen(q + k + 1), w11)));
-    // The laser only adds light: clipped at 0 (a saturating subtraction).
-    const __m256i difference = _mm256_subs_epu16(current, warped);
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + k),
-                        _mm256_srl_epi16(_mm256_add_epi16(difference, half), bits));
+  for (int j = 0; j < blocks; ++j) {
+    if (!whole[j]) continue;
+    const int u0 = j * Frontend::kWarpBlock;
+    const std::uint8_t* p = background + offset[j];
+    const std::uint8_t* q = p + stride;
+    const std::uint16_t* w = weights + 4 * j;
+    const __m256i w00 = _mm256_set1_epi16(static_cast<short>(w[0]));
+    const __m256i w01 = _mm256_set1_epi16(static_cast<short>(w[1]));
+    const __m256i w10 = _mm256_set1_epi16(static_cast<short>(w[2]));
+    const __m256i w11 = _mm256_set1_epi16(static_cast<short>(w[3]));
+    for (int k = u0; k < u0 + Frontend::kWarpBlock; k += 16) {
+      const __m256i current = _mm256_add_epi16(_mm256_mullo_epi16(widen(a + k), fa_),
+                                               _mm256_mullo_epi16(widen(b + k), fb_));
+      const int i = k - u0;
+      const __m256i warped =
+          _mm256_add_epi16(_mm256_add_epi16(_mm256_mullo_epi16(widen(p + i), w00),
+                                            _mm256_mullo_epi16(widen(p + i + 1), w01)),
+                           _mm256_add_epi16(_mm256_mullo_epi16(widen(q + i), w10),
+                                            _mm256_mullo_epi16(widen(q + i + 1), w11)));
+      // The laser only adds light: clipped at 0 (a saturating subtraction).
+      const __m256i difference = _mm256_subs_epu16(current, warped);
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + k),
+                          _mm256_srl_epi16(_mm256_add_epi16(difference, half), bits));
+    }
   }
 }
 #endif
@@ -422,6 +435,9 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
   std::int32_t* __restrict left = warp_left_.data();
   std::int32_t* __restrict top = warp_top_.data();
   std::uint16_t* __restrict weights = warp_weights_.data();
+  std::int32_t* __restrict offset = warp_offset_.data();
+  std::int32_t* __restrict whole = warp_whole_.data();
+  const int last_row = background.height - 1;
   const float far = 2.0f * std::max(bg_width, bg_height);
   for (int j = 0; j < blocks; ++j) {
     const int u0 = j * kWarpBlock;
@@ -433,8 +449,13 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
     const float xs = x > -far ? (x < far ? x : far) : -far;
     const float ys = y > -far ? (y < far ? y : far) : -far;
     const float fx = std::floor(xs), fy = std::floor(ys);
-    left[j] = static_cast<std::int32_t>(fx);
-    top[j] = static_cast<std::int32_t>(fy);
+    const auto ix = static_cast<std::int32_t>(fx), iy = static_cast<std::int32_t>(fy);
+    left[j] = ix;
+    top[j] = iy;
+    // Whole: all its pixels' four neighbours lie inside the background (nearly every block).
+    offset[j] = iy * stride + ix;
+    whole[j] = (count == kWarpBlock) & (ix >= 0) & (ix + kWarpBlock <= last_column) & (iy >= 0) &
+               (iy < last_row);
     const float tx = xs - fx, ty = ys - fy;
     const float one = kFixedOne;
     const auto w00 = static_cast<std::int32_t>((1.0f - tx) * (1.0f - ty) * one + 0.5f);
@@ -446,40 +467,38 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
     weights[4 * j + 2] = static_cast<std::uint16_t>(w10);
     weights[4 * j + 3] = static_cast<std::uint16_t>(std::max(kFixedOne - w00 - w01 - w10, 0));
   }
-  const int last_row = background.height - 1;
+#if LASERLINE_AVX2_KERNELS
+  // Inlined into the AVX2 version of this function, a call never made in the other.
+  if (avx2_) {
+    difference_whole_blocks_avx2(row.a, row.b, row.fb, background.data, stride, whole, offset,
+                                 weights, blocks, normalised_shift_, out);
+  } else
+#endif
+  {
+    for (int j = 0; j < blocks; ++j) {
+      if (!whole[j]) continue;
+      const int u0 = j * kWarpBlock;
+      const std::uint8_t* p = background.data + offset[j];
+      difference_block(row.a + u0, row.b + u0, row.fb, p, p + stride, weights + 4 * j,
+                       normalised_shift_, kWarpBlock, out + u0);
+    }
+  }
+  // The blocks partly or wholly outside the background: pixels [f, e) have their four
+  // neighbours inside it; elsewhere there is nothing to compare with, so no signal.
   for (int j = 0; j < blocks; ++j) {
+    if (whole[j]) continue;
     const int u0 = j * kWarpBlock;
     const int count = std::min(kWarpBlock, width - u0);
     const int ix = left[j], iy = top[j];
-    const std::uint16_t* w = weights + 4 * j;
-    if (iy < 0 || iy >= last_row) {  // no background rows above and below
-      std::fill(out + u0, out + u0 + count, std::uint16_t{0});
-      continue;
-    }
-    const std::ptrdiff_t offset = static_cast<std::ptrdiff_t>(iy) * stride + ix;
-    if (count == kWarpBlock && ix >= 0 && ix + kWarpBlock <= last_column) {
-      const std::uint8_t* p = background.data + offset;
-#if LASERLINE_AVX2_KERNELS
-      // Inlined into the AVX2 version of this function, a call never made in the other.
-      if (avx2_) {
-        difference_whole_block_avx2(row.a + u0, row.b + u0, row.fb, p, p + stride, w,
-                                    normalised_shift_, out + u0);
-        continue;
-      }
-#endif
-      difference_block(row.a + u0, row.b + u0, row.fb, p, p + stride, w, normalised_shift_,
-                       kWarpBlock, out + u0);
-      continue;
-    }
-    // The pixels [f, e) of a block partly outside the background: where a pixel's four
-    // neighbours are not all inside it, there is nothing to compare with, so no signal.
-    const int f = std::clamp(-ix, 0, count), e = std::clamp(last_column - ix, f, count);
+    const bool rows_inside = iy >= 0 && iy < last_row;
+    const int f = rows_inside ? std::clamp(-ix, 0, count) : count;
+    const int e = rows_inside ? std::clamp(last_column - ix, f, count) : count;
     std::fill(out + u0, out + u0 + f, std::uint16_t{0});
     std::fill(out + u0 + e, out + u0 + count, std::uint16_t{0});
     if (f < e) {
-      const std::uint8_t* p = background.data + offset + f;
-      difference_block(row.a + u0 + f, row.b + u0 + f, row.fb, p, p + stride, w, normalised_shift_,
-                       e - f, out + u0 + f);
+      const std::uint8_t* p = background.data + static_cast<std::ptrdiff_t>(iy) * stride + ix + f;
+      difference_block(row.a + u0 + f, row.b + u0 + f, row.fb, p, p + stride, weights + 4 * j,
+                       normalised_shift_, e - f, out + u0 + f);
     }
   }
 }
@@ -793,15 +812,24 @@ float Frontend::refine_row(int u, float v_guess) const {
                          centre);
 
   const int lo = std::max(centre - reach, 0), hi = std::min(centre + reach, last);
+  // The samples of the search window are kept for the fit below (its inner samples are usually
+  // among them).
+  std::array<float, 32> window;
+  const bool kept = hi - lo < static_cast<int>(window.size());
   int best = lo;
   float best_value = at(lo);
+  if (kept) window[0] = best_value;
   for (int v = lo + 1; v <= hi; ++v) {
     const float value = at(v);
+    if (kept) window[static_cast<std::size_t>(v - lo)] = value;
     if (value > best_value) {
       best_value = value;
       best = v;
     }
   }
+  auto sample = [&](int v) {
+    return kept && v >= lo && v <= hi ? window[static_cast<std::size_t>(v - lo)] : at(v);
+  };
 
   // A clipped core (real green lasers saturate): the centre of the run, located on its flanks.
   const int saturation = options_.saturation_level;
@@ -831,13 +859,13 @@ float Frontend::refine_row(int u, float v_guess) const {
   // samples just beyond the line on either side, is removed first: ambient light under the line
   // would bend the logarithms.
   if (best - edge < 0 || best + edge > last) return static_cast<float>(best);
-  const float before = at(best - edge), after = at(best + edge);
+  const float before = sample(best - edge), after = sample(best + edge);
   const float slope = (after - before) / static_cast<float>(2 * edge);
   const float level = 0.5f * (before + after);
   const float step = slope * static_cast<float>(spacing);
-  const float a = at(best - spacing) - (level - step);
+  const float a = sample(best - spacing) - (level - step);
   const float b = best_value - level;
-  const float c = at(best + spacing) - (level + step);
+  const float c = sample(best + spacing) - (level + step);
   return static_cast<float>(best) + static_cast<float>(spacing) * gaussian_offset(a, b, c);
 }
 
