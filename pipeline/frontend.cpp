@@ -354,9 +354,9 @@ LASERLINE_ROW_KERNEL void band_pass_row_cut_short(Sum* inner, const std::uint16_
     inner[u] = i;
     outer[u] = o;
     const float exact = static_cast<float>(i) * wi - static_cast<float>(o) * wo;
-    // Rounded (through 32 bits: a conversion GCC vectorises).
+    // Rounded half away from zero, branch-free (the sign is random: a branch would mispredict).
     const auto band =
-        static_cast<Lane>(static_cast<std::int32_t>(exact < 0.0f ? exact - 0.5f : exact + 0.5f));
+        static_cast<Lane>(static_cast<std::int32_t>(exact + std::copysign(0.5f, exact)));
     out[u] = band;
     magnitude[u] = magnitude_above[u] + static_cast<std::uint32_t>(band < 0 ? -band : band);
     n += band >= threshold;
