@@ -439,6 +439,7 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
   std::int32_t* __restrict whole = warp_whole_.data();
   const int last_row = background.height - 1;
   const float far = 2.0f * std::max(bg_width, bg_height);
+  int partial = 0;  // blocks not whole
   for (int j = 0; j < blocks; ++j) {
     const int u0 = j * kWarpBlock;
     const int count = std::min(kWarpBlock, width - u0);
@@ -456,6 +457,7 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
     offset[j] = iy * stride + ix;
     whole[j] = (count == kWarpBlock) & (ix >= 0) & (ix + kWarpBlock <= last_column) & (iy >= 0) &
                (iy < last_row);
+    partial += 1 - whole[j];
     const float tx = xs - fx, ty = ys - fy;
     const float one = kFixedOne;
     const auto w00 = static_cast<std::int32_t>((1.0f - tx) * (1.0f - ty) * one + 0.5f);
@@ -484,9 +486,11 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
     }
   }
   // The blocks partly or wholly outside the background: pixels [f, e) have their four
-  // neighbours inside it; elsewhere there is nothing to compare with, so no signal.
-  for (int j = 0; j < blocks; ++j) {
+  // neighbours inside it; elsewhere there is nothing to compare with, so no signal. (Few or
+  // none: the scan stops after the last.)
+  for (int j = 0; partial > 0; ++j) {
     if (whole[j]) continue;
+    --partial;
     const int u0 = j * kWarpBlock;
     const int count = std::min(kWarpBlock, width - u0);
     const int ix = left[j], iy = top[j];
@@ -784,7 +788,9 @@ class ColumnSampler {
     const auto k = static_cast<float>(v - v0_);
     const float x = x0_ + dx_ * k, y = y0_ + dy_ * k;
     if (!(x >= 0.0f && x < x_max_ && y >= 0.0f && y < y_max_)) return 0.0f;
-    return std::max(value - bilinear(*background_, x, y), 0.0f);
+    // (A select that compiles to maxss: as a branch its random outcome mispredicts.)
+    const float difference = value - bilinear(*background_, x, y);
+    return difference > 0.0f ? difference : 0.0f;
   }
 
  private:
