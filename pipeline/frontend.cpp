@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <numeric>
@@ -682,12 +683,17 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
         threshold_row(row, lane_threshold, count, mask);
         const Lane* up = band(r - 1);
         const Lane* down = band(r + 1);
-        for (int i0 = c0 - begin; i0 < c1 - begin; i0 += 8) {
+        // Flags 8 at a time, and within them from set flag to set flag (a branch per pixel
+        // would mispredict).
+        const int end = c1 - begin;
+        for (int i0 = c0 - begin; i0 < end; i0 += 8) {
           std::uint64_t any = 0;
           std::memcpy(&any, mask + i0, sizeof any);
-          if (any == 0) continue;
-          for (int i = i0; i < std::min(i0 + 8, c1 - begin); ++i) {
-            if (!mask[i]) continue;
+          if (end - i0 < 8) any &= (std::uint64_t{1} << (8 * (end - i0))) - 1;
+          while (any != 0) {
+            static_assert(std::endian::native == std::endian::little);  // byte k: bits 8k..
+            const int i = i0 + std::countr_zero(any) / 8;
+            any &= any - 1;  // the flag is 0 or 1: clears it
             // A candidate is a maximum of the band-pass within `reach` rows up and down.
             const Lane lane = row[i];
             bool peak = lane > up[i] && lane >= down[i];
