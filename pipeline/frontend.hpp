@@ -55,7 +55,9 @@ class RowNormalisation {
 //   normalised row r       III-B: frame (minus background) resampled to normalised row r
 //   band-pass row r        III-C: inner minus outer box mean down the columns (running sums)
 //   noise of row r         III-D: mean |band-pass| around the pixel, a guard band left out
-//   candidates of row r    III-E: band-pass peaks whose SNR passes the threshold
+//                          (column prefix sums of |band-pass|, looked up at candidates only)
+//   candidates of row r    III-E: band-pass peaks whose SNR passes the threshold (only pixels
+//                          whose band-pass reaches it can: the noise is at least 1)
 // The band-pass of row r needs the normalised rows up to r + outer/2 and the noise of row r the
 // band-pass rows up to r + noise_rows/2, so the pass runs that far ahead. stage_images() runs the
 // same pass and keeps every row of the three intermediate images, for tests and pictures.
