@@ -5,6 +5,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <numeric>
 #include <stdexcept>
 #include <string>
@@ -541,7 +542,11 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
   const auto ring = static_cast<std::size_t>(ring_stride_);
   const float threshold = std::pow(10.0f, static_cast<float>(options_.snr_threshold_db) / 20.0f);
   // In band-pass units: at or above it exactly where the band-pass is at or above the threshold.
-  const auto lane_threshold = static_cast<Lane>(std::ceil(threshold / band_unit_));
+  // (Beyond the lanes' range, as a high threshold in 16-bit lanes can be: never reached.)
+  const float lanes = std::ceil(threshold / band_unit_);
+  constexpr Lane kMostLane = std::numeric_limits<Lane>::max();
+  const Lane lane_threshold =
+      lanes < static_cast<float>(kMostLane) ? static_cast<Lane>(lanes) : kMostLane;
   const float unit = band_unit_;
   const auto a = static_cast<Sum>(band_a_), b_coefficient = static_cast<Sum>(band_b_);
   const int per_column = options_.max_candidates_per_column;
