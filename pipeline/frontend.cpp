@@ -137,8 +137,9 @@ Frontend::Frontend(const ScannerGeometry& geometry, const FrontendOptions& optio
   // The band-pass as an integer: inner mean - outer mean = g (a S_inner - b S_outer) /
   // (inner outer one), with a = outer / g, b = inner / g (g their gcd) and one the normalised
   // rows' fixed-point one. Its extremes are +-255 (1 - inner / outer) grey levels, so it fits
-  // 16-bit lanes when 255 one (outer - inner) inner / g does: with the most fractional bits of
-  // the normalised rows (at most 4, at least 2) for which that holds, else 32-bit lanes and 8.
+  // 16-bit lanes when 255 one (outer - inner) inner / g does (and the outer box's sum,
+  // 255 one outer, fits 16 unsigned bits): with the most fractional bits of the normalised rows
+  // (at most 4, at least 2) for which that holds, else 32-bit lanes and 8.
   const int g = std::gcd(inner_, outer_);
   band_a_ = outer_ / g;
   band_b_ = inner_ / g;
@@ -146,7 +147,7 @@ Frontend::Frontend(const ScannerGeometry& geometry, const FrontendOptions& optio
   int bits = kFixedBits;
   narrow_band_ = false;
   for (int narrow_bits = 4; narrow_bits >= 2 && !narrow_band_; --narrow_bits) {
-    if ((extreme << narrow_bits) <= 32767) {
+    if ((extreme << narrow_bits) <= 32767 && (255L << narrow_bits) * outer_ <= 65535) {
       narrow_band_ = true;
       bits = narrow_bits;
     }
@@ -312,12 +313,12 @@ __attribute__((target("avx2"))) inline void difference_whole_blocks_avx2(
 
 // The band-pass row from the box sums of the normalised rows, each box sliding one row on:
 // sum += entering - leaving (rows of zeros beyond the ends). The band-pass, inner mean minus outer
-// mean, is held as the integer a * inner sum - b * outer sum (Frontend::reset() picks a and b and
-// the unit): exact, and in 16-bit lanes (sixteen to an AVX2 register) wherever it fits, the sums
-// then counted modulo 2^16 (only the band-pass, which fits, is read). With it the column prefix
-// sums of |band-pass| (this row's from the row above's), modulo 2^32: any window of rows of the
-// noise estimate is then the difference of two of them, wanted only where a candidate is.
-// `hits` counts the pixels at or above `threshold` (where candidates can be).
+// mean, is held as the integer a * inner sum - b * outer sum (the constructor picks a and b and
+// the unit): exact, and in 16-bit lanes (sixteen to an AVX2 register) wherever it and the sums
+// fit (a * inner sum alone may not: that arithmetic is modulo 2^16, and the result fits). With it
+// the column prefix sums of |band-pass| (this row's from the row above's), modulo 2^32: any window
+// of rows of the noise estimate is then the difference of two of them, wanted only where a
+// candidate is. `hits` counts the pixels at or above `threshold` (where candidates can be).
 template <class Lane, class Sum = std::make_unsigned_t<Lane>>
 LASERLINE_ROW_KERNEL void band_pass_row(
     Sum* __restrict inner, const std::uint16_t* __restrict inner_entering,
