@@ -162,8 +162,6 @@ Frontend::Frontend(const ScannerGeometry& geometry, const FrontendOptions& optio
   rows_ = RowNormalisation(geometry, options, margin_);
 }
 
-namespace {}  // namespace
-
 void Frontend::reset(int width, int height) {
   if (width != geometry_.width || height != geometry_.height) {
     throw std::invalid_argument("frame size " + std::to_string(width) + "x" +
