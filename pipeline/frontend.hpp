@@ -181,13 +181,13 @@ class Frontend {
   // The columns a strip's kernels run over when the noise window is at most 17 columns wide
   // (the usual case: a constant trip count); wider windows take a generic path.
   static constexpr int kRingColumns = 144;
-  // Rings of rows, indexed by row % ring rows: the normalised rows (stride_ values per row), and
-  // per strip the band-pass rows (ring_stride_ values per row); the per-strip sums below are as
-  // wide.
+  // Rings of rows, indexed by row % ring rows: the normalised rows (normalised_stride_ values per
+  // row), and per strip the band-pass rows and the prefix sums of |band-pass| (ring_stride_ values
+  // per row, and after the last row a row of zeros); the per-strip sums are as wide.
   int normalised_ring_rows_ = 0, band_ring_rows_ = 0, magnitude_ring_rows_ = 0, ring_stride_ = 0;
   // Normalised rows: zeros on either side of the image's columns, `normalised_pad_` on the left.
   int normalised_pad_ = 0, normalised_stride_ = 0;
-  std::vector<std::uint16_t> normalised_ring_;  // normalised rows, 1/256 grey levels
+  std::vector<std::uint16_t> normalised_ring_;  // 8 - normalised_shift_ fractional bits
   BandRings<std::int16_t> narrow_;
   BandRings<std::int32_t> wide_;
   std::vector<std::uint32_t> magnitude_ring_;  // sums of |band-pass| down the columns from row 0
