@@ -154,6 +154,15 @@ Frontend::Frontend(const ScannerGeometry& geometry, const FrontendOptions& optio
   }
   normalised_shift_ = kFixedBits - bits;
   band_unit_ = static_cast<float>(g) / static_cast<float>(inner_ * outer_ * (1 << bits));
+  // A column's sum of |band-pass| over the noise window less its guard band (from prefix sums
+  // modulo 2^32) must stay below 2^32: where wide boxes and a tall window could pass it,
+  // |band-pass| is summed in coarser units.
+  const std::uint64_t window_rows = 2 * static_cast<std::uint64_t>(noise_half_ - guard_);
+  const auto most_band = static_cast<std::uint64_t>(extreme) << bits;
+  magnitude_shift_ = 0;
+  while (window_rows * (most_band >> magnitude_shift_) >= (std::uint64_t{1} << 32))
+    ++magnitude_shift_;
+  magnitude_unit_ = band_unit_ * static_cast<float>(1u << magnitude_shift_);
   // Candidates are local maxima of the band-pass within one laser width along the column: the
   // noise window (guard band excluded) is the same to within a row there, so these are the
   // maxima of the SNR too.
@@ -220,8 +229,8 @@ void Frontend::reset(int width, int height) {
 namespace {
 
 // Interpolation is done in fixed point, 1/256 grey level: weights of 8 bit and 16-bit lanes,
-// clipping at 0 by a saturating subtraction. The normalised rows keep `precision` fractional bits
-// of it (fewer where the band-pass must fit 16-bit lanes, see Frontend::reset), rounded.
+// clipping at 0 by a saturating subtraction. The normalised rows keep 8 - shift fractional bits
+// of it, rounded (fewer where the band-pass is to fit 16-bit lanes: see the constructor).
 
 LASERLINE_ROW_KERNEL std::uint16_t to_precision(unsigned value, int shift) {
   return static_cast<std::uint16_t>((value + ((1u << shift) >> 1)) >> shift);
@@ -317,13 +326,25 @@ __attribute__((target("avx2"))) inline void difference_whole_blocks_avx2(
 // the column prefix sums of |band-pass| (this row's from the row above's), modulo 2^32: any window
 // of rows of the noise estimate is then the difference of two of them, wanted only where a
 // candidate is. `hits` counts the pixels at or above `threshold` (where candidates can be).
+// |band-pass| in the units its prefix sums count (16-bit lanes never need coarser ones).
+template <class Lane>
+LASERLINE_ROW_KERNEL std::uint32_t magnitude_of(Lane band, int shift) {
+  const auto magnitude = static_cast<std::uint32_t>(band < 0 ? -band : band);
+  if constexpr (sizeof(Lane) == 2) {
+    return magnitude;
+  } else {
+    return magnitude >> shift;
+  }
+}
+
 template <class Lane, class Sum = std::make_unsigned_t<Lane>>
 LASERLINE_ROW_KERNEL void band_pass_row(
     Sum* __restrict inner, const std::uint16_t* __restrict inner_entering,
     const std::uint16_t* __restrict inner_leaving, Sum* __restrict outer,
     const std::uint16_t* __restrict outer_entering, const std::uint16_t* __restrict outer_leaving,
-    Sum a, Sum b, const std::uint32_t* __restrict magnitude_above, Lane threshold, int count,
-    Lane* __restrict out, std::uint32_t* __restrict magnitude, int& hits) {
+    Sum a, Sum b, const std::uint32_t* __restrict magnitude_above, int magnitude_shift,
+    Lane threshold, int count, Lane* __restrict out, std::uint32_t* __restrict magnitude,
+    int& hits) {
   int n = 0;
   for (int u = 0; u < count; ++u) {
     const auto i = static_cast<Sum>(inner[u] + inner_entering[u] - inner_leaving[u]);
@@ -332,7 +353,7 @@ LASERLINE_ROW_KERNEL void band_pass_row(
     outer[u] = o;
     const auto band = static_cast<Lane>(static_cast<Sum>(a * i - b * o));
     out[u] = band;
-    magnitude[u] = magnitude_above[u] + static_cast<std::uint32_t>(band < 0 ? -band : band);
+    magnitude[u] = magnitude_above[u] + magnitude_of(band, magnitude_shift);
     n += band >= threshold;
   }
   hits = n;
@@ -346,8 +367,8 @@ LASERLINE_ROW_KERNEL void band_pass_row_cut_short(Sum* inner, const std::uint16_
                                                   const std::uint16_t* outer_entering,
                                                   const std::uint16_t* outer_leaving, float wi,
                                                   float wo, const std::uint32_t* magnitude_above,
-                                                  Lane threshold, int count, Lane* out,
-                                                  std::uint32_t* magnitude, int& hits) {
+                                                  int magnitude_shift, Lane threshold, int count,
+                                                  Lane* out, std::uint32_t* magnitude, int& hits) {
   int n = 0;
   for (int u = 0; u < count; ++u) {
     const auto i = static_cast<Sum>(inner[u] + inner_entering[u] - inner_leaving[u]);
@@ -359,7 +380,7 @@ LASERLINE_ROW_KERNEL void band_pass_row_cut_short(Sum* inner, const std::uint16_
     const auto band =
         static_cast<Lane>(static_cast<std::int32_t>(exact + std::copysign(0.5f, exact)));
     out[u] = band;
-    magnitude[u] = magnitude_above[u] + static_cast<std::uint32_t>(band < 0 ? -band : band);
+    magnitude[u] = magnitude_above[u] + magnitude_of(band, magnitude_shift);
     n += band >= threshold;
   }
   hits = n;
@@ -518,7 +539,7 @@ float Frontend::noise_level(const NoiseRows& rows, int u, int begin) const {
   auto column = [&](int i) LASERLINE_ROW_LAMBDA {
     return (rows.window_end[i] - rows.window_begin[i]) - (rows.guard_end[i] - rows.guard_begin[i]);
   };
-  std::uint32_t sum = 0;
+  std::uint64_t sum = 0;
   if (u >= noise_pad_ && u + noise_pad_ < width_) {
     const int first = u - noise_pad_ - begin;
     for (int i = first; i <= first + 2 * noise_pad_; ++i)
@@ -528,7 +549,7 @@ float Frontend::noise_level(const NoiseRows& rows, int u, int begin) const {
       sum += column(std::clamp(u + k, 0, width_ - 1) - begin);
   }
   // III-D: the minimal noise level is 1.
-  return std::max(static_cast<float>(sum) * band_unit_ * noise_norm_, 1.0f);
+  return std::max(static_cast<float>(sum) * magnitude_unit_ * noise_norm_, 1.0f);
 }
 
 template <class Lane>
@@ -644,12 +665,12 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
         if (b >= ho && b + ho < rows) {
           if (count == kRingColumns) {
             band_pass_row(inner, x(b + hi), x(b - hi - 1), outer, x(b + ho), x(b - ho - 1), a,
-                          b_coefficient, magnitude(b - 1), lane_threshold, kRingColumns, out,
-                          magnitude(b), row_hits);
+                          b_coefficient, magnitude(b - 1), magnitude_shift_, lane_threshold,
+                          kRingColumns, out, magnitude(b), row_hits);
           } else {
             band_pass_row(inner, x(b + hi), x(b - hi - 1), outer, x(b + ho), x(b - ho - 1), a,
-                          b_coefficient, magnitude(b - 1), lane_threshold, count, out, magnitude(b),
-                          row_hits);
+                          b_coefficient, magnitude(b - 1), magnitude_shift_, lane_threshold, count,
+                          out, magnitude(b), row_hits);
           }
         } else {
           const int i0 = std::max(b - hi, 0), i1 = std::min(b + hi + 1, rows);
@@ -657,8 +678,8 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
           const float wi = 1.0f / (static_cast<float>(i1 - i0) * normalised_one * unit);
           const float wo = 1.0f / (static_cast<float>(o1 - o0) * normalised_one * unit);
           band_pass_row_cut_short(inner, x(b + hi), x(b - hi - 1), outer, x(b + ho), x(b - ho - 1),
-                                  wi, wo, magnitude(b - 1), lane_threshold, count, out,
-                                  magnitude(b), row_hits);
+                                  wi, wo, magnitude(b - 1), magnitude_shift_, lane_threshold, count,
+                                  out, magnitude(b), row_hits);
         }
         if (images != nullptr && !images->band_pass.empty()) {
           float* dst = images->band_pass.data() + b * image_stride;

@@ -165,6 +165,10 @@ class Frontend {
   int band_a_ = 3, band_b_ = 1, normalised_shift_ = 4;
   float band_unit_ = 1;
   bool narrow_band_ = true;
+  // The prefix sums of |band-pass| count it in units of magnitude_unit_ = band_unit_ <<
+  // magnitude_shift_ (coarser only where wide boxes and a tall noise window need it).
+  int magnitude_shift_ = 0;
+  float magnitude_unit_ = 1;
   int width_ = 0, height_ = 0, stride_ = 0;
 
   // Inputs of the last set_frame call (views, valid during find_candidates).

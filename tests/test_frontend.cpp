@@ -126,16 +126,20 @@ TEST(Frontend, SignalToNoiseHasAMinimalNoiseOfOneAndMatchesTheImage) {
 // The pass goes down the rows in blocks and across in strips of columns, with running sums; the
 // same images computed directly, whole, from their definitions (III-C, III-D) must agree, across
 // strip edges and the cut-short boxes at the ends. `inner` and `outer` are the box sizes the
-// options give.
-void expect_pass_matches_stages_computed_whole(const FrontendOptions& o, int inner, int outer) {
+// options give. The image is noise, or with `stripes` bands of black and white rows (a strong
+// band-pass everywhere) under the noise. The SNR is checked every `step` rows and columns.
+void expect_pass_matches_stages_computed_whole(const FrontendOptions& o, int inner, int outer,
+                                               bool stripes = false, int step = 1) {
   const ScannerGeometry g = small_geometry();  // 320 columns: three strips
   Frontend frontend(g, o);
   frontend.reset(g.width, g.height);
   Image image(g.width, g.height, 0);
   std::uint32_t state = 12345;
-  for (auto& p : image.pixels) {
+  for (std::size_t i = 0; i < image.pixels.size(); ++i) {
     state = state * 1664525u + 1013904223u;
-    p = static_cast<std::uint8_t>(state >> 24);
+    const int v = static_cast<int>(i) / g.width;
+    image.pixels[i] = static_cast<std::uint8_t>(
+        stripes ? (v / 16 % 2 == 0 ? 200 : 0) + (state >> 27) : state >> 24);
   }
   frontend.set_frame(image.view());
   const int rows = frontend.rows().rows(), stride = frontend.stride(), width = frontend.width();
@@ -162,8 +166,8 @@ void expect_pass_matches_stages_computed_whole(const FrontendOptions& o, int inn
       worst = std::max(worst, std::abs(band[r * stride + u] - expected));
     }
   }
-  for (int r = 0; r < rows; ++r) {
-    for (int u = 0; u < width; ++u) {
+  for (int r = 0; r < rows; r += step) {
+    for (int u = 0; u < width; u += step) {
       double sum = 0;
       for (int k = -pad; k <= pad; ++k) {
         const int c = std::clamp(u + k, 0, width - 1);
@@ -194,6 +198,13 @@ TEST(Frontend, RollingPassMatchesTheStagesComputedWhole) {
   wide.passband_ratio = 3.8;
   EXPECT_FLOAT_EQ(Frontend(small_geometry(), wide).band_pass_unit(), 1.0f / (5 * 19 * 256));
   expect_pass_matches_stages_computed_whole(wide, 5, 19);
+  // 13 and 193 rows and a noise window of 1001: a column's sum of |band-pass| over the window in
+  // band-pass units could pass 2^32 (the prefix sums' modulus), so it is summed in coarser units.
+  FrontendOptions widest;
+  widest.normalised_width_px = 12;
+  widest.passband_ratio = 16;
+  widest.noise_rows = 1001;
+  expect_pass_matches_stages_computed_whole(widest, 13, 193, true, 16);
 }
 
 TEST(Frontend, FindsAWideAndANarrowLineAtSubPixelRows) {
