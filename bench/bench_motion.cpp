@@ -43,17 +43,22 @@ std::vector<std::vector<std::uint8_t>> sim_frames(int width, int height) {
   return render_pair(sim_options(width, height), 10, 13);
 }
 
+// A function that feeds the estimator the two frames in turn, returning its estimate.
+auto alternating_feed(const std::vector<std::vector<std::uint8_t>>& frames, int width, int height,
+                      laserline::pipeline::MotionEstimator& estimator) {
+  return [&frames, width, height, &estimator, next = std::size_t{0}]() mutable {
+    const laserline::pipeline::ImageView view{frames[next].data(), width, height, width};
+    next = 1 - next;
+    return estimator.update(view);
+  };
+}
+
 void BM_frontend_homography_estimation(benchmark::State& state) {
   const int width = static_cast<int>(state.range(0)), height = static_cast<int>(state.range(1));
   const std::vector<std::vector<std::uint8_t>> frames = sim_frames(width, height);
   laserline::pipeline::MotionEstimator estimator;
   estimator.reset(width, height);
-  std::size_t next = 0;
-  const auto feed = [&] {
-    const laserline::pipeline::ImageView view{frames[next].data(), width, height, width};
-    next = 1 - next;
-    return estimator.update(view);
-  };
+  auto feed = alternating_feed(frames, width, height, estimator);
   feed();
   laserline::pipeline::MotionEstimate estimate;
   std::int64_t valid = 0;
@@ -161,12 +166,7 @@ void BM_frontend_camera_motion_estimation(benchmark::State& state) {
   laserline::pipeline::MotionEstimator estimator(motion_options);
   const bool with_camera = state.range(2) != 0;
   estimator.reset(width, height, with_camera ? &geometry : nullptr);
-  std::size_t next = 0;
-  const auto feed = [&] {
-    const laserline::pipeline::ImageView view{frames[next].data(), width, height, width};
-    next = 1 - next;
-    return estimator.update(view);
-  };
+  auto feed = alternating_feed(frames, width, height, estimator);
   feed();
   laserline::pipeline::MotionEstimate estimate;
   std::int64_t valid = 0, scaled = 0;

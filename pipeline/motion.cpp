@@ -1027,17 +1027,26 @@ Eigen::Matrix<double, 9, 1> epipolar_row(double x1, double y1, double x2, double
   return row;
 }
 
-// Squared Sampson distance of a correspondence to the epipolar geometry E (normalised units).
-double sampson_squared(const Matrix3& e, double x1, double y1, double x2, double y2) {
+// The Sampson distance of a correspondence to the epipolar geometry E (normalised units) is
+// residual / sqrt(denominator).
+struct SampsonTerms {
+  double residual, denominator;
+};
+
+SampsonTerms sampson_terms(const Matrix3& e, double x1, double y1, double x2, double y2) {
   const double ex0 = e(0, 0) * x1 + e(0, 1) * y1 + e(0, 2);
   const double ex1 = e(1, 0) * x1 + e(1, 1) * y1 + e(1, 2);
   const double ex2 = e(2, 0) * x1 + e(2, 1) * y1 + e(2, 2);
   const double etx0 = e(0, 0) * x2 + e(1, 0) * y2 + e(2, 0);
   const double etx1 = e(0, 1) * x2 + e(1, 1) * y2 + e(2, 1);
-  const double residual = x2 * ex0 + y2 * ex1 + ex2;
-  const double denominator = ex0 * ex0 + ex1 * ex1 + etx0 * etx0 + etx1 * etx1;
-  return denominator > 0 ? residual * residual / denominator
-                         : std::numeric_limits<double>::infinity();
+  return {x2 * ex0 + y2 * ex1 + ex2, ex0 * ex0 + ex1 * ex1 + etx0 * etx0 + etx1 * etx1};
+}
+
+// Squared Sampson distance (infinite where it is undefined).
+double sampson_squared(const Matrix3& e, double x1, double y1, double x2, double y2) {
+  const SampsonTerms s = sampson_terms(e, x1, y1, x2, y2);
+  return s.denominator > 0 ? s.residual * s.residual / s.denominator
+                           : std::numeric_limits<double>::infinity();
 }
 
 // Depths (d1 in the previous camera, d2 in the current one) of the point seen along (x1, y1, 1)
@@ -1070,15 +1079,10 @@ Matrix3 skew(const Vector3& t) {
   return m;
 }
 
-// Signed Sampson distance (normalised units): its square is sampson_squared().
+// Signed Sampson distance (normalised units): its square is sampson_squared() (0 where undefined).
 double sampson_signed(const Matrix3& e, double x1, double y1, double x2, double y2) {
-  const double ex0 = e(0, 0) * x1 + e(0, 1) * y1 + e(0, 2);
-  const double ex1 = e(1, 0) * x1 + e(1, 1) * y1 + e(1, 2);
-  const double ex2 = e(2, 0) * x1 + e(2, 1) * y1 + e(2, 2);
-  const double etx0 = e(0, 0) * x2 + e(1, 0) * y2 + e(2, 0);
-  const double etx1 = e(0, 1) * x2 + e(1, 1) * y2 + e(2, 1);
-  const double denominator = ex0 * ex0 + ex1 * ex1 + etx0 * etx0 + etx1 * etx1;
-  return denominator > 0 ? (x2 * ex0 + y2 * ex1 + ex2) / std::sqrt(denominator) : 0.0;
+  const SampsonTerms s = sampson_terms(e, x1, y1, x2, y2);
+  return s.denominator > 0 ? s.residual / std::sqrt(s.denominator) : 0.0;
 }
 
 // Levenberg-Marquardt on the inliers' Sampson distances over the five degrees of freedom of
