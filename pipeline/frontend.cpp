@@ -115,9 +115,7 @@ double RowNormalisation::to_source(double r) const {
 
 Frontend::Frontend(const ScannerGeometry& geometry, const FrontendOptions& options)
     : geometry_(geometry), options_(options) {
-#if LASERLINE_AVX2_KERNELS
-  avx2_ = __builtin_cpu_supports("avx2");
-#endif
+  use_intrinsics(true);
   if (!(options.min_depth_m > 0) || !(options.max_depth_m > options.min_depth_m)) {
     throw std::invalid_argument("detector.frontend: need 0 < min_depth_m < max_depth_m");
   }
@@ -251,23 +249,87 @@ LASERLINE_ROW_KERNEL void interpolate_row(const std::uint8_t* __restrict a,
     out[u] = to_precision(static_cast<std::uint16_t>(a[u] * fa + b[u] * fb), shift);
 }
 
+// The four bilinear weights of a warp block (summing to 256).
+struct BlockWeights {
+  std::uint16_t w00, w01, w10, w11;
+};
+
 // `count` pixels of one warp block, minus the background sampled bilinearly at a constant
-// sub-pixel shift (rows p and q of the background, weights w summing to 256), clipped at 0.
-// Called with count = kWarpBlock for whole blocks (nearly all): a constant trip count, which
-// GCC turns into straight vector code.
+// sub-pixel shift (rows p and q of the background), clipped at 0.
 LASERLINE_ROW_KERNEL void difference_block(const std::uint8_t* __restrict a,
                                            const std::uint8_t* __restrict b, std::uint16_t fb,
                                            const std::uint8_t* __restrict p,
-                                           const std::uint8_t* __restrict q,
-                                           const std::uint16_t* __restrict w, int shift, int count,
-                                           std::uint16_t* __restrict out) {
+                                           const std::uint8_t* __restrict q, BlockWeights w,
+                                           int shift, int count, std::uint16_t* __restrict out) {
   const auto fa = static_cast<std::uint16_t>(kFixedOne - fb);
-  const std::uint16_t w00 = w[0], w01 = w[1], w10 = w[2], w11 = w[3];
   for (int k = 0; k < count; ++k) {
     const auto current = static_cast<std::uint16_t>(a[k] * fa + b[k] * fb);
-    const auto warped =
-        static_cast<std::uint16_t>(p[k] * w00 + p[k + 1] * w01 + q[k] * w10 + q[k + 1] * w11);
+    const auto warped = static_cast<std::uint16_t>(p[k] * w.w00 + p[k + 1] * w.w01 + q[k] * w.w10 +
+                                                   q[k + 1] * w.w11);
     out[k] = to_precision(current > warped ? current - warped : 0u, shift);
+  }
+}
+
+// difference_block() as the functor difference_blocks() takes: rows a and b of the current frame
+// (weight fb of b), background rows `stride` apart, the output row.
+struct DifferenceGeneric {
+  const std::uint8_t* a;
+  const std::uint8_t* b;
+  std::uint16_t fb;
+  std::ptrdiff_t stride;
+  int shift;
+  std::uint16_t* out;
+
+  LASERLINE_ROW_KERNEL void operator()(int u, const std::uint8_t* p, BlockWeights w, int count) {
+    difference_block(a + u, b + u, fb, p, p + stride, w, shift, count, out + u);
+  }
+};
+
+// The warp blocks of a normalised row (see Frontend::normalise_row()).
+struct WarpBlocks {
+  const std::int32_t* left;
+  const std::int32_t* top;
+  const std::int32_t* offset;
+  const std::int32_t* whole;
+  const std::int32_t* weights;  // w00, w01, w10, w11 of each block
+  const std::uint8_t* background;
+  std::ptrdiff_t stride;
+  int blocks, width, last_column, last_row;
+  int partial;  // blocks not whole
+
+  BlockWeights weights_of(int j) const {
+    const std::int32_t* w = weights + 4 * j;
+    return {static_cast<std::uint16_t>(w[0]), static_cast<std::uint16_t>(w[1]),
+            static_cast<std::uint16_t>(w[2]), static_cast<std::uint16_t>(w[3])};
+  }
+};
+
+// The row, block by block, through `difference` (DifferenceGeneric or DifferenceAvx2).
+template <class Difference>
+LASERLINE_ROW_KERNEL void difference_blocks(const WarpBlocks& w, Difference& difference,
+                                            std::uint16_t* out) {
+  constexpr int kWarp = Frontend::kWarpBlock;
+  for (int j = 0; j < w.blocks; ++j) {
+    if (w.whole[j]) difference(j * kWarp, w.background + w.offset[j], w.weights_of(j), kWarp);
+  }
+  // The blocks partly or wholly outside the background: pixels [f, e) have their four
+  // neighbours inside it; elsewhere there is nothing to compare with, so no signal. (Few or
+  // none: the scan stops after the last.)
+  for (int j = 0, partial = w.partial; partial > 0; ++j) {
+    if (w.whole[j]) continue;
+    --partial;
+    const int u0 = j * kWarp;
+    const int count = std::min(kWarp, w.width - u0);
+    const int ix = w.left[j], iy = w.top[j];
+    const bool rows_inside = iy >= 0 && iy < w.last_row;
+    const int f = rows_inside ? std::clamp(-ix, 0, count) : count;
+    const int e = rows_inside ? std::clamp(w.last_column - ix, f, count) : count;
+    std::fill(out + u0, out + u0 + f, std::uint16_t{0});
+    std::fill(out + u0 + e, out + u0 + count, std::uint16_t{0});
+    if (f < e) {
+      difference(u0 + f, w.background + static_cast<std::ptrdiff_t>(iy) * w.stride + ix + f,
+                 w.weights_of(j), e - f);
+    }
   }
 }
 
@@ -277,44 +339,85 @@ __attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i widen(const std::ui
   return _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(x)));
 }
 
-// difference_block() for the row's whole blocks (whole[j] != 0; the background's pixels of block
-// j from `background + offset[j]`, rows `stride` apart), in AVX2, sixteen pixels to a register:
-// GCC's own vectorisation of this register-hungry loop widens each load in three steps and
-// spills. (Not forced inline: the function it is called from is also compiled for the baseline.)
-__attribute__((target("avx2"))) inline void difference_whole_blocks_avx2(
-    const std::uint8_t* a, const std::uint8_t* b, std::uint16_t fb, const std::uint8_t* background,
-    int stride, const std::int32_t* whole, const std::int32_t* offset, const std::uint16_t* weights,
-    int blocks, int shift, std::uint16_t* out) {
-  static_assert(Frontend::kWarpBlock % 16 == 0);
-  const __m256i fa_ = _mm256_set1_epi16(static_cast<short>(kFixedOne - fb));
-  const __m256i fb_ = _mm256_set1_epi16(static_cast<short>(fb));
-  const __m256i half = _mm256_set1_epi16(static_cast<short>((1 << shift) >> 1));
-  const __m128i bits = _mm_cvtsi32_si128(shift);
-  for (int j = 0; j < blocks; ++j) {
-    if (!whole[j]) continue;
-    const int u0 = j * Frontend::kWarpBlock;
-    const std::uint8_t* p = background + offset[j];
-    const std::uint8_t* q = p + stride;
-    const std::uint16_t* w = weights + 4 * j;
-    const __m256i w00 = _mm256_set1_epi16(static_cast<short>(w[0]));
-    const __m256i w01 = _mm256_set1_epi16(static_cast<short>(w[1]));
-    const __m256i w10 = _mm256_set1_epi16(static_cast<short>(w[2]));
-    const __m256i w11 = _mm256_set1_epi16(static_cast<short>(w[3]));
-    for (int k = u0; k < u0 + Frontend::kWarpBlock; k += 16) {
-      const __m256i current = _mm256_add_epi16(_mm256_mullo_epi16(widen(a + k), fa_),
-                                               _mm256_mullo_epi16(widen(b + k), fb_));
-      const int i = k - u0;
-      const __m256i warped =
-          _mm256_add_epi16(_mm256_add_epi16(_mm256_mullo_epi16(widen(p + i), w00),
-                                            _mm256_mullo_epi16(widen(p + i + 1), w01)),
-                           _mm256_add_epi16(_mm256_mullo_epi16(widen(q + i), w10),
-                                            _mm256_mullo_epi16(widen(q + i + 1), w11)));
-      // The laser only adds light: clipped at 0 (a saturating subtraction).
-      const __m256i difference = _mm256_subs_epu16(current, warped);
-      _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + k),
-                          _mm256_srl_epi16(_mm256_add_epi16(difference, half), bits));
+// difference_blocks()'s functor in AVX2, sixteen pixels to a register (GCC's own vectorisation
+// of this register-hungry loop widens each load in three steps and spills): rows a and b of the
+// current frame (weight fb of b), background rows `stride` apart, the output row.
+struct DifferenceAvx2 {
+  const std::uint8_t* a;
+  const std::uint8_t* b;
+  std::uint16_t fb_;
+  std::ptrdiff_t stride;
+  int shift;
+  std::uint16_t* out;
+  __m256i fa, fb, half, w00, w01, w10, w11;
+  __m128i bits;
+
+  __attribute__((target("avx2")))
+  DifferenceAvx2(const std::uint8_t* a_, const std::uint8_t* b_, std::uint16_t fb_value,
+                 std::ptrdiff_t stride_, int shift_, std::uint16_t* out_)
+      : a(a_),
+        b(b_),
+        fb_(fb_value),
+        stride(stride_),
+        shift(shift_),
+        out(out_),
+        fa(_mm256_set1_epi16(static_cast<short>(kFixedOne - fb_value))),
+        fb(_mm256_set1_epi16(static_cast<short>(fb_value))),
+        half(_mm256_set1_epi16(static_cast<short>((1 << shift_) >> 1))),
+        bits(_mm_cvtsi32_si128(shift_)) {}
+
+  __attribute__((target("avx2"))) void set_weights(BlockWeights w) {
+    w00 = _mm256_set1_epi16(static_cast<short>(w.w00));
+    w01 = _mm256_set1_epi16(static_cast<short>(w.w01));
+    w10 = _mm256_set1_epi16(static_cast<short>(w.w10));
+    w11 = _mm256_set1_epi16(static_cast<short>(w.w11));
+  }
+
+  // Sixteen pixels: of the current rows x and y, the background rows p and q, into result.
+  __attribute__((target("avx2"))) LASERLINE_ROW_KERNEL void sixteen(const std::uint8_t* x,
+                                                                    const std::uint8_t* y,
+                                                                    const std::uint8_t* p,
+                                                                    const std::uint8_t* q,
+                                                                    std::uint16_t* result) const {
+    const __m256i current =
+        _mm256_add_epi16(_mm256_mullo_epi16(widen(x), fa), _mm256_mullo_epi16(widen(y), fb));
+    const __m256i warped = _mm256_add_epi16(
+        _mm256_add_epi16(_mm256_mullo_epi16(widen(p), w00), _mm256_mullo_epi16(widen(p + 1), w01)),
+        _mm256_add_epi16(_mm256_mullo_epi16(widen(q), w10), _mm256_mullo_epi16(widen(q + 1), w11)));
+    // The laser only adds light: clipped at 0 (a saturating subtraction).
+    const __m256i difference = _mm256_subs_epu16(current, warped);
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(result),
+                        _mm256_srl_epi16(_mm256_add_epi16(difference, half), bits));
+  }
+
+  // Pixels [u, u + count) of the row as difference_block(), p the background pixel under pixel
+  // u: sixteen at a time, the last sixteen overlapping the ones before (they read no further
+  // than difference_block would); fewer than sixteen one by one. (Inlined where
+  // difference_blocks() is: in an AVX2 function.)
+  __attribute__((target("avx2"))) void operator()(int u, const std::uint8_t* p, BlockWeights w,
+                                                  int count) {
+    if (count < 16) {
+      difference_block(a + u, b + u, fb_, p, p + stride, w, shift, count, out + u);
+      return;
+    }
+    set_weights(w);
+    for (int k = 0;; k += 16) {
+      const int i = u + std::min(k, count - 16);
+      sixteen(a + i, b + i, p + (i - u), p + (i - u) + stride, out + i);
+      if (i == u + count - 16) break;
     }
   }
+};
+
+// A normalised row's warp blocks in AVX2. (Not forced inline: the function it is called from is
+// also compiled for the baseline.)
+__attribute__((target("avx2"))) inline void difference_blocks_avx2(const WarpBlocks& w,
+                                                                   const std::uint8_t* a,
+                                                                   const std::uint8_t* b,
+                                                                   std::uint16_t fb, int shift,
+                                                                   std::uint16_t* out) {
+  DifferenceAvx2 difference(a, b, fb, w.stride, shift, out);
+  difference_blocks(w, difference, out);
 }
 #endif
 
@@ -413,6 +516,14 @@ struct SourceRow {
 
 }  // namespace
 
+void Frontend::use_intrinsics(bool use) {
+#if LASERLINE_AVX2_KERNELS
+  avx2_ = use && __builtin_cpu_supports("avx2");
+#else
+  (void)use;
+#endif
+}
+
 void Frontend::set_frame(const ImageView& current) {
   current_ = current;
   subtracting_ = false;
@@ -444,10 +555,6 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
   const auto xn0 = static_cast<float>(g[1] * v + g[2]), xnu = static_cast<float>(g[0]);
   const auto yn0 = static_cast<float>(g[4] * v + g[5]), ynu = static_cast<float>(g[3]);
   const auto wn0 = static_cast<float>(g[7] * v + g[8]), wnu = static_cast<float>(g[6]);
-  // Where each block's centre was in the background (the block moves as a whole), for all
-  // blocks of the row at once, branch-free so that it vectorises: the first pixel's position in
-  // the background, the pixels [first, end) whose four background neighbours lie inside it (the
-  // others have nothing to compare with, so no signal) and the bilinear weights.
   const int blocks = (width_ + kWarpBlock - 1) / kWarpBlock;
   const int width = width_, stride = background.stride, last_column = background.width - 1;
   // Where each block's centre was in the background, for all blocks of the row at once,
@@ -456,7 +563,8 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
   // background sizes (a NaN goes to the far left), so that they convert to int.
   std::int32_t* __restrict left = warp_left_.data();
   std::int32_t* __restrict top = warp_top_.data();
-  std::uint16_t* __restrict weights = warp_weights_.data();
+  // (32-bit weights, four per block: as wide as the positions, so that the loop vectorises.)
+  std::int32_t* __restrict weights = warp_weights_.data();
   std::int32_t* __restrict offset = warp_offset_.data();
   std::int32_t* __restrict whole = warp_whole_.data();
   const int last_row = background.height - 1;
@@ -482,51 +590,35 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
     partial += 1 - whole[j];
     const float tx = xs - fx, ty = ys - fy;
     const float one = kFixedOne;
-    const auto w00 = static_cast<std::int32_t>((1.0f - tx) * (1.0f - ty) * one + 0.5f);
-    const auto w01 = static_cast<std::int32_t>(tx * (1.0f - ty) * one + 0.5f);
-    const auto w10 = static_cast<std::int32_t>((1.0f - tx) * ty * one + 0.5f);
-    // The four sum to 256 (w11 absorbs the rounding).
-    weights[4 * j] = static_cast<std::uint16_t>(w00);
-    weights[4 * j + 1] = static_cast<std::uint16_t>(w01);
-    weights[4 * j + 2] = static_cast<std::uint16_t>(w10);
-    weights[4 * j + 3] = static_cast<std::uint16_t>(std::max(kFixedOne - w00 - w01 - w10, 0));
+    auto rounded = [&](float weight) { return static_cast<std::int32_t>(weight * one + 0.5f); };
+    std::int32_t top_left = rounded((1.0f - tx) * (1.0f - ty));
+    std::int32_t top_right = rounded(tx * (1.0f - ty));
+    std::int32_t bottom_left = rounded((1.0f - tx) * ty);
+    std::int32_t bottom_right = rounded(tx * ty);
+    // The four must sum to 256 (else the background is scaled): the largest, at least 64,
+    // absorbs the rounding (-2 to 2).
+    const std::int32_t rest = kFixedOne - top_left - top_right - bottom_left - bottom_right;
+    const bool right = tx >= 0.5f, bottom = ty >= 0.5f;
+    top_left += !right && !bottom ? rest : 0;
+    top_right += right && !bottom ? rest : 0;
+    bottom_left += !right && bottom ? rest : 0;
+    bottom_right += right && bottom ? rest : 0;
+    weights[4 * j] = top_left;
+    weights[4 * j + 1] = top_right;
+    weights[4 * j + 2] = bottom_left;
+    weights[4 * j + 3] = bottom_right;
   }
+  const WarpBlocks warp{left,   top,    offset, whole,       weights,  background.data,
+                        stride, blocks, width,  last_column, last_row, partial};
 #if LASERLINE_AVX2_KERNELS
   // Inlined into the AVX2 version of this function, a call never made in the other.
   if (avx2_) {
-    difference_whole_blocks_avx2(row.a, row.b, row.fb, background.data, stride, whole, offset,
-                                 weights, blocks, normalised_shift_, out);
-  } else
+    difference_blocks_avx2(warp, row.a, row.b, row.fb, normalised_shift_, out);
+    return;
+  }
 #endif
-  {
-    for (int j = 0; j < blocks; ++j) {
-      if (!whole[j]) continue;
-      const int u0 = j * kWarpBlock;
-      const std::uint8_t* p = background.data + offset[j];
-      difference_block(row.a + u0, row.b + u0, row.fb, p, p + stride, weights + 4 * j,
-                       normalised_shift_, kWarpBlock, out + u0);
-    }
-  }
-  // The blocks partly or wholly outside the background: pixels [f, e) have their four
-  // neighbours inside it; elsewhere there is nothing to compare with, so no signal. (Few or
-  // none: the scan stops after the last.)
-  for (int j = 0; partial > 0; ++j) {
-    if (whole[j]) continue;
-    --partial;
-    const int u0 = j * kWarpBlock;
-    const int count = std::min(kWarpBlock, width - u0);
-    const int ix = left[j], iy = top[j];
-    const bool rows_inside = iy >= 0 && iy < last_row;
-    const int f = rows_inside ? std::clamp(-ix, 0, count) : count;
-    const int e = rows_inside ? std::clamp(last_column - ix, f, count) : count;
-    std::fill(out + u0, out + u0 + f, std::uint16_t{0});
-    std::fill(out + u0 + e, out + u0 + count, std::uint16_t{0});
-    if (f < e) {
-      const std::uint8_t* p = background.data + static_cast<std::ptrdiff_t>(iy) * stride + ix + f;
-      difference_block(row.a + u0 + f, row.b + u0 + f, row.fb, p, p + stride, weights + 4 * j,
-                       normalised_shift_, e - f, out + u0 + f);
-    }
-  }
+  DifferenceGeneric difference{row.a, row.b, row.fb, stride, normalised_shift_, out};
+  difference_blocks(warp, difference, out);
 }
 
 struct Frontend::StageImages {
@@ -818,13 +910,42 @@ class ColumnSampler {
     if (background_ == nullptr) return value;
     const auto k = static_cast<float>(v - v0_);
     const float x = x0_ + dx_ * k, y = y0_ + dy_ * k;
-    if (!(x >= 0.0f && x < x_max_ && y >= 0.0f && y < y_max_)) return 0.0f;
+    if (!inside(x, y)) return 0.0f;
     // (A select that compiles to maxss: as a branch its random outcome mispredicts.)
     const float difference = value - bilinear(*background_, x, y);
     return difference > 0.0f ? difference : 0.0f;
   }
 
+  // The samples of rows [first, first + count) into out, the same values operator() gives. The
+  // run is a straight segment in the background: where both its ends lie inside, all of it does,
+  // and the samples are taken without a check each.
+  void run(int first, int count, float* out) const {
+    const std::uint8_t* column = current_.row(first) + u_;
+    const std::ptrdiff_t stride = current_.stride;
+    if (background_ == nullptr) {
+      for (int k = 0; k < count; ++k)
+        out[k] = column[k * stride];
+      return;
+    }
+    const auto k0 = static_cast<float>(first - v0_),
+               k1 = static_cast<float>(first + count - 1 - v0_);
+    if (!(inside(x0_ + dx_ * k0, y0_ + dy_ * k0) && inside(x0_ + dx_ * k1, y0_ + dy_ * k1))) {
+      for (int k = 0; k < count; ++k)
+        out[k] = (*this)(first + k);
+      return;
+    }
+    for (int k = 0; k < count; ++k) {
+      const auto kf = k0 + static_cast<float>(k);
+      const float difference = static_cast<float>(column[k * stride]) -
+                               bilinear(*background_, x0_ + dx_ * kf, y0_ + dy_ * kf);
+      out[k] = difference > 0.0f ? difference : 0.0f;
+    }
+  }
+
  private:
+  // The four neighbours of background position (x, y) lie inside the background.
+  bool inside(float x, float y) const { return x >= 0.0f && x < x_max_ && y >= 0.0f && y < y_max_; }
+
   const ImageView& current_;
   const ImageView* background_;
   int u_, v0_;
@@ -851,21 +972,24 @@ float Frontend::refine_row(int u, float v_guess) const {
   const int lo = std::max(centre - reach, 0), hi = std::min(centre + reach, last);
   // The samples of the search window are kept for the fit below (its inner samples are usually
   // among them).
-  std::array<float, 32> window;
-  const bool kept = hi - lo < static_cast<int>(window.size());
-  int best = lo;
-  float best_value = at(lo);
-  if (kept) window[0] = best_value;
-  for (int v = lo + 1; v <= hi; ++v) {
+  std::array<float, 32> window{};
+  const int count = std::min(hi - lo + 1, static_cast<int>(window.size()));
+  at.run(lo, count, window.data());
+  int best = 0;
+  for (int k = 1; k < count; ++k)
+    best = window[static_cast<std::size_t>(k)] > window[static_cast<std::size_t>(best)] ? k : best;
+  float best_value = window[static_cast<std::size_t>(best)];
+  // (A window too long for the array, as a very wide line can give: the rest one by one.)
+  for (int v = lo + count; v <= hi; ++v) {
     const float value = at(v);
-    if (kept) window[static_cast<std::size_t>(v - lo)] = value;
     if (value > best_value) {
       best_value = value;
-      best = v;
+      best = v - lo;
     }
   }
+  best += lo;
   auto sample = [&](int v) {
-    return kept && v >= lo && v <= hi ? window[static_cast<std::size_t>(v - lo)] : at(v);
+    return v >= lo && v < lo + count ? window[static_cast<std::size_t>(v - lo)] : at(v);
   };
 
   // A clipped core (real green lasers saturate): the centre of the run, located on its flanks.

@@ -109,6 +109,10 @@ class Frontend {
   int width() const { return width_; }
   int stride() const { return stride_; }
 
+  // Whether the kernels written in AVX2 intrinsics run (where the CPU has AVX2), or their
+  // portable versions: for tests, which check that both give the same results.
+  void use_intrinsics(bool use);
+
   // Pixels warped as one block. Within a block the warp is a translation: exact to
   // kWarpBlock / 2 * max(|d(x - u)/du|, |dy/du|), 0.05 px for a roll of 0.2 degrees between frames.
   static constexpr int kWarpBlock = 32;
@@ -201,7 +205,7 @@ class Frontend {
   std::vector<std::int32_t> warp_left_, warp_top_;
   // ... its first pixel's offset in the background, and whether the block lies wholly inside it.
   std::vector<std::int32_t> warp_offset_, warp_whole_;
-  std::vector<std::uint16_t> warp_weights_;
+  std::vector<std::int32_t> warp_weights_;      // four per block
   std::vector<std::uint16_t> zero_normalised_;  // a row of zeros: the rows beyond the ends
   // Per block of rows: where each row it touches is (offsets into a strip's rings, pointers to
   // the normalised rows), from the first it touches on.
