@@ -203,7 +203,7 @@ void Frontend::reset(int width, int height) {
   const auto ring = static_cast<std::size_t>(ring_stride_);
   const auto s = static_cast<std::size_t>(normalised_stride_);
   normalised_ring_.assign(static_cast<std::size_t>(normalised_ring_rows_) * s, 0);
-  band_hits_.assign(static_cast<std::size_t>(strips * band_ring_rows_), 0);
+  band_most_.assign(static_cast<std::size_t>(strips * band_ring_rows_), 0);
   // Each strip's rings end with a row of zeros (the rows beyond the ends).
   const auto band_ring = static_cast<std::size_t>(strips * (band_ring_rows_ + 1)) * ring;
   narrow_.assign(narrow_band_ ? band_ring : 0, narrow_band_ ? strips * ring : 0);
@@ -219,7 +219,8 @@ void Frontend::reset(int width, int height) {
   warp_whole_.assign(blocks, 0);
   warp_weights_.assign(4 * blocks, 0);
   zero_normalised_.assign(s, 0);
-  row_mask_.assign(ring + 8, 0u);
+  peak_flags_.assign(ring + 8, 0u);
+  peak_bits_.assign((ring + 63) / 64, 0u);
   column_best_.assign(static_cast<std::size_t>(width) * options_.max_candidates_per_column, {});
   column_count_.assign(static_cast<std::size_t>(width), 0);
 }
@@ -428,7 +429,7 @@ __attribute__((target("avx2"))) inline void difference_blocks_avx2(const WarpBlo
 // fit (a * inner sum alone may not: that arithmetic is modulo 2^16, and the result fits). With it
 // the column prefix sums of |band-pass| (this row's from the row above's), modulo 2^32: any window
 // of rows of the noise estimate is then the difference of two of them, wanted only where a
-// candidate is. `hits` counts the pixels at or above `threshold` (where candidates can be).
+// candidate is. `most` is the row's largest band-pass (candidates need the threshold).
 // |band-pass| in the units its prefix sums count (16-bit lanes never need coarser ones).
 template <class Lane>
 LASERLINE_ROW_KERNEL std::uint32_t magnitude_of(Lane band, int shift) {
@@ -445,10 +446,9 @@ LASERLINE_ROW_KERNEL void band_pass_row(
     Sum* __restrict inner, const std::uint16_t* __restrict inner_entering,
     const std::uint16_t* __restrict inner_leaving, Sum* __restrict outer,
     const std::uint16_t* __restrict outer_entering, const std::uint16_t* __restrict outer_leaving,
-    Sum a, Sum b, const std::uint32_t* __restrict magnitude_above, int magnitude_shift,
-    Lane threshold, int count, Lane* __restrict out, std::uint32_t* __restrict magnitude,
-    int& hits) {
-  int n = 0;
+    Sum a, Sum b, const std::uint32_t* __restrict magnitude_above, int magnitude_shift, int count,
+    Lane* __restrict out, std::uint32_t* __restrict magnitude, int& most) {
+  Lane largest = std::numeric_limits<Lane>::min();
   for (int u = 0; u < count; ++u) {
     const auto i = static_cast<Sum>(inner[u] + inner_entering[u] - inner_leaving[u]);
     const auto o = static_cast<Sum>(outer[u] + outer_entering[u] - outer_leaving[u]);
@@ -457,22 +457,21 @@ LASERLINE_ROW_KERNEL void band_pass_row(
     const auto band = static_cast<Lane>(static_cast<Sum>(a * i - b * o));
     out[u] = band;
     magnitude[u] = magnitude_above[u] + magnitude_of(band, magnitude_shift);
-    n += band >= threshold;
+    largest = std::max(largest, band);
   }
-  hits = n;
+  most = largest;
 }
 
 // The same where a box is cut short by an end of the rows (a few rows at either end): the means
 // over what each box covers (inner weight wi, outer wo per unit of sum), in the band-pass's unit.
 template <class Lane, class Sum = std::make_unsigned_t<Lane>>
-LASERLINE_ROW_KERNEL void band_pass_row_cut_short(Sum* inner, const std::uint16_t* inner_entering,
-                                                  const std::uint16_t* inner_leaving, Sum* outer,
-                                                  const std::uint16_t* outer_entering,
-                                                  const std::uint16_t* outer_leaving, float wi,
-                                                  float wo, const std::uint32_t* magnitude_above,
-                                                  int magnitude_shift, Lane threshold, int count,
-                                                  Lane* out, std::uint32_t* magnitude, int& hits) {
-  int n = 0;
+LASERLINE_ROW_KERNEL void band_pass_row_cut_short(
+    Sum* __restrict inner, const std::uint16_t* __restrict inner_entering,
+    const std::uint16_t* __restrict inner_leaving, Sum* __restrict outer,
+    const std::uint16_t* __restrict outer_entering, const std::uint16_t* __restrict outer_leaving,
+    float wi, float wo, const std::uint32_t* __restrict magnitude_above, int magnitude_shift,
+    int count, Lane* __restrict out, std::uint32_t* __restrict magnitude, int& most) {
+  Lane largest = std::numeric_limits<Lane>::min();
   for (int u = 0; u < count; ++u) {
     const auto i = static_cast<Sum>(inner[u] + inner_entering[u] - inner_leaving[u]);
     const auto o = static_cast<Sum>(outer[u] + outer_entering[u] - outer_leaving[u]);
@@ -484,21 +483,94 @@ LASERLINE_ROW_KERNEL void band_pass_row_cut_short(Sum* inner, const std::uint16_
         static_cast<Lane>(static_cast<std::int32_t>(exact + std::copysign(0.5f, exact)));
     out[u] = band;
     magnitude[u] = magnitude_above[u] + magnitude_of(band, magnitude_shift);
-    n += band >= threshold;
+    largest = std::max(largest, band);
   }
-  hits = n;
+  most = largest;
 }
 
-// Flags the pixels of a band-pass row at or above `threshold`: the noise is at least 1, so
-// nothing below can pass the SNR threshold. Few pixels pass (a few percent, about the line), so
-// the rest of the test runs on them alone. 8-bit flags, so that a block of them is checked with
-// one load.
+// The candidates of a band-pass row, as bits (bit i of word i / 64 for column i of the strip):
+// the pixels at or above `threshold` (the noise is at least 1, so nothing below can pass the SNR
+// threshold) that are a maximum of the band-pass within `reach` rows up and down (strictly above
+// the rows above, at least the rows below). Row r + k is at ring + slot[k]. Few pass (a fraction
+// of a percent), so the rest of the test runs on them alone.
+// Portable version: byte flags, then eight at a time into bits.
 template <class Lane>
-LASERLINE_ROW_KERNEL void threshold_row(const Lane* __restrict row, Lane threshold, int count,
-                                        std::uint8_t* __restrict mask) {
+LASERLINE_ROW_KERNEL void peak_bits(const Lane* ring, const std::size_t* slot, int reach,
+                                    Lane threshold, int count, std::uint8_t* __restrict flags,
+                                    std::uint64_t* __restrict bits) {
+  const Lane* __restrict row = ring + slot[0];
   for (int u = 0; u < count; ++u)
-    mask[u] = static_cast<std::uint8_t>(row[u] >= threshold);
+    flags[u] = static_cast<std::uint8_t>(row[u] >= threshold);
+  for (int k = 1; k <= reach; ++k) {
+    const Lane* __restrict above = ring + slot[-k];
+    const Lane* __restrict below = ring + slot[k];
+    for (int u = 0; u < count; ++u)
+      flags[u] = static_cast<std::uint8_t>(flags[u] & (row[u] > above[u]) & (row[u] >= below[u]));
+  }
+  for (int w = 0; w * 64 < count; ++w)
+    bits[w] = 0;
+  for (int c = 0; c < count; c += 8) {
+    std::uint64_t eight = 0;
+    std::memcpy(&eight, flags + c, sizeof eight);
+    // Flags of 0 or 1 in the bytes: the product gathers flag k into bit k of its top byte.
+    static_assert(std::endian::native == std::endian::little);
+    const std::uint64_t gathered = (eight * 0x0102040810204080u) >> 56;
+    bits[c / 64] |= gathered << (c % 64);
+  }
 }
+
+#if LASERLINE_AVX2_KERNELS
+// peak_bits() of sixteen 16-bit lanes from column u: a compare mask.
+template <int kReach = 0>  // the reach if known at compile time
+__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i peaks_of_sixteen(
+    const std::int16_t* ring, const std::size_t* slot, int reach, __m256i below_threshold, int u) {
+  if constexpr (kReach > 0) reach = kReach;
+  const std::int16_t* column = ring + u;
+  const __m256i centre = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(column + slot[0]));
+  __m256i peak = _mm256_cmpgt_epi16(centre, below_threshold);
+  for (int k = 1; k <= reach; ++k) {
+    const __m256i above = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(column + slot[-k]));
+    const __m256i below = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(column + slot[k]));
+    const __m256i higher = _mm256_cmpgt_epi16(centre, above);
+    const __m256i lower = _mm256_cmpgt_epi16(below, centre);
+    peak = _mm256_and_si256(peak, _mm256_andnot_si256(lower, higher));
+  }
+  return peak;
+}
+
+// peak_bits() for 16-bit lanes in AVX2: compare masks packed to bytes and their top bits taken
+// (count a multiple of 16).
+template <int kReach>
+__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL void peak_bits_avx2_with(
+    const std::int16_t* ring, const std::size_t* slot, int reach, std::int16_t threshold, int count,
+    std::uint64_t* bits) {
+  const __m256i below_threshold = _mm256_set1_epi16(static_cast<short>(threshold - 1));
+  for (int w = 0; w * 64 < count; ++w)
+    bits[w] = 0;
+  for (int u = 0; u < count; u += 32) {
+    const __m256i first = peaks_of_sixteen<kReach>(ring, slot, reach, below_threshold, u);
+    const __m256i second =
+        u + 16 < count ? peaks_of_sixteen<kReach>(ring, slot, reach, below_threshold, u + 16)
+                       : _mm256_setzero_si256();
+    // packs interleaves the 128-bit halves: the permutation puts the bytes back in order.
+    const __m256i bytes = _mm256_permute4x64_epi64(_mm256_packs_epi16(first, second), 0xd8);
+    const auto mask = static_cast<std::uint32_t>(_mm256_movemask_epi8(bytes));
+    bits[u / 64] |= static_cast<std::uint64_t>(mask) << (u % 64);
+  }
+}
+
+__attribute__((target("avx2"))) inline void peak_bits_avx2(const std::int16_t* ring,
+                                                           const std::size_t* slot, int reach,
+                                                           std::int16_t threshold, int count,
+                                                           std::uint64_t* bits) {
+  // (The usual reach, 2 rows for a 3-row laser width, unrolled.)
+  if (reach == 2) {
+    peak_bits_avx2_with<2>(ring, slot, reach, threshold, count, bits);
+  } else {
+    peak_bits_avx2_with<0>(ring, slot, reach, threshold, count, bits);
+  }
+}
+#endif
 
 // The two rows of the frame a normalised row is interpolated from, and the weight of the lower.
 struct SourceRow {
@@ -723,7 +795,7 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
       const int begin = c0 - noise_pad_;
       const int count = ring_stride_;
       const std::size_t state = static_cast<std::size_t>(strip) * ring;
-      int* hits = band_hits_.data() + static_cast<std::size_t>(strip) * band_ring_rows_;
+      int* most = band_most_.data() + static_cast<std::size_t>(strip) * band_ring_rows_;
       Sum* inner = rings.inner.data() + state;
       Sum* outer = rings.outer.data() + state;
       Lane* band_ring = rings.band.data() + state * static_cast<std::size_t>(band_ring_rows_ + 1);
@@ -753,16 +825,16 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
       }
       for (int b = next_band; b < band_end; ++b) {
         Lane* out = band(b);
-        int& row_hits = hits[b % band_ring_rows_];
+        int& row_most = most[b % band_ring_rows_];
         if (b >= ho && b + ho < rows) {
           if (count == kRingColumns) {
             band_pass_row(inner, x(b + hi), x(b - hi - 1), outer, x(b + ho), x(b - ho - 1), a,
-                          b_coefficient, magnitude(b - 1), magnitude_shift_, lane_threshold,
-                          kRingColumns, out, magnitude(b), row_hits);
+                          b_coefficient, magnitude(b - 1), magnitude_shift_, kRingColumns, out,
+                          magnitude(b), row_most);
           } else {
             band_pass_row(inner, x(b + hi), x(b - hi - 1), outer, x(b + ho), x(b - ho - 1), a,
-                          b_coefficient, magnitude(b - 1), magnitude_shift_, lane_threshold, count,
-                          out, magnitude(b), row_hits);
+                          b_coefficient, magnitude(b - 1), magnitude_shift_, count, out,
+                          magnitude(b), row_most);
           }
         } else {
           const int i0 = std::max(b - hi, 0), i1 = std::min(b + hi + 1, rows);
@@ -770,8 +842,8 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
           const float wi = 1.0f / (static_cast<float>(i1 - i0) * normalised_one * unit);
           const float wo = 1.0f / (static_cast<float>(o1 - o0) * normalised_one * unit);
           band_pass_row_cut_short(inner, x(b + hi), x(b - hi - 1), outer, x(b + ho), x(b - ho - 1),
-                                  wi, wo, magnitude(b - 1), magnitude_shift_, lane_threshold, count,
-                                  out, magnitude(b), row_hits);
+                                  wi, wo, magnitude(b - 1), magnitude_shift_, count, out,
+                                  magnitude(b), row_most);
         }
         if (images != nullptr && !images->band_pass.empty()) {
           float* dst = images->band_pass.data() + b * image_stride;
@@ -795,28 +867,34 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
         }
         const bool searched =
             r >= std::max(margin_, reach_) && r < rows - std::max(margin_, reach_);
-        if (!searched || hits[r % band_ring_rows_] == 0) continue;
-        std::uint8_t* __restrict mask = row_mask_.data();
-        threshold_row(row, lane_threshold, count, mask);
+        if (!searched || most[r % band_ring_rows_] < lane_threshold) continue;
+        // Candidates: maxima of the band-pass within `reach` rows at or above the threshold.
+        const std::size_t* rows_at = band_rows_.data() + (r - band_base);
+        std::uint64_t* bits = peak_bits_.data();
+#if LASERLINE_AVX2_KERNELS
+        if constexpr (std::is_same_v<Lane, std::int16_t>) {
+          if (avx2_) {
+            peak_bits_avx2(band_ring, rows_at, reach_, lane_threshold, count, bits);
+          } else {
+            peak_bits(band_ring, rows_at, reach_, lane_threshold, count, peak_flags_.data(), bits);
+          }
+        } else
+#endif
+        {
+          peak_bits(band_ring, rows_at, reach_, lane_threshold, count, peak_flags_.data(), bits);
+        }
         const Lane* up = band(r - 1);
         const Lane* down = band(r + 1);
-        // Flags 8 at a time, and within them from set flag to set flag (a branch per pixel
+        // From set bit to set bit over the strip's own columns [first, end) (a branch per pixel
         // would mispredict).
-        const int end = c1 - begin;
-        for (int i0 = c0 - begin; i0 < end; i0 += 8) {
-          std::uint64_t any = 0;
-          std::memcpy(&any, mask + i0, sizeof any);
-          if (end - i0 < 8) any &= (std::uint64_t{1} << (8 * (end - i0))) - 1;
-          while (any != 0) {
-            static_assert(std::endian::native == std::endian::little);  // byte k: bits 8k..
-            const int i = i0 + std::countr_zero(any) / 8;
-            any &= any - 1;  // the flag is 0 or 1: clears it
-            // A candidate is a maximum of the band-pass within `reach` rows up and down.
+        const int first = c0 - begin, end = c1 - begin;
+        for (int w = first / 64; w * 64 < end; ++w) {
+          std::uint64_t word = bits[w];
+          if (first > w * 64) word &= ~std::uint64_t{0} << (first - w * 64);
+          if (end < w * 64 + 64) word &= (std::uint64_t{1} << (end - w * 64)) - 1;
+          for (; word != 0; word &= word - 1) {
+            const int i = w * 64 + std::countr_zero(word);
             const Lane lane = row[i];
-            bool peak = lane > up[i] && lane >= down[i];
-            for (int k = 2; k <= reach_ && peak; ++k)
-              peak = lane > band(r - k)[i] && lane >= band(r + k)[i];
-            if (!peak) continue;
             const int u = begin + i;
             const float value = static_cast<float>(lane) * unit;
             const float snr = value / noise_at(u);

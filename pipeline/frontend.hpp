@@ -199,7 +199,7 @@ class Frontend {
   BandRings<std::int16_t> narrow_;
   BandRings<std::int32_t> wide_;
   std::vector<std::uint32_t> magnitude_ring_;  // sums of |band-pass| down the columns from row 0
-  std::vector<int> band_hits_;                 // per band-pass row of a strip: pixels >= threshold
+  std::vector<int> band_most_;                 // per band-pass row of a strip: its largest value
   // Per warp block of the row being normalised: where its first pixel lies in the background
   // (integer column and row) and the four bilinear weights.
   std::vector<std::int32_t> warp_left_, warp_top_;
@@ -211,7 +211,9 @@ class Frontend {
   // the normalised rows), from the first it touches on.
   std::vector<std::size_t> band_rows_, magnitude_rows_;
   std::vector<const std::uint16_t*> normalised_rows_;
-  std::vector<std::uint8_t> row_mask_;  // one row of a strip: candidates
+  // One row of a strip's candidates: flags (the portable kernel's), bits.
+  std::vector<std::uint8_t> peak_flags_;
+  std::vector<std::uint64_t> peak_bits_;
   struct Peak {
     float r = 0;     // normalised row of the band-pass peak (sub-row)
     float snr = 0;   // amplitude ratio
