@@ -37,6 +37,7 @@ namespace laserline::pipeline {
 namespace {
 
 constexpr double kFwhmToSigma = 2.3548200450309493;
+constexpr float kDecibelsPerNeper = 8.68588963806503655f;  // 20 / ln 10
 // Interpolation is done in fixed point, 1/256 grey level (see the row kernels).
 constexpr int kFixedOne = 256;
 constexpr int kFixedBits = 8;
@@ -94,6 +95,10 @@ RowNormalisation::RowNormalisation(const ScannerGeometry& g, const FrontendOptio
   r0_ = 0.0;
   r0_ = static_cast<double>(margin) - to_normalised(v_lo);
   const int count = static_cast<int>(std::ceil(to_normalised(v_hi))) + 1 + margin;
+  single_alpha_ = static_cast<float>(alpha_);
+  single_inverse_beta_ = static_cast<float>(1.0 / beta_);
+  single_rate_ = static_cast<float>(beta_ / scale_);
+  single_r0_ = static_cast<float>(r0_);
   source_row_.resize(static_cast<std::size_t>(count));
   const float last = static_cast<float>(g.height - 1);
   for (int r = 0; r < count; ++r) {
@@ -109,6 +114,10 @@ double RowNormalisation::to_normalised(double v) const {
 
 double RowNormalisation::to_source(double r) const {
   return (std::exp((r - r0_) * beta_ / scale_) - alpha_) / beta_;
+}
+
+float RowNormalisation::to_source_single(float r) const {
+  return (std::exp((r - single_r0_) * single_rate_) - single_alpha_) * single_inverse_beta_;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -963,15 +972,68 @@ void Frontend::stage_images(std::span<float> normalised, std::span<float> band_p
 
 namespace {
 
+#if LASERLINE_AVX2_KERNELS
+// ColumnSampler::run() in AVX2, eight samples to a register: the current frame's column from
+// `column` (rows `stride` apart) minus the background at x0 + dx k, y0 + dy k for k = k0, k0 + 1,
+// ..., clipped at 0; the same arithmetic as bilinear(), so the same values. The gathers read four
+// bytes: every position must lie in [0, width - 4) x [0, height - 1) of the background, and the
+// column at least four bytes before the end of its row.
+__attribute__((target("avx2"))) inline void column_run_avx2(const std::uint8_t* column,
+                                                            std::ptrdiff_t stride,
+                                                            const ImageView& background, float x0,
+                                                            float y0, float dx, float dy, float k0,
+                                                            int count, float* out) {
+  const __m256i low_byte = _mm256_set1_epi32(0xff);
+  const __m256i background_stride = _mm256_set1_epi32(background.stride);
+  const __m256i column_stride = _mm256_set1_epi32(static_cast<int>(stride));
+  const auto* top_row = reinterpret_cast<const int*>(background.data);
+  const auto* bottom_row = reinterpret_cast<const int*>(background.data + background.stride);
+  const auto* current = reinterpret_cast<const int*>(column);
+  const __m256i zero = _mm256_setzero_si256();
+  for (int k = 0; k < count; k += 8) {
+    const __m256i lanes =
+        _mm256_add_epi32(_mm256_set1_epi32(k), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+    const __m256i wanted = _mm256_cmpgt_epi32(_mm256_set1_epi32(count), lanes);
+    const __m256 kf = _mm256_add_ps(_mm256_set1_ps(k0), _mm256_cvtepi32_ps(lanes));
+    const __m256 x = _mm256_add_ps(_mm256_set1_ps(x0), _mm256_mul_ps(_mm256_set1_ps(dx), kf));
+    const __m256 y = _mm256_add_ps(_mm256_set1_ps(y0), _mm256_mul_ps(_mm256_set1_ps(dy), kf));
+    const __m256i ix = _mm256_cvttps_epi32(x), iy = _mm256_cvttps_epi32(y);
+    const __m256 fx = _mm256_sub_ps(x, _mm256_cvtepi32_ps(ix));
+    const __m256 fy = _mm256_sub_ps(y, _mm256_cvtepi32_ps(iy));
+    const __m256i offset = _mm256_add_epi32(_mm256_mullo_epi32(iy, background_stride), ix);
+    const __m256i top = _mm256_mask_i32gather_epi32(zero, top_row, offset, wanted, 1);
+    const __m256i bottom = _mm256_mask_i32gather_epi32(zero, bottom_row, offset, wanted, 1);
+    const __m256i value = _mm256_mask_i32gather_epi32(
+        zero, current, _mm256_mullo_epi32(lanes, column_stride), wanted, 1);
+    const __m256 p00 = _mm256_cvtepi32_ps(_mm256_and_si256(top, low_byte));
+    const __m256 p01 = _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srli_epi32(top, 8), low_byte));
+    const __m256 p10 = _mm256_cvtepi32_ps(_mm256_and_si256(bottom, low_byte));
+    const __m256 p11 = _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srli_epi32(bottom, 8), low_byte));
+    const __m256 upper = _mm256_add_ps(p00, _mm256_mul_ps(fx, _mm256_sub_ps(p01, p00)));
+    const __m256 lower = _mm256_add_ps(p10, _mm256_mul_ps(fx, _mm256_sub_ps(p11, p10)));
+    const __m256 warped = _mm256_add_ps(upper, _mm256_mul_ps(fy, _mm256_sub_ps(lower, upper)));
+    const __m256 difference =
+        _mm256_max_ps(_mm256_sub_ps(_mm256_cvtepi32_ps(_mm256_and_si256(value, low_byte)), warped),
+                      _mm256_setzero_ps());
+    if (count - k >= 8) {
+      _mm256_storeu_ps(out + k, difference);
+    } else {
+      _mm256_maskstore_ps(out + k, wanted, difference);
+    }
+  }
+}
+#endif
+
 // The background-free column u near one row: the current frame minus the background seen
 // through the homography, which along a short stretch of column moves linearly with the row.
 // Clipped at 0 as in normalise_subtracting(): the previous frame's laser, warped a few pixels
 // away, must not pull the baseline of the fit down on one side.
 class ColumnSampler {
  public:
+  // `intrinsics`: run() may use column_run_avx2().
   ColumnSampler(const ImageView& current, const ImageView* background, const Homography& h, int u,
-                int v)
-      : current_(current), background_(background), u_(u), v0_(v) {
+                int v, bool intrinsics)
+      : current_(current), background_(background), u_(u), v0_(v), intrinsics_(intrinsics) {
     if (background_ == nullptr) return;
     const auto [x0, y0] = h.map(u, v);
     const auto [x1, y1] = h.map(u, v + 1);
@@ -1007,6 +1069,15 @@ class ColumnSampler {
     }
     const auto k0 = static_cast<float>(first - v0_),
                k1 = static_cast<float>(first + count - 1 - v0_);
+#if LASERLINE_AVX2_KERNELS
+    const float x_first = x0_ + dx_ * k0, x_last = x0_ + dx_ * k1;
+    const float gathered = static_cast<float>(background_->width - 4);
+    if (intrinsics_ && u_ + 4 <= current_.width && inside(x_first, y0_ + dy_ * k0) &&
+        inside(x_last, y0_ + dy_ * k1) && x_first < gathered && x_last < gathered) {
+      column_run_avx2(column, stride, *background_, x0_, y0_, dx_, dy_, k0, count, out);
+      return;
+    }
+#endif
     if (!(inside(x0_ + dx_ * k0, y0_ + dy_ * k0) && inside(x0_ + dx_ * k1, y0_ + dy_ * k1))) {
       for (int k = 0; k < count; ++k)
         out[k] = (*this)(first + k);
@@ -1022,11 +1093,14 @@ class ColumnSampler {
 
  private:
   // The four neighbours of background position (x, y) lie inside the background.
-  bool inside(float x, float y) const { return x >= 0.0f && x < x_max_ && y >= 0.0f && y < y_max_; }
+  bool inside(float x, float y) const {
+    return x >= 0.0f && x < x_max_ && y >= 0.0f && y < y_max_;
+  }
 
   const ImageView& current_;
   const ImageView* background_;
   int u_, v0_;
+  bool intrinsics_;
   float x0_ = 0, y0_ = 0, dx_ = 0, dy_ = 0, x_max_ = 0, y_max_ = 0;
 };
 
@@ -1044,14 +1118,15 @@ float Frontend::refine_row(int u, float v_guess) const {
       static_cast<int>(std::ceil(0.5 * width / options_.normalised_width_px + 0.5)) + 1;
   // (Rounded likewise: a negative guess goes to row 0 either way.)
   const int centre = std::clamp(static_cast<int>(v_guess + 0.5f), 0, last);
-  const ColumnSampler at(current_, subtracting_ ? &background_ : nullptr, to_background_, u,
-                         centre);
+  const ColumnSampler at(current_, subtracting_ ? &background_ : nullptr, to_background_, u, centre,
+                         avx2_);
 
   const int lo = std::max(centre - reach, 0), hi = std::min(centre + reach, last);
   // The samples of the search window are kept for the fit below (its inner samples are usually
   // among them).
-  std::array<float, 32> window{};
+  std::array<float, 32> window;  // (not zeroed: run() fills what is read)
   const int count = std::min(hi - lo + 1, static_cast<int>(window.size()));
+  if (count < 1) return v_guess;  // (never: lo <= centre <= hi)
   at.run(lo, count, window.data());
   int best = 0;
   for (int k = 1; k < count; ++k)
@@ -1127,9 +1202,9 @@ void Frontend::find_candidates(Profile& out) {
       point.u = u;
       // Only the chosen point gets the sub-pixel fit (the costly part of this stage); the others
       // keep the band-pass peak's row, good to about half a laser width.
-      const auto v = static_cast<float>(rows_.to_source(best[i].r));
+      const float v = rows_.to_source_single(best[i].r);
       point.v = i == strongest ? refine_row(u, v) : v;
-      point.snr_db = 20.0f * std::log10(best[i].snr);
+      point.snr_db = kDecibelsPerNeper * std::log(best[i].snr);  // 20 log10 (cheaper)
       point.valid = i == strongest;
       if (!out.add(point)) return;
     }
