@@ -50,6 +50,12 @@ int odd_at_least_one(double x) {
   return n % 2 == 1 ? n : n + 1;
 }
 
+// std::ceil(x) for 0 <= x < 2^31, without the call the baseline x86-64 makes for it.
+inline int ceil_positive(double x) {
+  const int whole = static_cast<int>(x);
+  return whole + (static_cast<double>(whole) < x ? 1 : 0);
+}
+
 // Bilinear sample of a mono8 image; (x, y) must lie within [0, w-1) x [0, h-1).
 inline float bilinear(const ImageView& image, float x, float y) {
   const int ix = static_cast<int>(x);
@@ -1112,10 +1118,9 @@ float Frontend::refine_row(int u, float v_guess) const {
   const double sigma = width / kFwhmToSigma;
   // Rounded by truncation after adding 0.5 (sigma > 0): what lround gives, without the call.
   const int spacing = std::max(1, static_cast<int>(sigma + 0.5));
-  const int edge = static_cast<int>(std::ceil(2.5 * sigma)) + 1;
+  const int edge = ceil_positive(2.5 * sigma) + 1;
   // The guess comes from a normalised row, good to about half a normalised width.
-  const int reach =
-      static_cast<int>(std::ceil(0.5 * width / options_.normalised_width_px + 0.5)) + 1;
+  const int reach = ceil_positive(0.5 * width / options_.normalised_width_px + 0.5) + 1;
   // (Rounded likewise: a negative guess goes to row 0 either way.)
   const int centre = std::clamp(static_cast<int>(v_guess + 0.5f), 0, last);
   const ColumnSampler at(current_, subtracting_ ? &background_ : nullptr, to_background_, u, centre,
