@@ -218,13 +218,14 @@ void Frontend::reset(int width, int height) {
   const auto ring = static_cast<std::size_t>(ring_stride_);
   const auto s = static_cast<std::size_t>(normalised_stride_);
   normalised_ring_.assign(static_cast<std::size_t>(normalised_ring_rows_) * s, 0);
-  band_most_.assign(static_cast<std::size_t>(strips * band_ring_rows_), 0);
+  band_most_.assign(static_cast<std::size_t>(strips * (band_ring_rows_ + 1)), 0);
   // Each strip's rings end with a row of zeros (the rows beyond the ends).
   const auto band_ring = static_cast<std::size_t>(strips * (band_ring_rows_ + 1)) * ring;
   narrow_.assign(narrow_band_ ? band_ring : 0, narrow_band_ ? strips * ring : 0);
   wide_.assign(narrow_band_ ? 0 : band_ring, narrow_band_ ? 0 : strips * ring);
   magnitude_ring_.assign(static_cast<std::size_t>(strips * (magnitude_ring_rows_ + 1)) * ring, 0);
   band_rows_.assign(static_cast<std::size_t>(kRowBlock + look + 2 * reach_ + 1), 0);
+  band_slots_.assign(band_rows_.size(), 0);
   magnitude_rows_.assign(static_cast<std::size_t>(kRowBlock + look + noise_half_ + 2), 0);
   normalised_rows_.assign(static_cast<std::size_t>(kRowBlock + look + outer_ + 3), nullptr);
   const auto blocks = static_cast<std::size_t>((width + kWarpBlock - 1) / kWarpBlock);
@@ -791,14 +792,22 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
     // Where the rows the block touches are, the same in every strip: as offsets into a strip's
     // rings (rows beyond the ends: the zero row after the ring's last), and the normalised rows.
     const int band_base = r_begin - reach_, band_top = std::max(band_end, r_end + reach_);
-    for (int r = band_base; r < band_top; ++r) {
-      const int slot = r < 0 || r >= rows ? band_ring_rows_ : r % band_ring_rows_;
-      band_rows_[r - band_base] = static_cast<std::size_t>(slot) * ring;
+    // (Slots counted on from the first, wrapping: a division per row and strip was 2% of the
+    // time.)
+    for (int r = band_base, slot = band_base < 0 ? 0 : band_base % band_ring_rows_; r < band_top;
+         ++r) {
+      const int at = r < 0 || r >= rows ? band_ring_rows_ : slot;
+      band_slots_[r - band_base] = at;
+      band_rows_[r - band_base] = static_cast<std::size_t>(at) * ring;
+      if (r >= 0) slot = slot + 1 == band_ring_rows_ ? 0 : slot + 1;
     }
     const int magnitude_base = r_begin - nh - 1;
-    for (int r = magnitude_base; r < band_end; ++r) {
-      const int slot = r < 0 ? magnitude_ring_rows_ : r % magnitude_ring_rows_;
-      magnitude_rows_[r - magnitude_base] = static_cast<std::size_t>(slot) * ring;
+    for (int r = magnitude_base,
+             slot = magnitude_base < 0 ? 0 : magnitude_base % magnitude_ring_rows_;
+         r < band_end; ++r) {
+      const int at = r < 0 ? magnitude_ring_rows_ : slot;
+      magnitude_rows_[r - magnitude_base] = static_cast<std::size_t>(at) * ring;
+      if (r >= 0) slot = slot + 1 == magnitude_ring_rows_ ? 0 : slot + 1;
     }
     const int normalised_base = next_band - ho - 1;
     for (int r = normalised_base; r <= band_end + ho; ++r)
@@ -810,7 +819,7 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
       const int begin = c0 - noise_pad_;
       const int count = ring_stride_;
       const std::size_t state = static_cast<std::size_t>(strip) * ring;
-      int* most = band_most_.data() + static_cast<std::size_t>(strip) * band_ring_rows_;
+      int* most = band_most_.data() + static_cast<std::size_t>(strip) * (band_ring_rows_ + 1);
       Sum* inner = rings.inner.data() + state;
       Sum* outer = rings.outer.data() + state;
       Lane* band_ring = rings.band.data() + state * static_cast<std::size_t>(band_ring_rows_ + 1);
@@ -840,7 +849,7 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
       }
       for (int b = next_band; b < band_end; ++b) {
         Lane* out = band(b);
-        int& row_most = most[b % band_ring_rows_];
+        int& row_most = most[band_slots_[b - band_base]];
         if (b >= ho && b + ho < rows) {
           if (count == kRingColumns) {
             band_pass_row(inner, x(b + hi), x(b - hi - 1), outer, x(b + ho), x(b - ho - 1), a,
@@ -882,7 +891,7 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
         }
         const bool searched =
             r >= std::max(margin_, reach_) && r < rows - std::max(margin_, reach_);
-        if (!searched || most[r % band_ring_rows_] < lane_threshold) continue;
+        if (!searched || most[band_slots_[r - band_base]] < lane_threshold) continue;
         // Candidates: maxima of the band-pass within `reach` rows at or above the threshold.
         const std::size_t* rows_at = band_rows_.data() + (r - band_base);
         std::uint64_t* bits = peak_bits_.data();

@@ -212,6 +212,7 @@ class Frontend {
   // Per block of rows: where each row it touches is (offsets into a strip's rings, pointers to
   // the normalised rows), from the first it touches on.
   std::vector<std::size_t> band_rows_, magnitude_rows_;
+  std::vector<int> band_slots_;  // the band-pass rows' slots (band_rows_ = slot * ring stride)
   std::vector<const std::uint16_t*> normalised_rows_;
   // One row of a strip's candidates: flags (the portable kernel's), bits.
   std::vector<std::uint8_t> peak_flags_;
