@@ -133,7 +133,7 @@ TEST(Frontend, SignalToNoiseHasAMinimalNoiseOfOneAndMatchesTheImage) {
 // band-pass everywhere) under the noise. The SNR is checked every `step` rows and columns.
 void expect_pass_matches_stages_computed_whole(const FrontendOptions& o, int inner, int outer,
                                                bool stripes = false, int step = 1) {
-  const ScannerGeometry g = small_geometry();  // 320 columns: three strips
+  const ScannerGeometry g = small_geometry();  // 320 columns: two strips
   Frontend frontend(g, o);
   frontend.reset(g.width, g.height);
   Image image(g.width, g.height, 0);
