@@ -713,20 +713,75 @@ struct Frontend::StageImages {
   std::span<float> normalised, band_pass, signal_to_noise;
 };
 
+namespace {
+
+// The sum of |band-pass| over a noise window less its guard band (see Frontend::noise_level())
+// in column i, from the prefix sums: an exact integer (the differences of the modulo-2^32 prefix
+// sums are the true sums).
+LASERLINE_ROW_KERNEL std::uint32_t noise_column(const Frontend::NoiseRows& rows, int i) {
+  return (rows.window_end[i] - rows.window_begin[i]) - (rows.guard_end[i] - rows.guard_begin[i]);
+}
+
+#if LASERLINE_AVX2_KERNELS
+__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i eight(const std::uint32_t* x) {
+  return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(x));
+}
+
+// noise_column() of columns [first, first + 8) in AVX2.
+__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i
+noise_columns_avx2(const Frontend::NoiseRows& rows, int first) {
+  return _mm256_sub_epi32(
+      _mm256_sub_epi32(eight(rows.window_end + first), eight(rows.window_begin + first)),
+      _mm256_sub_epi32(eight(rows.guard_end + first), eight(rows.guard_begin + first)));
+}
+
+// Eight 32-bit columns added to four 64-bit sums.
+__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i add_widened(__m256i total,
+                                                                         __m256i columns) {
+  total = _mm256_add_epi64(total, _mm256_cvtepu32_epi64(_mm256_castsi256_si128(columns)));
+  return _mm256_add_epi64(total, _mm256_cvtepu32_epi64(_mm256_extracti128_si256(columns, 1)));
+}
+
+// The sum of noise_column() over columns [first, first + count) in AVX2, eight columns to a
+// register (count at least 8: the last eight overlap the ones before, which are masked off).
+__attribute__((target("avx2"))) inline std::uint64_t noise_sum_avx2(const Frontend::NoiseRows& rows,
+                                                                    int first, int count) {
+  __m256i total = _mm256_setzero_si256();
+  int done = 0;
+  for (; done + 8 <= count; done += 8)
+    total = add_widened(total, noise_columns_avx2(rows, first + done));
+  if (done < count) {
+    const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    const __m256i fresh = _mm256_cmpgt_epi32(lane, _mm256_set1_epi32(7 - (count - done)));
+    total =
+        add_widened(total, _mm256_and_si256(noise_columns_avx2(rows, first + count - 8), fresh));
+  }
+  const __m128i pairs =
+      _mm_add_epi64(_mm256_castsi256_si128(total), _mm256_extracti128_si256(total, 1));
+  return static_cast<std::uint64_t>(_mm_cvtsi128_si64(pairs)) +
+         static_cast<std::uint64_t>(_mm_extract_epi64(pairs, 1));
+}
+#endif
+
+}  // namespace
+
 float Frontend::noise_level(const NoiseRows& rows, int u, int begin) const {
-  // Sums of |band-pass| over the window less its guard band, column by column (exact integers;
-  // the differences of the modulo-2^32 prefix sums are the true sums).
-  auto column = [&](int i) LASERLINE_ROW_LAMBDA {
-    return (rows.window_end[i] - rows.window_begin[i]) - (rows.guard_end[i] - rows.guard_begin[i]);
-  };
   std::uint64_t sum = 0;
+  const int count = 2 * noise_pad_ + 1;
   if (u >= noise_pad_ && u + noise_pad_ < width_) {
     const int first = u - noise_pad_ - begin;
-    for (int i = first; i <= first + 2 * noise_pad_; ++i)
-      sum += column(i);
+#if LASERLINE_AVX2_KERNELS
+    if (avx2_ && count >= 8) {
+      sum = noise_sum_avx2(rows, first, count);
+    } else
+#endif
+    {
+      for (int i = first; i < first + count; ++i)
+        sum += noise_column(rows, i);
+    }
   } else {  // at the image's sides the window repeats the edge column
     for (int k = -noise_pad_; k <= noise_pad_; ++k)
-      sum += column(std::clamp(u + k, 0, width_ - 1) - begin);
+      sum += noise_column(rows, std::clamp(u + k, 0, width_ - 1) - begin);
   }
   // III-D: the minimal noise level is 1.
   return std::max(static_cast<float>(sum) * magnitude_unit_ * noise_norm_, 1.0f);

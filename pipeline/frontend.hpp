@@ -147,12 +147,15 @@ class Frontend {
   // The prefix sums of |band-pass| (rows [0, r] summed down the columns, modulo 2^32) that bound
   // the noise window of a row and its guard band: the window is the rows (window_begin,
   // window_end].
+ public:
   struct NoiseRows {
     const std::uint32_t* window_begin;
     const std::uint32_t* window_end;
     const std::uint32_t* guard_begin;
     const std::uint32_t* guard_end;
   };
+
+ private:
   // III-D at column u (rows holding columns from `begin` on): the mean |band-pass| around it, a
   // guard band left out, at least 1.
   float noise_level(const NoiseRows& rows, int u, int begin) const;
