@@ -36,8 +36,8 @@ namespace laserline::pipeline {
 
 namespace {
 
-constexpr double kFwhmToSigma = 2.3548200450309493;
-constexpr float kDecibelsPerNeper = 8.68588963806503655f;  // 20 / ln 10
+constexpr double kSigmaPerFwhm = 1.0 / 2.3548200450309493;  // a Gaussian's sigma per FWHM
+constexpr float kDecibelsPerNeper = 8.68588963806503655f;   // 20 / ln 10
 // Interpolation is done in fixed point, 1/256 grey level (see the row kernels).
 constexpr int kFixedOne = 256;
 constexpr int kFixedBits = 8;
@@ -180,6 +180,7 @@ Frontend::Frontend(const ScannerGeometry& geometry, const FrontendOptions& optio
   // noise window (guard band excluded) is the same to within a row there, so these are the
   // maxima of the SNR too.
   reach_ = std::max(1, inner_ / 2 + 1);
+  half_per_normalised_width_ = 0.5 / options.normalised_width_px;
   margin_ = outer_ / 2 + 2;
   rows_ = RowNormalisation(geometry, options, margin_);
 }
@@ -1045,14 +1046,16 @@ namespace {
 #if LASERLINE_AVX2_KERNELS
 // ColumnSampler::run() in AVX2, eight samples to a register: the current frame's column from
 // `column` (rows `stride` apart) minus the background at x0 + dx k, y0 + dy k for k = k0, k0 + 1,
-// ..., clipped at 0; the same arithmetic as bilinear(), so the same values. The gathers read four
+// ..., clipped at 0; the same arithmetic as bilinear(), so the same values. Returns the index of
+// the first largest sample (a scan over the stored samples waits on the stores and runs one
+// sample at a time: 10% of the refinement's time). The gathers read four
 // bytes: every position must lie in [0, width - 4) x [0, height - 1) of the background, and the
 // column at least four bytes before the end of its row.
-__attribute__((target("avx2"))) inline void column_run_avx2(const std::uint8_t* column,
-                                                            std::ptrdiff_t stride,
-                                                            const ImageView& background, float x0,
-                                                            float y0, float dx, float dy, float k0,
-                                                            int count, float* out) {
+__attribute__((target("avx2"))) inline int column_run_avx2(const std::uint8_t* column,
+                                                           std::ptrdiff_t stride,
+                                                           const ImageView& background, float x0,
+                                                           float y0, float dx, float dy, float k0,
+                                                           int count, float* out) {
   const __m256i low_byte = _mm256_set1_epi32(0xff);
   const __m256i background_stride = _mm256_set1_epi32(background.stride);
   const __m256i column_stride = _mm256_set1_epi32(static_cast<int>(stride));
@@ -1060,6 +1063,9 @@ __attribute__((target("avx2"))) inline void column_run_avx2(const std::uint8_t* 
   const auto* bottom_row = reinterpret_cast<const int*>(background.data + background.stride);
   const auto* current = reinterpret_cast<const int*>(column);
   const __m256i zero = _mm256_setzero_si256();
+  // Per lane: the largest sample so far and the first index it was at (samples are >= 0).
+  __m256 most = _mm256_set1_ps(-1.0f);
+  __m256i most_at = zero;
   for (int k = 0; k < count; k += 8) {
     const __m256i lanes =
         _mm256_add_epi32(_mm256_set1_epi32(k), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
@@ -1090,7 +1096,21 @@ __attribute__((target("avx2"))) inline void column_run_avx2(const std::uint8_t* 
     } else {
       _mm256_maskstore_ps(out + k, wanted, difference);
     }
+    const __m256 larger =
+        _mm256_and_ps(_mm256_cmp_ps(difference, most, _CMP_GT_OQ), _mm256_castsi256_ps(wanted));
+    most = _mm256_blendv_ps(most, difference, larger);
+    most_at = _mm256_blendv_epi8(most_at, lanes, _mm256_castps_si256(larger));
   }
+  // The largest over the lanes, then the first index among the lanes that hold it.
+  __m256 largest = _mm256_max_ps(most, _mm256_permute2f128_ps(most, most, 1));
+  largest = _mm256_max_ps(largest, _mm256_shuffle_ps(largest, largest, 0x4e));
+  largest = _mm256_max_ps(largest, _mm256_shuffle_ps(largest, largest, 0xb1));
+  const __m256i holders = _mm256_castps_si256(_mm256_cmp_ps(most, largest, _CMP_EQ_OQ));
+  __m256i first = _mm256_blendv_epi8(_mm256_set1_epi32(count), most_at, holders);
+  first = _mm256_min_epi32(first, _mm256_permute2x128_si256(first, first, 1));
+  first = _mm256_min_epi32(first, _mm256_shuffle_epi32(first, 0x4e));
+  first = _mm256_min_epi32(first, _mm256_shuffle_epi32(first, 0xb1));
+  return _mm256_cvtsi256_si32(first);
 }
 #endif
 
@@ -1098,6 +1118,14 @@ __attribute__((target("avx2"))) inline void column_run_avx2(const std::uint8_t* 
 // through the homography, which along a short stretch of column moves linearly with the row.
 // Clipped at 0 as in normalise_subtracting(): the previous frame's laser, warped a few pixels
 // away, must not pull the baseline of the fit down on one side.
+// The index of the first largest of values[0, count).
+inline int first_largest(const float* values, int count) {
+  int best = 0;
+  for (int k = 1; k < count; ++k)
+    best = values[k] > values[best] ? k : best;
+  return best;
+}
+
 class ColumnSampler {
  public:
   // `intrinsics`: run() may use column_run_avx2().
@@ -1126,16 +1154,17 @@ class ColumnSampler {
     return difference > 0.0f ? difference : 0.0f;
   }
 
-  // The samples of rows [first, first + count) into out, the same values operator() gives. The
-  // run is a straight segment in the background: where both its ends lie inside, all of it does,
-  // and the samples are taken without a check each.
-  void run(int first, int count, float* out) const {
+  // The samples of rows [first, first + count) into out, the same values operator() gives, and
+  // the index of the first largest (count >= 1). The run is a straight segment in the
+  // background: where both its ends lie inside, all of it does, and the samples are taken
+  // without a check each.
+  int run(int first, int count, float* out) const {
     const std::uint8_t* column = current_.row(first) + u_;
     const std::ptrdiff_t stride = current_.stride;
     if (background_ == nullptr) {
       for (int k = 0; k < count; ++k)
         out[k] = column[k * stride];
-      return;
+      return first_largest(out, count);
     }
     const auto k0 = static_cast<float>(first - v0_),
                k1 = static_cast<float>(first + count - 1 - v0_);
@@ -1144,14 +1173,13 @@ class ColumnSampler {
     const float gathered = static_cast<float>(background_->width - 4);
     if (intrinsics_ && u_ + 4 <= current_.width && inside(x_first, y0_ + dy_ * k0) &&
         inside(x_last, y0_ + dy_ * k1) && x_first < gathered && x_last < gathered) {
-      column_run_avx2(column, stride, *background_, x0_, y0_, dx_, dy_, k0, count, out);
-      return;
+      return column_run_avx2(column, stride, *background_, x0_, y0_, dx_, dy_, k0, count, out);
     }
 #endif
     if (!(inside(x0_ + dx_ * k0, y0_ + dy_ * k0) && inside(x0_ + dx_ * k1, y0_ + dy_ * k1))) {
       for (int k = 0; k < count; ++k)
         out[k] = (*this)(first + k);
-      return;
+      return first_largest(out, count);
     }
     for (int k = 0; k < count; ++k) {
       const auto kf = k0 + static_cast<float>(k);
@@ -1159,6 +1187,7 @@ class ColumnSampler {
                                bilinear(*background_, x0_ + dx_ * kf, y0_ + dy_ * kf);
       out[k] = difference > 0.0f ? difference : 0.0f;
     }
+    return first_largest(out, count);
   }
 
  private:
@@ -1179,12 +1208,12 @@ class ColumnSampler {
 float Frontend::refine_row(int u, float v_guess) const {
   const double width = std::max(rows_.width_px(v_guess), 1.0);
   const int last = height_ - 1;
-  const double sigma = width / kFwhmToSigma;
+  const double sigma = width * kSigmaPerFwhm;
   // Rounded by truncation after adding 0.5 (sigma > 0): what lround gives, without the call.
   const int spacing = std::max(1, static_cast<int>(sigma + 0.5));
   const int edge = ceil_positive(2.5 * sigma) + 1;
   // The guess comes from a normalised row, good to about half a normalised width.
-  const int reach = ceil_positive(0.5 * width / options_.normalised_width_px + 0.5) + 1;
+  const int reach = ceil_positive(width * half_per_normalised_width_ + 0.5) + 1;
   // (Rounded likewise: a negative guess goes to row 0 either way.)
   const int centre = std::clamp(static_cast<int>(v_guess + 0.5f), 0, last);
   const ColumnSampler at(current_, subtracting_ ? &background_ : nullptr, to_background_, u, centre,
@@ -1196,10 +1225,7 @@ float Frontend::refine_row(int u, float v_guess) const {
   std::array<float, 32> window;  // (not zeroed: run() fills what is read)
   const int count = std::min(hi - lo + 1, static_cast<int>(window.size()));
   if (count < 1) return v_guess;  // (never: lo <= centre <= hi)
-  at.run(lo, count, window.data());
-  int best = 0;
-  for (int k = 1; k < count; ++k)
-    best = window[static_cast<std::size_t>(k)] > window[static_cast<std::size_t>(best)] ? k : best;
+  int best = at.run(lo, count, window.data());
   float best_value = window[static_cast<std::size_t>(best)];
   // (A window too long for the array, as a very wide line can give: the rest one by one.)
   for (int v = lo + count; v <= hi; ++v) {

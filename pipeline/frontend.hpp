@@ -169,6 +169,7 @@ class Frontend {
   int reach_ = 2;   // a candidate is the maximum within this many rows up and down
   int margin_ = 6;  // normalised rows beyond the depth range on each side (for the filters)
   float noise_norm_ = 1;
+  double half_per_normalised_width_ = 0.5;  // 0.5 / normalised_width_px (refine_row())
   // The band-pass, in units of band_unit_ grey levels: band_a_ S_inner - band_b_ S_outer of the
   // normalised rows, which keep 8 - normalised_shift_ fractional bits; 16-bit lanes where it fits.
   int band_a_ = 3, band_b_ = 1, normalised_shift_ = 4;
