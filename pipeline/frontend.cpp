@@ -679,19 +679,16 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
     partial += 1 - whole[j];
     const float tx = xs - fx, ty = ys - fy;
     const float one = kFixedOne;
-    auto rounded = [&](float weight) { return static_cast<std::int32_t>(weight * one + 0.5f); };
-    std::int32_t top_left = rounded((1.0f - tx) * (1.0f - ty));
-    std::int32_t top_right = rounded(tx * (1.0f - ty));
-    std::int32_t bottom_left = rounded((1.0f - tx) * ty);
-    std::int32_t bottom_right = rounded(tx * ty);
-    // The four must sum to 256 (else the background is scaled): the largest, at least 64,
-    // absorbs the rounding (-2 to 2).
-    const std::int32_t rest = kFixedOne - top_left - top_right - bottom_left - bottom_right;
-    const bool right = tx >= 0.5f, bottom = ty >= 0.5f;
-    top_left += !right && !bottom ? rest : 0;
-    top_right += right && !bottom ? rest : 0;
-    bottom_left += !right && bottom ? rest : 0;
-    bottom_right += right && bottom ? rest : 0;
+    // The four sum to 256 (else the background is scaled) by construction: the rows' shares
+    // rounded, then each row's share split between its two pixels.
+    const auto top_share = static_cast<std::int32_t>((1.0f - ty) * one + 0.5f);
+    const std::int32_t bottom_share = kFixedOne - top_share;
+    const auto top_left =
+        static_cast<std::int32_t>((1.0f - tx) * static_cast<float>(top_share) + 0.5f);
+    const auto bottom_left =
+        static_cast<std::int32_t>((1.0f - tx) * static_cast<float>(bottom_share) + 0.5f);
+    const std::int32_t top_right = top_share - top_left;
+    const std::int32_t bottom_right = bottom_share - bottom_left;
     weights[4 * j] = top_left;
     weights[4 * j + 1] = top_right;
     weights[4 * j + 2] = bottom_left;
