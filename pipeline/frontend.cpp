@@ -288,16 +288,19 @@ LASERLINE_ROW_KERNEL void difference_block(const std::uint8_t* __restrict a,
   }
 }
 
-// difference_block() as the functor difference_blocks() takes: rows a and b of the current frame
-// (weight fb of b), background rows `stride` apart, the output row.
-struct DifferenceGeneric {
+// A normalised row being made: rows a and b of the current frame (weight fb of b), background
+// rows `stride` apart, the output row (`shift` bits of the fixed point dropped).
+struct RowDifference {
   const std::uint8_t* a;
   const std::uint8_t* b;
   std::uint16_t fb;
   std::ptrdiff_t stride;
   int shift;
   std::uint16_t* out;
+};
 
+// difference_block() as the functor difference_blocks() takes.
+struct DifferenceGeneric : RowDifference {
   LASERLINE_ROW_KERNEL void operator()(int u, const std::uint8_t* p, BlockWeights w, int count) {
     difference_block(a + u, b + u, fb, p, p + stride, w, shift, count, out + u);
   }
@@ -358,31 +361,17 @@ __attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i widen(const std::ui
 }
 
 // difference_blocks()'s functor in AVX2, sixteen pixels to a register (GCC's own vectorisation
-// of this register-hungry loop widens each load in three steps and spills): rows a and b of the
-// current frame (weight fb of b), background rows `stride` apart, the output row.
-struct DifferenceAvx2 {
-  const std::uint8_t* a;
-  const std::uint8_t* b;
-  std::uint16_t fb_;
-  std::ptrdiff_t stride;
-  int shift;
-  std::uint16_t* out;
-  __m256i fa, fb, half, w00, w01, w10, w11;
+// of this register-hungry loop widens each load in three steps and spills).
+struct DifferenceAvx2 : RowDifference {
+  __m256i weight_a, weight_b, half, w00, w01, w10, w11;
   __m128i bits;
 
-  __attribute__((target("avx2")))
-  DifferenceAvx2(const std::uint8_t* a_, const std::uint8_t* b_, std::uint16_t fb_value,
-                 std::ptrdiff_t stride_, int shift_, std::uint16_t* out_)
-      : a(a_),
-        b(b_),
-        fb_(fb_value),
-        stride(stride_),
-        shift(shift_),
-        out(out_),
-        fa(_mm256_set1_epi16(static_cast<short>(kFixedOne - fb_value))),
-        fb(_mm256_set1_epi16(static_cast<short>(fb_value))),
-        half(_mm256_set1_epi16(static_cast<short>((1 << shift_) >> 1))),
-        bits(_mm_cvtsi32_si128(shift_)) {}
+  __attribute__((target("avx2"))) explicit DifferenceAvx2(const RowDifference& row)
+      : RowDifference(row),
+        weight_a(_mm256_set1_epi16(static_cast<short>(kFixedOne - row.fb))),
+        weight_b(_mm256_set1_epi16(static_cast<short>(row.fb))),
+        half(_mm256_set1_epi16(static_cast<short>((1 << row.shift) >> 1))),
+        bits(_mm_cvtsi32_si128(row.shift)) {}
 
   __attribute__((target("avx2"))) void set_weights(BlockWeights w) {
     w00 = _mm256_set1_epi16(static_cast<short>(w.w00));
@@ -397,8 +386,8 @@ struct DifferenceAvx2 {
                                                                     const std::uint8_t* p,
                                                                     const std::uint8_t* q,
                                                                     std::uint16_t* result) const {
-    const __m256i current =
-        _mm256_add_epi16(_mm256_mullo_epi16(widen(x), fa), _mm256_mullo_epi16(widen(y), fb));
+    const __m256i current = _mm256_add_epi16(_mm256_mullo_epi16(widen(x), weight_a),
+                                             _mm256_mullo_epi16(widen(y), weight_b));
     const __m256i warped = _mm256_add_epi16(
         _mm256_add_epi16(_mm256_mullo_epi16(widen(p), w00), _mm256_mullo_epi16(widen(p + 1), w01)),
         _mm256_add_epi16(_mm256_mullo_epi16(widen(q), w10), _mm256_mullo_epi16(widen(q + 1), w11)));
@@ -415,7 +404,7 @@ struct DifferenceAvx2 {
   __attribute__((target("avx2"))) void operator()(int u, const std::uint8_t* p, BlockWeights w,
                                                   int count) {
     if (count < 16) {
-      difference_block(a + u, b + u, fb_, p, p + stride, w, shift, count, out + u);
+      difference_block(a + u, b + u, fb, p, p + stride, w, shift, count, out + u);
       return;
     }
     set_weights(w);
@@ -430,12 +419,9 @@ struct DifferenceAvx2 {
 // A normalised row's warp blocks in AVX2. (Not forced inline: the function it is called from is
 // also compiled for the baseline.)
 __attribute__((target("avx2"))) inline void difference_blocks_avx2(const WarpBlocks& w,
-                                                                   const std::uint8_t* a,
-                                                                   const std::uint8_t* b,
-                                                                   std::uint16_t fb, int shift,
-                                                                   std::uint16_t* out) {
-  DifferenceAvx2 difference(a, b, fb, w.stride, shift, out);
-  difference_blocks(w, difference, out);
+                                                                   const RowDifference& row) {
+  DifferenceAvx2 difference(row);
+  difference_blocks(w, difference, row.out);
 }
 #endif
 
@@ -696,14 +682,15 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
   }
   const WarpBlocks warp{left,   top,    offset, whole,       weights,  background.data,
                         stride, blocks, width,  last_column, last_row, partial};
+  const RowDifference difference_row{row.a, row.b, row.fb, stride, normalised_shift_, out};
 #if LASERLINE_AVX2_KERNELS
   // Inlined into the AVX2 version of this function, a call never made in the other.
   if (avx2_) {
-    difference_blocks_avx2(warp, row.a, row.b, row.fb, normalised_shift_, out);
+    difference_blocks_avx2(warp, difference_row);
     return;
   }
 #endif
-  DifferenceGeneric difference{row.a, row.b, row.fb, stride, normalised_shift_, out};
+  DifferenceGeneric difference{difference_row};
   difference_blocks(warp, difference, out);
 }
 
