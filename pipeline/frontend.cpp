@@ -232,7 +232,6 @@ void Frontend::reset(int width, int height) {
   const auto blocks = static_cast<std::size_t>((width + kWarpBlock - 1) / kWarpBlock);
   warp_left_.assign(blocks, 0);
   warp_top_.assign(blocks, 0);
-  warp_offset_.assign(blocks, 0);
   warp_whole_.assign(blocks, 0);
   warp_weights_.assign(4 * blocks, 0);
   zero_normalised_.assign(s, 0);
@@ -310,7 +309,6 @@ struct DifferenceGeneric : RowDifference {
 struct WarpBlocks {
   const std::int32_t* left;
   const std::int32_t* top;
-  const std::int32_t* offset;
   const std::int32_t* whole;
   const std::int32_t* weights;  // w00, w01, w10, w11 of each block
   const std::uint8_t* background;
@@ -331,7 +329,9 @@ LASERLINE_ROW_KERNEL void difference_blocks(const WarpBlocks& w, Difference& dif
                                             std::uint16_t* out) {
   constexpr int kWarp = Frontend::kWarpBlock;
   for (int j = 0; j < w.blocks; ++j) {
-    if (w.whole[j]) difference(j * kWarp, w.background + w.offset[j], w.weights_of(j), kWarp);
+    if (w.whole[j]) {
+      difference(j * kWarp, w.background + w.top[j] * w.stride + w.left[j], w.weights_of(j), kWarp);
+    }
   }
   // The blocks partly or wholly outside the background: pixels [f, e) have their four
   // neighbours inside it; elsewhere there is nothing to compare with, so no signal. (Few or
@@ -640,7 +640,6 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
   std::int32_t* __restrict top = warp_top_.data();
   // (32-bit weights, four per block: as wide as the positions, so that the loop vectorises.)
   std::int32_t* __restrict weights = warp_weights_.data();
-  std::int32_t* __restrict offset = warp_offset_.data();
   std::int32_t* __restrict whole = warp_whole_.data();
   const int last_row = background.height - 1;
   const float far = 2.0f * std::max(bg_width, bg_height);
@@ -659,7 +658,6 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
     left[j] = ix;
     top[j] = iy;
     // Whole: all its pixels' four neighbours lie inside the background (nearly every block).
-    offset[j] = iy * stride + ix;
     whole[j] = (count == kWarpBlock) & (ix >= 0) & (ix + kWarpBlock <= last_column) & (iy >= 0) &
                (iy < last_row);
     partial += 1 - whole[j];
@@ -680,8 +678,8 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
     weights[4 * j + 2] = bottom_left;
     weights[4 * j + 3] = bottom_right;
   }
-  const WarpBlocks warp{left,   top,    offset, whole,       weights,  background.data,
-                        stride, blocks, width,  last_column, last_row, partial};
+  const WarpBlocks warp{left,   top,   whole,       weights,  background.data, stride,
+                        blocks, width, last_column, last_row, partial};
   const RowDifference difference_row{row.a, row.b, row.fb, stride, normalised_shift_, out};
 #if LASERLINE_AVX2_KERNELS
   // Inlined into the AVX2 version of this function, a call never made in the other.
@@ -1032,9 +1030,9 @@ namespace {
 // `column` (rows `stride` apart) minus the background at x0 + dx k, y0 + dy k for k = k0, k0 + 1,
 // ..., clipped at 0; the same arithmetic as bilinear(), so the same values. Returns the index of
 // the first largest sample (a scan over the stored samples waits on the stores and runs one
-// sample at a time: 10% of the refinement's time). The gathers read four
-// bytes: every position must lie in [0, width - 4) x [0, height - 1) of the background, and the
-// column at least four bytes before the end of its row.
+// sample at a time: 10% of the refinement's time). The gathers read four bytes: every position
+// must lie in [0, width - 4) x [0, height - 1) of the background, and the column at least four
+// bytes before the end of its row.
 __attribute__((target("avx2"))) inline int column_run_avx2(const std::uint8_t* column,
                                                            std::ptrdiff_t stride,
                                                            const ImageView& background, float x0,
@@ -1098,10 +1096,6 @@ __attribute__((target("avx2"))) inline int column_run_avx2(const std::uint8_t* c
 }
 #endif
 
-// The background-free column u near one row: the current frame minus the background seen
-// through the homography, which along a short stretch of column moves linearly with the row.
-// Clipped at 0 as in normalise_subtracting(): the previous frame's laser, warped a few pixels
-// away, must not pull the baseline of the fit down on one side.
 // The index of the first largest of values[0, count).
 inline int first_largest(const float* values, int count) {
   int best = 0;
@@ -1110,6 +1104,10 @@ inline int first_largest(const float* values, int count) {
   return best;
 }
 
+// The background-free column u near one row: the current frame minus the background seen
+// through the homography, which along a short stretch of column moves linearly with the row.
+// Clipped at 0 as in normalise_subtracting(): the previous frame's laser, warped a few pixels
+// away, must not pull the baseline of the fit down on one side.
 class ColumnSampler {
  public:
   // `intrinsics`: run() may use column_run_avx2().
@@ -1140,8 +1138,8 @@ class ColumnSampler {
 
   // The samples of rows [first, first + count) into out, the same values operator() gives, and
   // the index of the first largest (count >= 1). The run is a straight segment in the
-  // background: where both its ends lie inside, all of it does, and the samples are taken
-  // without a check each.
+  // background: where both its ends lie inside, all of it does, and the AVX2 version takes the
+  // samples without a check each.
   int run(int first, int count, float* out) const {
     const std::uint8_t* column = current_.row(first) + u_;
     const std::ptrdiff_t stride = current_.stride;
@@ -1150,9 +1148,9 @@ class ColumnSampler {
         out[k] = column[k * stride];
       return first_largest(out, count);
     }
+#if LASERLINE_AVX2_KERNELS
     const auto k0 = static_cast<float>(first - v0_),
                k1 = static_cast<float>(first + count - 1 - v0_);
-#if LASERLINE_AVX2_KERNELS
     const float x_first = x0_ + dx_ * k0, x_last = x0_ + dx_ * k1;
     const float gathered = static_cast<float>(background_->width - 4);
     if (intrinsics_ && u_ + 4 <= current_.width && inside(x_first, y0_ + dy_ * k0) &&
@@ -1160,17 +1158,8 @@ class ColumnSampler {
       return column_run_avx2(column, stride, *background_, x0_, y0_, dx_, dy_, k0, count, out);
     }
 #endif
-    if (!(inside(x0_ + dx_ * k0, y0_ + dy_ * k0) && inside(x0_ + dx_ * k1, y0_ + dy_ * k1))) {
-      for (int k = 0; k < count; ++k)
-        out[k] = (*this)(first + k);
-      return first_largest(out, count);
-    }
-    for (int k = 0; k < count; ++k) {
-      const auto kf = k0 + static_cast<float>(k);
-      const float difference = static_cast<float>(column[k * stride]) -
-                               bilinear(*background_, x0_ + dx_ * kf, y0_ + dy_ * kf);
-      out[k] = difference > 0.0f ? difference : 0.0f;
-    }
+    for (int k = 0; k < count; ++k)
+      out[k] = (*this)(first + k);
     return first_largest(out, count);
   }
 

@@ -210,8 +210,8 @@ class Frontend {
   // Per warp block of the row being normalised: where its first pixel lies in the background
   // (integer column and row) and the four bilinear weights.
   std::vector<std::int32_t> warp_left_, warp_top_;
-  // ... its first pixel's offset in the background, and whether the block lies wholly inside it.
-  std::vector<std::int32_t> warp_offset_, warp_whole_;
+  // ... and whether the block lies wholly inside it.
+  std::vector<std::int32_t> warp_whole_;
   std::vector<std::int32_t> warp_weights_;      // four per block
   std::vector<std::uint16_t> zero_normalised_;  // a row of zeros: the rows beyond the ends
   // Per block of rows: where each row it touches is (offsets into a strip's rings, pointers to
