@@ -167,15 +167,6 @@ Frontend::Frontend(const ScannerGeometry& geometry, const FrontendOptions& optio
   }
   normalised_shift_ = kFixedBits - bits;
   band_unit_ = static_cast<float>(g) / static_cast<float>(inner_ * outer_ * (1 << bits));
-  // A column's sum of |band-pass| over the noise window less its guard band (from prefix sums
-  // modulo 2^32) must stay below 2^32: where wide boxes and a tall window could pass it,
-  // |band-pass| is summed in coarser units.
-  const std::uint64_t window_rows = 2 * static_cast<std::uint64_t>(noise_half_ - guard_);
-  const auto most_band = static_cast<std::uint64_t>(extreme) << bits;
-  magnitude_shift_ = 0;
-  while (window_rows * (most_band >> magnitude_shift_) >= (std::uint64_t{1} << 32))
-    ++magnitude_shift_;
-  magnitude_unit_ = band_unit_ * static_cast<float>(1u << magnitude_shift_);
   // Candidates are local maxima of the band-pass within one laser width along the column: the
   // noise window (guard band excluded) is the same to within a row there, so these are the
   // maxima of the SNR too.
@@ -199,15 +190,13 @@ void Frontend::reset(int width, int height) {
   width_ = width;
   height_ = height;
   stride_ = (width + kBlock - 1) / kBlock * kBlock;
-  // Each strip's band-pass ring holds the rows from the oldest a peak is compared with (r -
-  // reach for the block's first row r) to the newest the block's last row looks at, its ring of
-  // prefix sums of |band-pass| from the row above the oldest noise window (r - noise/2 - 1) on;
-  // the normalised ring the rows the band-pass boxes of the block's rows reach.
+  // Each strip's band-pass ring holds the rows from the oldest the noise window of the block's
+  // first row r reaches (r - noise/2; a peak is compared with fewer) to the newest the block's
+  // last row looks at; the normalised ring the rows the band-pass boxes of the block's rows reach.
   // (A row's slot in a ring is looked up once per block of rows, so the rings are no larger than
   // they must be: they stay in the cache.)
   const int look = std::max(noise_half_, reach_);
-  band_ring_rows_ = kRowBlock + look + reach_ + 1;
-  magnitude_ring_rows_ = kRowBlock + look + noise_half_ + 2;
+  band_ring_rows_ = kRowBlock + 2 * look;
   normalised_ring_rows_ = kRowBlock + look + outer_ + 2;
   const int strips = (width + kStripColumns - 1) / kStripColumns;
   // A strip holds its columns and the noise window's reach on either side, the same count for
@@ -220,14 +209,13 @@ void Frontend::reset(int width, int height) {
   const auto s = static_cast<std::size_t>(normalised_stride_);
   normalised_ring_.assign(static_cast<std::size_t>(normalised_ring_rows_) * s, 0);
   band_most_.assign(static_cast<std::size_t>(strips * (band_ring_rows_ + 1)), 0);
-  // Each strip's rings end with a row of zeros (the rows beyond the ends).
-  const auto band_ring = static_cast<std::size_t>(strips * (band_ring_rows_ + 1)) * ring;
+  // Each strip's rings end with a row of zeros (the rows beyond the ends); the last, with a
+  // register's lanes more for the noise sums to read past it.
+  const auto band_ring = static_cast<std::size_t>(strips * (band_ring_rows_ + 1)) * ring + kBlock;
   narrow_.assign(narrow_band_ ? band_ring : 0, narrow_band_ ? strips * ring : 0);
   wide_.assign(narrow_band_ ? 0 : band_ring, narrow_band_ ? 0 : strips * ring);
-  magnitude_ring_.assign(static_cast<std::size_t>(strips * (magnitude_ring_rows_ + 1)) * ring, 0);
-  band_rows_.assign(static_cast<std::size_t>(kRowBlock + look + 2 * reach_ + 1), 0);
+  band_rows_.assign(static_cast<std::size_t>(kRowBlock + 2 * look), 0);
   band_slots_.assign(band_rows_.size(), 0);
-  magnitude_rows_.assign(static_cast<std::size_t>(kRowBlock + look + noise_half_ + 2), 0);
   normalised_rows_.assign(static_cast<std::size_t>(kRowBlock + look + outer_ + 3), nullptr);
   const auto blocks = static_cast<std::size_t>((width + kWarpBlock - 1) / kWarpBlock);
   warp_left_.assign(blocks, 0);
@@ -429,28 +417,16 @@ __attribute__((target("avx2"))) inline void difference_blocks_avx2(const WarpBlo
 // sum += entering - leaving (rows of zeros beyond the ends). The band-pass, inner mean minus outer
 // mean, is held as the integer a * inner sum - b * outer sum (the constructor picks a and b and
 // the unit): exact, and in 16-bit lanes (sixteen to an AVX2 register) wherever it and the sums
-// fit (a * inner sum alone may not: that arithmetic is modulo 2^16, and the result fits). With it
-// the column prefix sums of |band-pass| (this row's from the row above's), modulo 2^32: any window
-// of rows of the noise estimate is then the difference of two of them, wanted only where a
-// candidate is. `most` is the row's largest band-pass (candidates need the threshold).
-// |band-pass| in the units its prefix sums count (16-bit lanes never need coarser ones).
-template <class Lane>
-LASERLINE_ROW_KERNEL std::uint32_t magnitude_of(Lane band, int shift) {
-  const auto magnitude = static_cast<std::uint32_t>(band < 0 ? -band : band);
-  if constexpr (sizeof(Lane) == 2) {
-    return magnitude;
-  } else {
-    return magnitude >> shift;
-  }
-}
-
+// fit (a * inner sum alone may not: that arithmetic is modulo 2^16, and the result fits).
+// `most` is the row's largest band-pass (candidates need the threshold).
 template <class Lane, class Sum = std::make_unsigned_t<Lane>>
-LASERLINE_ROW_KERNEL void band_pass_row(
-    Sum* __restrict inner, const std::uint16_t* __restrict inner_entering,
-    const std::uint16_t* __restrict inner_leaving, Sum* __restrict outer,
-    const std::uint16_t* __restrict outer_entering, const std::uint16_t* __restrict outer_leaving,
-    Sum a, Sum b, const std::uint32_t* __restrict magnitude_above, int magnitude_shift, int count,
-    Lane* __restrict out, std::uint32_t* __restrict magnitude, int& most) {
+LASERLINE_ROW_KERNEL void band_pass_row(Sum* __restrict inner,
+                                        const std::uint16_t* __restrict inner_entering,
+                                        const std::uint16_t* __restrict inner_leaving,
+                                        Sum* __restrict outer,
+                                        const std::uint16_t* __restrict outer_entering,
+                                        const std::uint16_t* __restrict outer_leaving, Sum a, Sum b,
+                                        int count, Lane* __restrict out, int& most) {
   Lane largest = std::numeric_limits<Lane>::min();
   for (int u = 0; u < count; ++u) {
     const auto i = static_cast<Sum>(inner[u] + inner_entering[u] - inner_leaving[u]);
@@ -459,7 +435,6 @@ LASERLINE_ROW_KERNEL void band_pass_row(
     outer[u] = o;
     const auto band = static_cast<Lane>(static_cast<Sum>(a * i - b * o));
     out[u] = band;
-    magnitude[u] = magnitude_above[u] + magnitude_of(band, magnitude_shift);
     largest = std::max(largest, band);
   }
   most = largest;
@@ -472,8 +447,7 @@ LASERLINE_ROW_KERNEL void band_pass_row_cut_short(
     Sum* __restrict inner, const std::uint16_t* __restrict inner_entering,
     const std::uint16_t* __restrict inner_leaving, Sum* __restrict outer,
     const std::uint16_t* __restrict outer_entering, const std::uint16_t* __restrict outer_leaving,
-    float wi, float wo, const std::uint32_t* __restrict magnitude_above, int magnitude_shift,
-    int count, Lane* __restrict out, std::uint32_t* __restrict magnitude, int& most) {
+    float wi, float wo, int count, Lane* __restrict out, int& most) {
   Lane largest = std::numeric_limits<Lane>::min();
   for (int u = 0; u < count; ++u) {
     const auto i = static_cast<Sum>(inner[u] + inner_entering[u] - inner_leaving[u]);
@@ -485,7 +459,6 @@ LASERLINE_ROW_KERNEL void band_pass_row_cut_short(
     const auto band =
         static_cast<Lane>(static_cast<std::int32_t>(exact + std::copysign(0.5f, exact)));
     out[u] = band;
-    magnitude[u] = magnitude_above[u] + magnitude_of(band, magnitude_shift);
     largest = std::max(largest, band);
   }
   most = largest;
@@ -698,46 +671,47 @@ struct Frontend::StageImages {
 
 namespace {
 
-// The sum of |band-pass| over a noise window less its guard band (see Frontend::noise_level())
-// in column i, from the prefix sums: an exact integer (the differences of the modulo-2^32 prefix
-// sums are the true sums).
-LASERLINE_ROW_KERNEL std::uint32_t noise_column(const Frontend::NoiseRows& rows, int i) {
-  return (rows.window_end[i] - rows.window_begin[i]) - (rows.guard_end[i] - rows.guard_begin[i]);
+// The sum of |band-pass| over a noise window less its guard band (see Frontend::noise_level()):
+// over the `rows` rows from each of `above` and `below` (offsets into the strip's band-pass ring),
+// columns [first, first + count) of the ring. Exact: 64-bit.
+template <class Lane>
+std::uint64_t window_sum(const Lane* ring, const Frontend::NoiseWindow& window, int first,
+                         int count) {
+  std::uint64_t sum = 0;
+  for (const std::size_t* rows : {window.above, window.below}) {
+    for (int j = 0; j < window.rows; ++j) {
+      const Lane* row = ring + rows[j] + first;
+      for (int i = 0; i < count; ++i)
+        sum += static_cast<std::uint64_t>(row[i] < 0 ? -static_cast<std::int64_t>(row[i]) : row[i]);
+    }
+  }
+  return sum;
 }
 
 #if LASERLINE_AVX2_KERNELS
-__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i eight(const std::uint32_t* x) {
-  return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(x));
-}
-
-// noise_column() of columns [first, first + 8) in AVX2.
-__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i
-noise_columns_avx2(const Frontend::NoiseRows& rows, int first) {
-  return _mm256_sub_epi32(
-      _mm256_sub_epi32(eight(rows.window_end + first), eight(rows.window_begin + first)),
-      _mm256_sub_epi32(eight(rows.guard_end + first), eight(rows.guard_begin + first)));
-}
-
-// Eight 32-bit columns added to four 64-bit sums.
-__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i add_widened(__m256i total,
-                                                                         __m256i columns) {
-  total = _mm256_add_epi64(total, _mm256_cvtepu32_epi64(_mm256_castsi256_si128(columns)));
-  return _mm256_add_epi64(total, _mm256_cvtepu32_epi64(_mm256_extracti128_si256(columns, 1)));
-}
-
-// The sum of noise_column() over columns [first, first + count) in AVX2, eight columns to a
-// register (count at least 8: the last eight overlap the ones before, which are masked off).
-__attribute__((target("avx2"))) inline std::uint64_t noise_sum_avx2(const Frontend::NoiseRows& rows,
-                                                                    int first, int count) {
+// window_sum() of 16-bit lanes in AVX2: sixteen columns to a register, the columns beyond
+// `count` weighted 0. Reads up to 15 lanes past the last column (the ring is padded for it).
+// Each 32-bit lane sums two columns over the rows: at most 2 x 32767 x 2 x 500 rows (the largest
+// noise window) fits.
+__attribute__((target("avx2"))) inline std::uint64_t window_sum_avx2(
+    const std::int16_t* ring, const Frontend::NoiseWindow& window, int first, int count) {
+  const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
   __m256i total = _mm256_setzero_si256();
-  int done = 0;
-  for (; done + 8 <= count; done += 8)
-    total = add_widened(total, noise_columns_avx2(rows, first + done));
-  if (done < count) {
-    const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-    const __m256i fresh = _mm256_cmpgt_epi32(lane, _mm256_set1_epi32(7 - (count - done)));
-    total =
-        add_widened(total, _mm256_and_si256(noise_columns_avx2(rows, first + count - 8), fresh));
+  for (int c = 0; c < count; c += 16) {
+    // 1 in the lanes of columns inside the window, else 0.
+    const __m256i ones =
+        _mm256_and_si256(_mm256_cmpgt_epi16(_mm256_set1_epi16(static_cast<short>(count - c)), lane),
+                         _mm256_set1_epi16(1));
+    __m256i sums = _mm256_setzero_si256();
+    for (const std::size_t* rows : {window.above, window.below}) {
+      for (int j = 0; j < window.rows; ++j) {
+        const __m256i band =
+            _mm256_loadu_si256(reinterpret_cast<const __m256i*>(ring + rows[j] + first + c));
+        sums = _mm256_add_epi32(sums, _mm256_madd_epi16(_mm256_abs_epi16(band), ones));
+      }
+    }
+    total = _mm256_add_epi64(total, _mm256_cvtepu32_epi64(_mm256_castsi256_si128(sums)));
+    total = _mm256_add_epi64(total, _mm256_cvtepu32_epi64(_mm256_extracti128_si256(sums, 1)));
   }
   const __m128i pairs =
       _mm_add_epi64(_mm256_castsi256_si128(total), _mm256_extracti128_si256(total, 1));
@@ -748,26 +722,28 @@ __attribute__((target("avx2"))) inline std::uint64_t noise_sum_avx2(const Fronte
 
 }  // namespace
 
-float Frontend::noise_level(const NoiseRows& rows, int u, int begin) const {
+template <class Lane>
+float Frontend::noise_level(const Lane* ring, const NoiseWindow& window, int u, int begin) const {
   std::uint64_t sum = 0;
   const int count = 2 * noise_pad_ + 1;
   if (u >= noise_pad_ && u + noise_pad_ < width_) {
     const int first = u - noise_pad_ - begin;
 #if LASERLINE_AVX2_KERNELS
-    if (avx2_ && count >= 8) {
-      sum = noise_sum_avx2(rows, first, count);
-    } else
-#endif
-    {
-      for (int i = first; i < first + count; ++i)
-        sum += noise_column(rows, i);
+    if constexpr (std::is_same_v<Lane, std::int16_t>) {
+      if (avx2_) return noise_from_sum(window_sum_avx2(ring, window, first, count));
     }
+#endif
+    sum = window_sum(ring, window, first, count);
   } else {  // at the image's sides the window repeats the edge column
     for (int k = -noise_pad_; k <= noise_pad_; ++k)
-      sum += noise_column(rows, std::clamp(u + k, 0, width_ - 1) - begin);
+      sum += window_sum(ring, window, std::clamp(u + k, 0, width_ - 1) - begin, 1);
   }
+  return noise_from_sum(sum);
+}
+
+float Frontend::noise_from_sum(std::uint64_t sum) const {
   // III-D: the minimal noise level is 1.
-  return std::max(static_cast<float>(sum) * magnitude_unit_ * noise_norm_, 1.0f);
+  return std::max(static_cast<float>(sum) * band_unit_ * noise_norm_, 1.0f);
 }
 
 template <class Lane>
@@ -829,7 +805,7 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
     normalise_until(band_end - 1 + ho);
     // Where the rows the block touches are, the same in every strip: as offsets into a strip's
     // rings (rows beyond the ends: the zero row after the ring's last), and the normalised rows.
-    const int band_base = r_begin - reach_, band_top = std::max(band_end, r_end + reach_);
+    const int band_base = r_begin - look, band_top = r_end + look;
     // (Slots counted on from the first, wrapping: a division per row and strip was 2% of the
     // time.)
     for (int r = band_base, slot = band_base < 0 ? 0 : band_base % band_ring_rows_; r < band_top;
@@ -838,14 +814,6 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
       band_slots_[r - band_base] = at;
       band_rows_[r - band_base] = static_cast<std::size_t>(at) * ring;
       if (r >= 0) slot = slot + 1 == band_ring_rows_ ? 0 : slot + 1;
-    }
-    const int magnitude_base = r_begin - nh - 1;
-    for (int r = magnitude_base,
-             slot = magnitude_base < 0 ? 0 : magnitude_base % magnitude_ring_rows_;
-         r < band_end; ++r) {
-      const int at = r < 0 ? magnitude_ring_rows_ : slot;
-      magnitude_rows_[r - magnitude_base] = static_cast<std::size_t>(at) * ring;
-      if (r >= 0) slot = slot + 1 == magnitude_ring_rows_ ? 0 : slot + 1;
     }
     const int normalised_base = next_band - ho - 1;
     for (int r = normalised_base; r <= band_end + ho; ++r)
@@ -861,14 +829,8 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
       Sum* inner = rings.inner.data() + state;
       Sum* outer = rings.outer.data() + state;
       Lane* band_ring = rings.band.data() + state * static_cast<std::size_t>(band_ring_rows_ + 1);
-      std::uint32_t* magnitude_ring =
-          magnitude_ring_.data() + state * static_cast<std::size_t>(magnitude_ring_rows_ + 1);
       auto band = [&](int r) LASERLINE_ROW_LAMBDA -> Lane* {
         return band_ring + band_rows_[r - band_base];
-      };
-      // Sums of |band-pass| down the columns over rows [0, r] (none above row 0).
-      auto magnitude = [&](int r) LASERLINE_ROW_LAMBDA -> std::uint32_t* {
-        return magnitude_ring + magnitude_rows_[r - magnitude_base];
       };
       auto x = [&](int r)
                    LASERLINE_ROW_LAMBDA { return normalised_rows_[r - normalised_base] + begin; };
@@ -891,12 +853,10 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
         if (b >= ho && b + ho < rows) {
           if (count == kRingColumns) {
             band_pass_row(inner, x(b + hi), x(b - hi - 1), outer, x(b + ho), x(b - ho - 1), a,
-                          b_coefficient, magnitude(b - 1), magnitude_shift_, kRingColumns, out,
-                          magnitude(b), row_most);
+                          b_coefficient, kRingColumns, out, row_most);
           } else {
             band_pass_row(inner, x(b + hi), x(b - hi - 1), outer, x(b + ho), x(b - ho - 1), a,
-                          b_coefficient, magnitude(b - 1), magnitude_shift_, count, out,
-                          magnitude(b), row_most);
+                          b_coefficient, count, out, row_most);
           }
         } else {
           const int i0 = std::max(b - hi, 0), i1 = std::min(b + hi + 1, rows);
@@ -904,8 +864,7 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
           const float wi = 1.0f / (static_cast<float>(i1 - i0) * normalised_one * unit);
           const float wo = 1.0f / (static_cast<float>(o1 - o0) * normalised_one * unit);
           band_pass_row_cut_short(inner, x(b + hi), x(b - hi - 1), outer, x(b + ho), x(b - ho - 1),
-                                  wi, wo, magnitude(b - 1), magnitude_shift_, count, out,
-                                  magnitude(b), row_most);
+                                  wi, wo, count, out, row_most);
         }
         if (images != nullptr && !images->band_pass.empty()) {
           float* dst = images->band_pass.data() + b * image_stride;
@@ -917,11 +876,12 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
       // candidates there.
       for (int r = r_begin; r < r_end; ++r) {
         const Lane* row = band(r);
-        // The noise window of row r, rows [r - nh, r + nh], less its guard band, as differences
-        // of the prefix sums.
-        const NoiseRows noise{magnitude(r - nh - 1), magnitude(std::min(r + nh, rows - 1)),
-                              magnitude(r - gh - 1), magnitude(std::min(r + gh, rows - 1))};
-        auto noise_at = [&](int u) LASERLINE_ROW_LAMBDA { return noise_level(noise, u, begin); };
+        // The noise window of row r, rows [r - nh, r + nh], less its guard band.
+        const NoiseWindow noise{band_rows_.data() + (r - nh - band_base),
+                                band_rows_.data() + (r + gh + 1 - band_base), nh - gh};
+        auto noise_at = [&](int u) LASERLINE_ROW_LAMBDA {
+          return noise_level(band_ring, noise, u, begin);
+        };
         if (want_snr) {
           float* dst = images->signal_to_noise.data() + r * image_stride;
           for (int u = c0; u < c1; ++u)

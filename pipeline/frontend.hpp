@@ -59,7 +59,7 @@ class RowNormalisation {
 //   normalised row r       III-B: frame (minus background) resampled to normalised row r
 //   band-pass row r        III-C: inner minus outer box mean down the columns (running sums)
 //   noise of row r         III-D: mean |band-pass| around the pixel, a guard band left out
-//                          (column prefix sums of |band-pass|, looked up at candidates only)
+//                          (summed from the band-pass ring at candidates only)
 //   candidates of row r    III-E: band-pass peaks whose SNR passes the threshold (only pixels
 //                          whose band-pass reaches it can: the noise is at least 1)
 // The band-pass of row r needs the normalised rows up to r + outer/2 and the noise of row r the
@@ -144,21 +144,21 @@ class Frontend {
   // Normalised row r into out[0, width).
   void normalise_row(int r, std::uint16_t* out);
   bool avx2_ = false;  // the AVX2 kernels run: the CPU has AVX2, and use_intrinsics()
-  // The prefix sums of |band-pass| (rows [0, r] summed down the columns, modulo 2^32) that bound
-  // the noise window of a row and its guard band: the window is the rows (window_begin,
-  // window_end].
+  // The noise window of a row less its guard band: `rows` rows from each of `above` and `below`
+  // (offsets of the rows in a strip's band-pass ring).
  public:
-  struct NoiseRows {
-    const std::uint32_t* window_begin;
-    const std::uint32_t* window_end;
-    const std::uint32_t* guard_begin;
-    const std::uint32_t* guard_end;
+  struct NoiseWindow {
+    const std::size_t* above;
+    const std::size_t* below;
+    int rows;
   };
 
  private:
-  // III-D at column u (rows holding columns from `begin` on): the mean |band-pass| around it, a
-  // guard band left out, at least 1.
-  float noise_level(const NoiseRows& rows, int u, int begin) const;
+  // III-D at column u (`ring` holding columns from `begin` on): the mean |band-pass| over the
+  // window around it, at least 1.
+  template <class Lane>
+  float noise_level(const Lane* ring, const NoiseWindow& window, int u, int begin) const;
+  float noise_from_sum(std::uint64_t sum) const;
   float refine_row(int u, float v_guess) const;
 
   ScannerGeometry geometry_;
@@ -175,10 +175,6 @@ class Frontend {
   int band_a_ = 3, band_b_ = 1, normalised_shift_ = 4;
   float band_unit_ = 1;
   bool narrow_band_ = true;
-  // The prefix sums of |band-pass| count it in units of magnitude_unit_ = band_unit_ <<
-  // magnitude_shift_ (coarser only where wide boxes and a tall noise window need it).
-  int magnitude_shift_ = 0;
-  float magnitude_unit_ = 1;
   int width_ = 0, height_ = 0, stride_ = 0;
 
   // Inputs of the last set_frame call (views, valid during find_candidates).
@@ -197,16 +193,15 @@ class Frontend {
   // (the usual case: a constant trip count); wider windows take a generic path.
   static constexpr int kRingColumns = 272;
   // Rings of rows, indexed by row % ring rows: the normalised rows (normalised_stride_ values per
-  // row), and per strip the band-pass rows and the prefix sums of |band-pass| (ring_stride_ values
-  // per row, and after the last row a row of zeros); the per-strip sums are as wide.
-  int normalised_ring_rows_ = 0, band_ring_rows_ = 0, magnitude_ring_rows_ = 0, ring_stride_ = 0;
+  // row), and per strip the band-pass rows (ring_stride_ values per row, and after the last row a
+  // row of zeros); the per-strip sums are as wide.
+  int normalised_ring_rows_ = 0, band_ring_rows_ = 0, ring_stride_ = 0;
   // Normalised rows: zeros on either side of the image's columns, `normalised_pad_` on the left.
   int normalised_pad_ = 0, normalised_stride_ = 0;
   std::vector<std::uint16_t> normalised_ring_;  // 8 - normalised_shift_ fractional bits
   BandRings<std::int16_t> narrow_;
   BandRings<std::int32_t> wide_;
-  std::vector<std::uint32_t> magnitude_ring_;  // sums of |band-pass| down the columns from row 0
-  std::vector<int> band_most_;                 // per band-pass row of a strip: its largest value
+  std::vector<int> band_most_;  // per band-pass row of a strip: its largest value
   // Per warp block of the row being normalised: where its first pixel lies in the background
   // (integer column and row) and the four bilinear weights.
   std::vector<std::int32_t> warp_left_, warp_top_;
@@ -216,7 +211,7 @@ class Frontend {
   std::vector<std::uint16_t> zero_normalised_;  // a row of zeros: the rows beyond the ends
   // Per block of rows: where each row it touches is (offsets into a strip's rings, pointers to
   // the normalised rows), from the first it touches on.
-  std::vector<std::size_t> band_rows_, magnitude_rows_;
+  std::vector<std::size_t> band_rows_;
   std::vector<int> band_slots_;  // the band-pass rows' slots (band_rows_ = slot * ring stride)
   std::vector<const std::uint16_t*> normalised_rows_;
   // One row of a strip's candidates: flags (the portable kernel's), bits.

@@ -202,7 +202,7 @@ TEST(Frontend, RollingPassMatchesTheStagesComputedWhole) {
   EXPECT_FLOAT_EQ(Frontend(small_geometry(), wide).band_pass_unit(), 1.0f / (5 * 19 * 256));
   expect_pass_matches_stages_computed_whole(wide, 5, 19);
   // 13 and 193 rows and a noise window of 1001: a column's sum of |band-pass| over the window in
-  // band-pass units could pass 2^32 (the prefix sums' modulus), so it is summed in coarser units.
+  // band-pass units could pass 2^32 (it is summed in 64 bits).
   FrontendOptions widest;
   widest.normalised_width_px = 12;
   widest.passband_ratio = 16;
