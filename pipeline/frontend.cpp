@@ -689,34 +689,50 @@ std::uint64_t window_sum(const Lane* ring, const Frontend::NoiseWindow& window, 
 }
 
 #if LASERLINE_AVX2_KERNELS
-// window_sum() of 16-bit lanes in AVX2: sixteen columns to a register, the columns beyond
-// `count` weighted 0. Reads up to 15 lanes past the last column (the ring is padded for it).
-// Each 32-bit lane sums two columns over the rows: at most 2 x 32767 x 2 x 500 rows (the largest
-// noise window) fits.
+// |band-pass| of sixteen 16-bit lanes, summed in pairs to 32-bit lanes with the weights `ones`
+// (1 for the window's columns, else 0).
+__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i magnitude_pairs(const std::int16_t* x,
+                                                                             __m256i ones) {
+  return _mm256_madd_epi16(
+      _mm256_abs_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(x))), ones);
+}
+
+// window_sum() of 16-bit lanes in AVX2, sixteen columns to a register, the columns beyond `count`
+// weighted 0. Reads up to 15 lanes past the last column (the ring is padded for it). Each 32-bit
+// lane sums two columns over the rows: at most 2 x 32767 x 1000 rows (the largest noise window)
+// fits, and for a window at most sixteen columns wide (the usual case: one register, summed in
+// 32 bits) so does the whole sum.
 __attribute__((target("avx2"))) inline std::uint64_t window_sum_avx2(
     const std::int16_t* ring, const Frontend::NoiseWindow& window, int first, int count) {
   const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-  __m256i total = _mm256_setzero_si256();
+  const std::int16_t* columns = ring + first;
+  std::uint64_t sum = 0;
   for (int c = 0; c < count; c += 16) {
-    // 1 in the lanes of columns inside the window, else 0.
     const __m256i ones =
         _mm256_and_si256(_mm256_cmpgt_epi16(_mm256_set1_epi16(static_cast<short>(count - c)), lane),
                          _mm256_set1_epi16(1));
-    __m256i sums = _mm256_setzero_si256();
-    for (const std::size_t* rows : {window.above, window.below}) {
-      for (int j = 0; j < window.rows; ++j) {
-        const __m256i band =
-            _mm256_loadu_si256(reinterpret_cast<const __m256i*>(ring + rows[j] + first + c));
-        sums = _mm256_add_epi32(sums, _mm256_madd_epi16(_mm256_abs_epi16(band), ones));
-      }
+    // (The rows above and below the guard band in two sums: two chains of additions.)
+    __m256i above = _mm256_setzero_si256(), below = _mm256_setzero_si256();
+    for (int j = 0; j < window.rows; ++j) {
+      above = _mm256_add_epi32(above, magnitude_pairs(columns + window.above[j] + c, ones));
+      below = _mm256_add_epi32(below, magnitude_pairs(columns + window.below[j] + c, ones));
     }
-    total = _mm256_add_epi64(total, _mm256_cvtepu32_epi64(_mm256_castsi256_si128(sums)));
-    total = _mm256_add_epi64(total, _mm256_cvtepu32_epi64(_mm256_extracti128_si256(sums, 1)));
+    const __m256i both = _mm256_add_epi32(above, below);
+    if (count <= 16) {
+      __m128i total =
+          _mm_add_epi32(_mm256_castsi256_si128(both), _mm256_extracti128_si256(both, 1));
+      total = _mm_add_epi32(total, _mm_shuffle_epi32(total, 0x4e));
+      total = _mm_add_epi32(total, _mm_shuffle_epi32(total, 0xb1));
+      return static_cast<std::uint32_t>(_mm_cvtsi128_si32(total));
+    }
+    __m256i wide = _mm256_add_epi64(_mm256_cvtepu32_epi64(_mm256_castsi256_si128(both)),
+                                    _mm256_cvtepu32_epi64(_mm256_extracti128_si256(both, 1)));
+    const __m128i pairs =
+        _mm_add_epi64(_mm256_castsi256_si128(wide), _mm256_extracti128_si256(wide, 1));
+    sum += static_cast<std::uint64_t>(_mm_cvtsi128_si64(pairs)) +
+           static_cast<std::uint64_t>(_mm_extract_epi64(pairs, 1));
   }
-  const __m128i pairs =
-      _mm_add_epi64(_mm256_castsi256_si128(total), _mm256_extracti128_si256(total, 1));
-  return static_cast<std::uint64_t>(_mm_cvtsi128_si64(pairs)) +
-         static_cast<std::uint64_t>(_mm_extract_epi64(pairs, 1));
+  return sum;
 }
 #endif
 
