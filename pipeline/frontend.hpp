@@ -159,7 +159,16 @@ class Frontend {
   template <class Lane>
   float noise_level(const Lane* ring, const NoiseWindow& window, int u, int begin) const;
   float noise_from_sum(std::uint64_t sum) const;
+  // The sub-pixel row of the valid point of column u, from its guess (see find_candidates()).
+  struct RefineStart;
+  RefineStart refine_start(float v_guess) const;
   float refine_row(int u, float v_guess) const;
+  // refine_row() of the first `count` points waiting for it (refine_columns_, ...): into the
+  // profile's points.
+  void refine(std::span<ProfilePoint> points, std::size_t count) const;
+#if LASERLINE_AVX2_KERNELS
+  void refine_avx2(std::span<ProfilePoint> points, std::size_t count) const;
+#endif
 
   ScannerGeometry geometry_;
   FrontendOptions options_;
@@ -224,6 +233,10 @@ class Frontend {
   };
   std::vector<Peak> column_best_;  // max_candidates_per_column per column
   std::vector<std::uint8_t> column_count_;
+  // The valid points waiting for refine_row(): column, guess, index in the profile.
+  std::vector<int> refine_columns_;
+  std::vector<float> refine_guesses_;
+  std::vector<std::size_t> refine_points_;
 };
 
 }  // namespace laserline::pipeline

@@ -291,10 +291,14 @@ TEST(Frontend, IntrinsicsAndPortableKernelsFindTheSameCandidates) {
   std::uint32_t state = 777;
   for (std::size_t i = 0; i < current.pixels.size(); ++i) {
     state = state * 1664525u + 1013904223u;
-    current.pixels[i] = static_cast<std::uint8_t>(60 + (state >> 26));
+    current.pixels[i] = static_cast<std::uint8_t>(60 + (state >> 27));
     background.pixels[i] = static_cast<std::uint8_t>(40 + (state >> 28) * 3);
   }
-  current.add_line([](int u) { return 90.0 + 0.2 * u; }, 120.0, 2.0);
+  auto line = [](int u) { return 90.0 + 0.2 * u; };
+  current.add_line(line, 120.0, 2.0);
+  // Over the right half a brighter line whose core clips: the refinement's other path.
+  auto clipped = [](int u) { return u < 160 ? -1000.0 : 40.0 + 0.1 * u; };
+  current.add_line(clipped, 600.0, 2.5);
   Homography h;
   h.h = {1, 0.002, 1.7, -0.001, 1, -2.2, 0, 0, 1};
   FrontendOptions narrow, wide, wide_reach;
@@ -311,12 +315,18 @@ TEST(Frontend, IntrinsicsAndPortableKernelsFindTheSameCandidates) {
     frontend.find_candidates(portable);
     ASSERT_EQ(with_intrinsics.size(), portable.size());
     EXPECT_GT(portable.size(), static_cast<std::size_t>(g.width));  // many, some not valid
+    // Both of the refinement's paths ran: the Gaussian fit, and the centre of a clipped run.
+    int on_line = 0, on_clipped_line = 0;
     for (std::size_t i = 0; i < portable.size(); ++i) {
       const ProfilePoint& a = with_intrinsics.points()[i];
       const ProfilePoint& b = portable.points()[i];
       EXPECT_TRUE(a.u == b.u && a.v == b.v && a.snr_db == b.snr_db && a.valid == b.valid)
           << "point " << i << ": " << a.u << ", " << a.v << " against " << b.u << ", " << b.v;
+      if (b.valid && std::abs(b.v - line(b.u)) < 1.0) ++on_line;
+      if (b.valid && std::abs(b.v - clipped(b.u)) < 1.0) ++on_clipped_line;
     }
+    EXPECT_GT(on_line, 50);
+    EXPECT_GT(on_clipped_line, 100);
   }
 }
 
