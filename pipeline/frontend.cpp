@@ -38,9 +38,9 @@ namespace {
 
 constexpr double kSigmaPerFwhm = 1.0 / 2.3548200450309493;  // a Gaussian's sigma per FWHM
 constexpr float kDecibelsPerNeper = 8.68588963806503655f;   // 20 / ln 10
-// Interpolation is done in fixed point, 1/256 grey level (see the row kernels).
-constexpr int kFixedOne = 256;
-constexpr int kFixedBits = 8;
+// Interpolation is done in fixed point, 1/128 grey level (see the row kernels).
+constexpr int kFixedOne = 128;
+constexpr int kFixedBits = 7;
 // Row kernels run over blocks of this many pixels with a constant trip count: what GCC needs to
 // vectorise them. Float rows are padded to a multiple of it.
 constexpr int kBlock = 16;
@@ -152,7 +152,8 @@ Frontend::Frontend(const ScannerGeometry& geometry, const FrontendOptions& optio
   // rows' fixed-point one. Its extremes are +-255 (1 - inner / outer) grey levels, so it fits
   // 16-bit lanes when 255 one (outer - inner) inner / g does (and the outer box's sum,
   // 255 one outer, fits 16 unsigned bits): with the most fractional bits of the normalised rows
-  // (at most 4, at least 2) for which that holds, else 32-bit lanes and 8.
+  // (at most 4, at least 2) for which that holds, else 32-bit lanes and the 7 of the
+  // interpolation.
   const int g = std::gcd(inner_, outer_);
   band_a_ = outer_ / g;
   band_b_ = inner_ / g;
@@ -221,7 +222,8 @@ void Frontend::reset(int width, int height) {
   warp_left_.assign(blocks, 0);
   warp_top_.assign(blocks, 0);
   warp_whole_.assign(blocks, 0);
-  warp_weights_.assign(4 * blocks, 0);
+  warp_offset_.assign(blocks, 0);
+  warp_pairs_.assign(2 * blocks, 0);
   zero_normalised_.assign(s, 0);
   peak_flags_.assign(ring + 8, 0u);
   peak_bits_.assign((ring + 63) / 64, 0u);
@@ -234,12 +236,21 @@ void Frontend::reset(int width, int height) {
 
 namespace {
 
-// Interpolation is done in fixed point, 1/256 grey level: weights of 8 bit and 16-bit lanes,
-// clipping at 0 by a saturating subtraction. The normalised rows keep 8 - shift fractional bits
-// of it, rounded (fewer where the band-pass is to fit 16-bit lanes: see the constructor).
+// Interpolation is done in fixed point, 1/128 grey level: weights of 7 bits (summing to 128),
+// so that a pixel's weighted sum fits 16 signed bits, as AVX2's multiply-add of bytes wants.
+// (The warp is a translation per block, off by up to 0.05 pixel: at an edge of 255 grey levels,
+// 13 of them, against at most 1 for weights rounded to 1/256 instead of 1/128.) Clipped at 0.
+// The normalised rows keep 7 - shift fractional bits of it, rounded (fewer where the band-pass
+// is to fit 16-bit lanes: see the constructor).
 
 LASERLINE_ROW_KERNEL std::uint16_t to_precision(unsigned value, int shift) {
   return static_cast<std::uint16_t>((value + ((1u << shift) >> 1)) >> shift);
+}
+
+// Two weights as the byte pair AVX2's multiply-add of bytes takes (the first in the low byte of a
+// 16-bit word), negated: -128 fits a signed byte, +128 does not.
+LASERLINE_ROW_KERNEL std::int32_t negated_pair(std::int32_t first, std::int32_t second) {
+  return (-first & 0xff) | ((-second & 0xff) << 8);
 }
 
 inline std::uint16_t fixed_weight(float t) {
@@ -257,7 +268,7 @@ LASERLINE_ROW_KERNEL void interpolate_row(const std::uint8_t* __restrict a,
     out[u] = to_precision(static_cast<std::uint16_t>(a[u] * fa + b[u] * fb), shift);
 }
 
-// The four bilinear weights of a warp block (summing to 256).
+// The four bilinear weights of a warp block (summing to 128).
 struct BlockWeights {
   std::uint16_t w00, w01, w10, w11;
 };
@@ -301,32 +312,29 @@ struct WarpBlocks {
   const std::int32_t* left;
   const std::int32_t* top;
   const std::int32_t* whole;
-  const std::int32_t* weights;  // w00, w01, w10, w11 of each block
+  const std::int32_t* offset;  // of the first pixel's background pixel, where whole
+  const std::int32_t* pairs;   // negated_pair(w00, w01), negated_pair(w10, w11) of each block
   const std::uint8_t* background;
   std::ptrdiff_t stride;
   int blocks, width, last_column, last_row;
   int partial;  // blocks not whole
 
   BlockWeights weights_of(int j) const {
-    const std::int32_t* w = weights + 4 * j;
-    return {static_cast<std::uint16_t>(w[0]), static_cast<std::uint16_t>(w[1]),
-            static_cast<std::uint16_t>(w[2]), static_cast<std::uint16_t>(w[3])};
+    return {weight(pairs[2 * j], 0), weight(pairs[2 * j], 8), weight(pairs[2 * j + 1], 0),
+            weight(pairs[2 * j + 1], 8)};
+  }
+  static std::uint16_t weight(std::int32_t pair, int at) {
+    return static_cast<std::uint16_t>(-static_cast<std::int8_t>((pair >> at) & 0xff));
   }
 };
 
-// The row, block by block, through `difference` (DifferenceGeneric or DifferenceAvx2).
+// The blocks partly or wholly outside the background, through `difference`: pixels [f, e) have
+// their four neighbours inside it; elsewhere there is nothing to compare with, so no signal.
+// (Few or none: the scan stops after the last.)
 template <class Difference>
-LASERLINE_ROW_KERNEL void difference_blocks(const WarpBlocks& w, Difference& difference,
-                                            std::uint16_t* out) {
+LASERLINE_ROW_KERNEL void difference_partial_blocks(const WarpBlocks& w, Difference& difference,
+                                                    std::uint16_t* out) {
   constexpr int kWarp = Frontend::kWarpBlock;
-  for (int j = 0; j < w.blocks; ++j) {
-    if (w.whole[j]) {
-      difference(j * kWarp, w.background + w.top[j] * w.stride + w.left[j], w.weights_of(j), kWarp);
-    }
-  }
-  // The blocks partly or wholly outside the background: pixels [f, e) have their four
-  // neighbours inside it; elsewhere there is nothing to compare with, so no signal. (Few or
-  // none: the scan stops after the last.)
   for (int j = 0, partial = w.partial; partial > 0; ++j) {
     if (w.whole[j]) continue;
     --partial;
@@ -345,16 +353,29 @@ LASERLINE_ROW_KERNEL void difference_blocks(const WarpBlocks& w, Difference& dif
   }
 }
 
+// The row, block by block, through DifferenceGeneric.
+template <class Difference>
+LASERLINE_ROW_KERNEL void difference_blocks(const WarpBlocks& w, Difference& difference,
+                                            std::uint16_t* out) {
+  constexpr int kWarp = Frontend::kWarpBlock;
+  for (int j = 0; j < w.blocks; ++j) {
+    if (w.whole[j]) difference(j * kWarp, w.background + w.offset[j], w.weights_of(j), kWarp);
+  }
+  difference_partial_blocks(w, difference, out);
+}
+
 #if LASERLINE_AVX2_KERNELS
 // Sixteen bytes widened to 16-bit lanes.
 __attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i widen(const std::uint8_t* x) {
   return _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(x)));
 }
 
-// difference_blocks()'s functor in AVX2, sixteen pixels to a register (GCC's own vectorisation
-// of this register-hungry loop widens each load in three steps and spills).
+// difference_blocks()'s functor in AVX2: a whole block, 32 pixels, with multiply-adds of byte
+// pairs (a pixel and its right neighbour, or the pixel in rows a and b); the rest sixteen pixels
+// to a register (GCC's own vectorisation of this register-hungry loop widens each load in three
+// steps and spills).
 struct DifferenceAvx2 : RowDifference {
-  __m256i weight_a, weight_b, half, w00, w01, w10, w11;
+  __m256i weight_a, weight_b, half, w00, w01, w10, w11, rows_pair;
   __m128i bits;
 
   __attribute__((target("avx2"))) explicit DifferenceAvx2(const RowDifference& row)
@@ -362,7 +383,52 @@ struct DifferenceAvx2 : RowDifference {
         weight_a(_mm256_set1_epi16(static_cast<short>(kFixedOne - row.fb))),
         weight_b(_mm256_set1_epi16(static_cast<short>(row.fb))),
         half(_mm256_set1_epi16(static_cast<short>((1 << row.shift) >> 1))),
+        rows_pair(_mm256_set1_epi16(static_cast<short>(negated_pair(kFixedOne - row.fb, row.fb)))),
         bits(_mm_cvtsi32_si128(row.shift)) {}
+
+  // Thirty-two pixels from column u (p the background pixel under it), weights w, into the row.
+  // Loaded as 16-bit words, the bytes of a row pair up: word i holds pixels 2i and 2i + 1, which
+  // the multiply-add weights as pixel 2i and its right neighbour; loaded a pixel on, the same for
+  // pixel 2i + 1. The current frame's rows a and b pair up as (a, b) by masks and shifts. So the
+  // even pixels and the odd ones come out in two registers, interleaved back at the end.
+  __attribute__((target("avx2"))) LASERLINE_ROW_KERNEL void thirty_two(
+      int u, const std::uint8_t* p, std::int32_t top_pair, std::int32_t bottom_pair) const {
+    const __m256i low_bytes = _mm256_set1_epi16(0x00ff);
+    const __m256i x = load(a + u), y = load(b + u);
+    const __m256i even_rows =
+        _mm256_or_si256(_mm256_and_si256(x, low_bytes), _mm256_slli_epi16(y, 8));
+    const __m256i odd_rows =
+        _mm256_or_si256(_mm256_srli_epi16(x, 8), _mm256_andnot_si256(low_bytes, y));
+    const __m256i top = _mm256_set1_epi16(static_cast<short>(top_pair));
+    const __m256i bottom = _mm256_set1_epi16(static_cast<short>(bottom_pair));
+    const std::uint8_t* q = p + stride;
+    // Each -(weighted sum): at least -255 x 128, within 16 signed bits.
+    const __m256i even = difference_of(_mm256_maddubs_epi16(even_rows, rows_pair),
+                                       _mm256_add_epi16(_mm256_maddubs_epi16(load(p), top),
+                                                        _mm256_maddubs_epi16(load(q), bottom)));
+    const __m256i odd = difference_of(_mm256_maddubs_epi16(odd_rows, rows_pair),
+                                      _mm256_add_epi16(_mm256_maddubs_epi16(load(p + 1), top),
+                                                       _mm256_maddubs_epi16(load(q + 1), bottom)));
+    // Interleaved within 128-bit halves: pixels 0-7 and 16-23, then 8-15 and 24-31.
+    const __m256i low = _mm256_unpacklo_epi16(even, odd), high = _mm256_unpackhi_epi16(even, odd);
+    std::uint16_t* result = out + u;
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(result),
+                        _mm256_permute2x128_si256(low, high, 0x20));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(result + 16),
+                        _mm256_permute2x128_si256(low, high, 0x31));
+  }
+
+  __attribute__((target("avx2"))) static LASERLINE_ROW_KERNEL __m256i load(const std::uint8_t* x) {
+    return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(x));
+  }
+
+  // current - warped from their negations, clipped at 0 and rounded to the row's precision.
+  __attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i
+  difference_of(__m256i negated_current, __m256i negated_warped) const {
+    const __m256i difference =
+        _mm256_max_epi16(_mm256_sub_epi16(negated_warped, negated_current), _mm256_setzero_si256());
+    return _mm256_srl_epi16(_mm256_add_epi16(difference, half), bits);
+  }
 
   __attribute__((target("avx2"))) void set_weights(BlockWeights w) {
     w00 = _mm256_set1_epi16(static_cast<short>(w.w00));
@@ -412,7 +478,14 @@ struct DifferenceAvx2 : RowDifference {
 __attribute__((target("avx2"))) inline void difference_blocks_avx2(const WarpBlocks& w,
                                                                    const RowDifference& row) {
   DifferenceAvx2 difference(row);
-  difference_blocks(w, difference, row.out);
+  constexpr int kWarp = Frontend::kWarpBlock;
+  for (int j = 0; j < w.blocks; ++j) {
+    if (w.whole[j]) {
+      difference.thirty_two(j * kWarp, w.background + w.offset[j], w.pairs[2 * j],
+                            w.pairs[2 * j + 1]);
+    }
+  }
+  difference_partial_blocks(w, difference, row.out);
 }
 #endif
 
@@ -614,8 +687,10 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
   // background sizes (a NaN goes to the far left), so that they convert to int.
   std::int32_t* __restrict left = warp_left_.data();
   std::int32_t* __restrict top = warp_top_.data();
-  // (32-bit weights, four per block: as wide as the positions, so that the loop vectorises.)
-  std::int32_t* __restrict weights = warp_weights_.data();
+  // The weights as negated_pair()s, a row's two in one (32-bit, as wide as the positions, so that
+  // the loop vectorises).
+  std::int32_t* __restrict pairs = warp_pairs_.data();
+  std::int32_t* __restrict offset = warp_offset_.data();
   std::int32_t* __restrict whole = warp_whole_.data();
   const int last_row = background.height - 1;
   const float far = 2.0f * std::max(bg_width, bg_height);
@@ -633,13 +708,17 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
     const auto ix = static_cast<std::int32_t>(fx), iy = static_cast<std::int32_t>(fy);
     left[j] = ix;
     top[j] = iy;
+    // (Where whole, it fits: unsigned, so that elsewhere it may wrap.)
+    offset[j] = static_cast<std::int32_t>(static_cast<std::uint32_t>(iy) *
+                                              static_cast<std::uint32_t>(stride) +
+                                          static_cast<std::uint32_t>(ix));
     // Whole: all its pixels' four neighbours lie inside the background (nearly every block).
     whole[j] = (count == kWarpBlock) & (ix >= 0) & (ix + kWarpBlock <= last_column) & (iy >= 0) &
                (iy < last_row);
     partial += 1 - whole[j];
     const float tx = xs - fx, ty = ys - fy;
     const float one = kFixedOne;
-    // The four sum to 256 (else the background is scaled) by construction: the rows' shares
+    // The four sum to 128 (else the background is scaled) by construction: the rows' shares
     // rounded, then each row's share split between its two pixels.
     const auto top_share = static_cast<std::int32_t>((1.0f - ty) * one + 0.5f);
     const std::int32_t bottom_share = kFixedOne - top_share;
@@ -649,13 +728,11 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
         static_cast<std::int32_t>((1.0f - tx) * static_cast<float>(bottom_share) + 0.5f);
     const std::int32_t top_right = top_share - top_left;
     const std::int32_t bottom_right = bottom_share - bottom_left;
-    weights[4 * j] = top_left;
-    weights[4 * j + 1] = top_right;
-    weights[4 * j + 2] = bottom_left;
-    weights[4 * j + 3] = bottom_right;
+    pairs[2 * j] = negated_pair(top_left, top_right);
+    pairs[2 * j + 1] = negated_pair(bottom_left, bottom_right);
   }
-  const WarpBlocks warp{left,   top,   whole,       weights,  background.data, stride,
-                        blocks, width, last_column, last_row, partial};
+  const WarpBlocks warp{left,   top,    whole, offset,      pairs,    background.data,
+                        stride, blocks, width, last_column, last_row, partial};
   const RowDifference difference_row{row.a, row.b, row.fb, stride, normalised_shift_, out};
 #if LASERLINE_AVX2_KERNELS
   // Inlined into the AVX2 version of this function, a call never made in the other.

@@ -216,7 +216,8 @@ class Frontend {
   std::vector<std::int32_t> warp_left_, warp_top_;
   // ... and whether the block lies wholly inside it.
   std::vector<std::int32_t> warp_whole_;
-  std::vector<std::int32_t> warp_weights_;      // four per block
+  std::vector<std::int32_t> warp_offset_;  // of its first pixel's in the background, where whole
+  std::vector<std::int32_t> warp_pairs_;   // its weights: two pairs of bytes (see normalise_row())
   std::vector<std::uint16_t> zero_normalised_;  // a row of zeros: the rows beyond the ends
   // Per block of rows: where each row it touches is (offsets into a strip's rings, pointers to
   // the normalised rows), from the first it touches on.

@@ -195,11 +195,11 @@ TEST(Frontend, RollingPassMatchesTheStagesComputedWhole) {
   EXPECT_FLOAT_EQ(Frontend(small_geometry(), narrow).band_pass_unit(), 1.0f / 144.0f);
   expect_pass_matches_stages_computed_whole(narrow, 3, 9);
   // 5 and 19 rows (a passband ratio that is no odd whole number) do not: 32-bit lanes with the
-  // 8 fractional bits of the interpolation, unit 1 / (5 * 19 * 256).
+  // 7 fractional bits of the interpolation, unit 1 / (5 * 19 * 128).
   FrontendOptions wide;
   wide.normalised_width_px = 5;
   wide.passband_ratio = 3.8;
-  EXPECT_FLOAT_EQ(Frontend(small_geometry(), wide).band_pass_unit(), 1.0f / (5 * 19 * 256));
+  EXPECT_FLOAT_EQ(Frontend(small_geometry(), wide).band_pass_unit(), 1.0f / (5 * 19 * 128));
   expect_pass_matches_stages_computed_whole(wide, 5, 19);
   // 13 and 193 rows and a noise window of 1001: a column's sum of |band-pass| over the window in
   // band-pass units could pass 2^32 (it is summed in 64 bits).
