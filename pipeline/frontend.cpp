@@ -1176,8 +1176,8 @@ lanes_of(const std::array<float, 8>& values) {
 }
 
 // Four bytes from each of base + offset (lanes `wanted`; the others 0), as a gather does but by
-// eight loads: gathers are slow on CPUs patched against Gather Data Sampling (measured here, an
-// Ice Lake: 24 cycles a gather, 10 for eight loads). The lanes not wanted read from base itself.
+// eight loads: gathers are slow on this machine's CPU (an Ice Lake server; measured: 24 cycles a
+// gather, 10 for eight loads). The lanes not wanted read from base itself.
 __attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i four_bytes_at(const std::uint8_t* base,
                                                                            __m256i offset,
                                                                            __m256i wanted) {
