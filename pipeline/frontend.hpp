@@ -193,9 +193,10 @@ class Frontend {
   Homography to_background_;
 
   // The pass goes down the rows in blocks of kRowBlock and, within a block, across the image in
-  // strips of kStripColumns: a strip's band-pass ring (about 26 rows, 14 KB) and the rows of
-  // sums being written then stay in the first-level cache while the block's rows are done.
-  // (Measured: 256 columns beat 128, whose work per row and strip weighs more, and 512.)
+  // strips of kStripColumns: a strip's band-pass ring (about 38 rows, 21 KB) and the sums being
+  // written then stay in the first-level cache while the block's rows are done. (Measured: 256
+  // columns beat 128, whose work per row and strip weighs more, and 512; going down a whole strip
+  // before the next, the normalised rows made strip by strip, was slower still.)
   static constexpr int kRowBlock = 8;
   static constexpr int kStripColumns = 256;
   // The columns a strip's kernels run over when the noise window is at most 17 columns wide
@@ -212,7 +213,7 @@ class Frontend {
   BandRings<std::int32_t> wide_;
   std::vector<int> band_most_;  // per band-pass row of a strip: its largest value
   // Per warp block of the row being normalised: where its first pixel lies in the background
-  // (integer column and row) and the four bilinear weights.
+  // (integer column and row).
   std::vector<std::int32_t> warp_left_, warp_top_;
   // ... and whether the block lies wholly inside it.
   std::vector<std::int32_t> warp_whole_;
