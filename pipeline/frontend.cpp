@@ -824,20 +824,20 @@ float Frontend::noise_level(const Lane* ring, const NoiseWindow& window, int u, 
   const int count = 2 * noise_pad_ + 1;
   if (u >= noise_pad_ && u + noise_pad_ < width_) {
     const int first = u - noise_pad_ - begin;
+    bool summed = false;
 #if LASERLINE_AVX2_KERNELS
     if constexpr (std::is_same_v<Lane, std::int16_t>) {
-      if (avx2_) return noise_from_sum(window_sum_avx2(ring, window, first, count));
+      if (avx2_) {
+        sum = window_sum_avx2(ring, window, first, count);
+        summed = true;
+      }
     }
 #endif
-    sum = window_sum(ring, window, first, count);
+    if (!summed) sum = window_sum(ring, window, first, count);
   } else {  // at the image's sides the window repeats the edge column
     for (int k = -noise_pad_; k <= noise_pad_; ++k)
       sum += window_sum(ring, window, std::clamp(u + k, 0, width_ - 1) - begin, 1);
   }
-  return noise_from_sum(sum);
-}
-
-float Frontend::noise_from_sum(std::uint64_t sum) const {
   // III-D: the minimal noise level is 1.
   return std::max(static_cast<float>(sum) * band_unit_ * noise_norm_, 1.0f);
 }

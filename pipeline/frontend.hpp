@@ -158,7 +158,6 @@ class Frontend {
   // window around it, at least 1.
   template <class Lane>
   float noise_level(const Lane* ring, const NoiseWindow& window, int u, int begin) const;
-  float noise_from_sum(std::uint64_t sum) const;
   // The sub-pixel row of the valid point of column u, from its guess (see find_candidates()).
   struct RefineStart;
   RefineStart refine_start(float v_guess) const;
