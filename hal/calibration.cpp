@@ -14,10 +14,35 @@ bool CameraIntrinsics::has_distortion() const {
   return false;
 }
 
+const char* to_string(LaserSide side) {
+  switch (side) {
+    case LaserSide::kAbove:
+      return "above";
+    case LaserSide::kBelow:
+      return "below";
+    case LaserSide::kLeft:
+      return "left";
+    case LaserSide::kRight:
+      return "right";
+  }
+  return "above";
+}
+
 std::array<double, 4> LaserMount::plane_coefficients() const {
   if (plane) return *plane;
-  // Y = -d + tan(90 - beta) Z  <=>  0*X + 1*Y - tan(90 - beta) Z + d = 0
+  // Above: Y = -d + tan(90 - beta) Z  <=>  0*X + 1*Y - tan(90 - beta) Z + d = 0; the other sides
+  // are the same sheet turned about the optical axis, the projector at +y, -x or +x.
   const double t = std::tan((90.0 - angle_deg) * std::numbers::pi / 180.0);
+  switch (side) {
+    case LaserSide::kBelow:
+      return {0.0, -1.0, -t, baseline_m};
+    case LaserSide::kLeft:
+      return {1.0, 0.0, -t, baseline_m};
+    case LaserSide::kRight:
+      return {-1.0, 0.0, -t, baseline_m};
+    case LaserSide::kAbove:
+      break;
+  }
   return {0.0, 1.0, -t, baseline_m};
 }
 
@@ -161,6 +186,11 @@ Calibration read_calibration(YamlMap& map) {
   cal.laser.baseline_m = laser.number("baseline_m", cal.laser.baseline_m, 1e-3, 10.0);
   cal.laser.angle_deg = laser.number("angle_deg", cal.laser.angle_deg, 1.0, 179.0);
   cal.laser.sheet_width_m = laser.number("sheet_width_m", cal.laser.sheet_width_m, 1e-5, 0.1);
+  const std::string side =
+      laser.choice("side", to_string(cal.laser.side), {"above", "below", "left", "right"});
+  for (LaserSide s : {LaserSide::kAbove, LaserSide::kBelow, LaserSide::kLeft, LaserSide::kRight}) {
+    if (side == to_string(s)) cal.laser.side = s;
+  }
   std::vector<double> plane = laser.numbers("plane", {4});
   if (!plane.empty()) {
     const double norm = std::sqrt(plane[0] * plane[0] + plane[1] * plane[1] + plane[2] * plane[2]);

@@ -1,6 +1,7 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <optional>
 #include <string>
 
@@ -18,16 +19,24 @@ struct CameraIntrinsics {
   bool has_distortion() const;
 };
 
-// Where the laser sheet is relative to the camera (the paper's d, beta, l_w). The projector sits
-// at baseline d along -y and the sheet contains the x direction: Y = -d + tan(90deg - beta) * Z.
-// A calibrated plane a*X + b*Y + c*Z + e = 0 (camera frame, metres) replaces that model when set.
+// Which side of the camera the laser projector is on, as seen in the image: above (the paper's
+// mounting, the line runs across the image), below, left or right (the line runs down the image).
+enum class LaserSide : std::uint8_t { kAbove, kBelow, kLeft, kRight };
+const char* to_string(LaserSide side);
+
+// Where the laser sheet is relative to the camera (the paper's d, beta, l_w). With the projector
+// above the camera it sits at baseline d along -y and the sheet contains the x direction:
+// Y = -d + tan(90deg - beta) * Z; on another side the same model turned about the optical axis
+// (left: X = -d + tan(90deg - beta) * Z). A calibrated plane a*X + b*Y + c*Z + e = 0 (camera
+// frame, metres) replaces that model when set.
 struct LaserMount {
   double baseline_m = 0.25;
   double angle_deg = 80.0;
   double sheet_width_m = 0.003;
+  LaserSide side = LaserSide::kAbove;
   std::optional<std::array<double, 4>> plane;
 
-  // The sheet as a*X + b*Y + c*Z + e = 0, from `plane` or from baseline and angle.
+  // The sheet as a*X + b*Y + c*Z + e = 0, from `plane` or from baseline, angle and side.
   std::array<double, 4> plane_coefficients() const;
 };
 

@@ -6,7 +6,7 @@ set -euo pipefail
 
 packages=(
   # build
-  build-essential cmake pkg-config git clang-format
+  build-essential cmake pkg-config git clang-format ccache
   # libraries
   liblcm-dev liblcm-bin liblcm-java libglib2.0-dev
   # the Java message types (a jar for lcm-spy) and the Python log reader

@@ -5,8 +5,10 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <opencv2/core.hpp>
 #include <string>
 
@@ -56,6 +58,26 @@ TEST_F(CalibrationFile, NativeLayout) {
   EXPECT_DOUBLE_EQ(c.camera.distortion[4], 0.05);
   EXPECT_DOUBLE_EQ(c.laser.angle_deg, 80);
   EXPECT_FALSE(c.laser.plane.has_value());
+}
+
+// The projector on each side of the camera: the same sheet turned about the optical axis. Each
+// plane passes through the projector (baseline d on that side, Z = 0) and meets the optical axis
+// at the same depth d / tan(90 - beta).
+TEST_F(CalibrationFile, LaserSides) {
+  const double d = 0.2, t = std::tan((90.0 - 75.0) * M_PI / 180.0);
+  const std::map<std::string, std::array<double, 3>> projector = {
+      {"above", {0, -d, 0}}, {"below", {0, d, 0}}, {"left", {-d, 0, 0}}, {"right", {d, 0, 0}}};
+  for (const auto& [side, at] : projector) {
+    const Calibration c = load_calibration_file(
+        write(side + ".yaml", "laser: {baseline_m: 0.2, angle_deg: 75, side: " + side + "}\n"));
+    EXPECT_STREQ(to_string(c.laser.side), side.c_str());
+    const auto [a, b, cc, e] = c.laser.plane_coefficients();
+    EXPECT_NEAR(a * at[0] + b * at[1] + cc * at[2] + e, 0.0, 1e-12) << side;
+    const double axis_depth = -e / cc;  // X = Y = 0
+    EXPECT_NEAR(axis_depth, d / t, 1e-12) << side;
+  }
+  EXPECT_EQ(error_of("laser: {side: up}\n"),
+            "calib.yaml:1: laser.side: must be one of above, below, left, right, got 'up'");
 }
 
 // The layout of OpenCV's calibration sample, written by cv::FileStorage (with its `%YAML:1.0`
@@ -206,7 +228,7 @@ TEST_F(CalibrationFile, NativeErrorsUnchanged) {
             "calib.yaml:2: camera.distortion: must have 4 or 5 numbers, got 2");
   EXPECT_EQ(error_of("laser:\n  angel_deg: 80\n"),
             "calib.yaml:2: laser.angel_deg: unknown key (expected one of: angle_deg, baseline_m, "
-            "plane, sheet_width_m)");
+            "plane, sheet_width_m, side)");
 }
 
 }  // namespace
