@@ -14,6 +14,8 @@
 #include <opencv2/imgproc.hpp>
 #include <sstream>
 
+#include "tools/frame_channel.hpp"
+
 namespace laserline::tools {
 
 namespace {
@@ -642,25 +644,9 @@ cv::Mat load_mono8(const std::string& path) {
     if (access(path.c_str(), R_OK) != 0) fail(path + ": cannot be read: " + std::strerror(errno));
     fail(path + ": not a readable image (corrupt or unsupported format)");
   }
-  if (raw.depth() != CV_8U && raw.depth() != CV_16U) {
-    fail(path + ": unsupported pixel type (only 8 and 16 bit unsigned integers)");
-  }
-  cv::Mat channel;
-  if (raw.channels() == 1) {
-    channel = raw;
-  } else if (raw.channels() == 2) {
-    cv::extractChannel(raw, channel, 0);  // grey + alpha
-  } else if (raw.channels() <= 4) {
-    cv::extractChannel(raw, channel, 1);  // green (OpenCV orders BGR): the laser's colour
-  } else {
-    fail(path + ": unsupported number of channels (" + std::to_string(raw.channels()) + ")");
-  }
   cv::Mat out;
-  if (channel.depth() == CV_16U) {
-    channel.convertTo(out, CV_8U, 255.0 / 65535.0);
-  } else {
-    out = channel;
-  }
+  std::string problem;
+  if (!to_laser_mono8(raw, hal::LaserChannel{}, out, problem)) fail(path + ": " + problem);
   return out;
 }
 

@@ -34,6 +34,7 @@
 #include "daemon/config.hpp"
 #include "hal/calibration.hpp"
 #include "pipeline/detector.hpp"
+#include "tools/frame_channel.hpp"
 #include "tools/point_cloud.hpp"
 
 namespace {
@@ -190,7 +191,7 @@ class Extractor {
              std::optional<std::int64_t> utime = std::nullopt) {
     const std::int64_t index = next_frame_++;
     std::string problem;
-    if (!to_mono8(raw, mono_, problem)) {
+    if (!laserline::tools::to_laser_mono8(raw, channel_, mono_, problem)) {
       fail(where + ": " + problem + "; skipped");
       return;
     }
@@ -289,36 +290,6 @@ class Extractor {
     }
   }
 
-  // The laser is green (535 nm): colour frames give their green channel (OpenCV orders BGR).
-  static bool to_mono8(const cv::Mat& raw, cv::Mat& out, std::string& problem) {
-    if (raw.empty()) {
-      problem = "empty image";
-      return false;
-    }
-    if (raw.depth() != CV_8U && raw.depth() != CV_16U) {
-      problem = "unsupported pixel type (only 8 and 16 bit unsigned integers)";
-      return false;
-    }
-    cv::Mat channel;
-    const int channels = raw.channels();
-    if (channels == 1) {
-      channel = raw;
-    } else if (channels == 2) {
-      cv::extractChannel(raw, channel, 0);  // grey + alpha
-    } else if (channels == 3 || channels == 4) {
-      cv::extractChannel(raw, channel, 1);
-    } else {
-      problem = "unsupported number of channels (" + std::to_string(channels) + ")";
-      return false;
-    }
-    if (channel.depth() == CV_16U) {
-      channel.convertTo(out, CV_8U, 255.0 / 65535.0);  // full 16-bit range onto 0..255
-    } else {
-      out = channel;
-    }
-    return true;
-  }
-
   void write_overlay(std::int64_t index, const std::string& where) {
     cv::cvtColor(mono_, overlay_, cv::COLOR_GRAY2BGR);
     constexpr int kShift = 4;  // sub-pixel drawing: coordinates in 1/16 px
@@ -349,6 +320,7 @@ class Extractor {
   FILE* csv_;
   laserline::tools::PlyWriter* ply_;
   const laserline::tools::PoseLog* poses_;
+  laserline::hal::LaserChannel channel_;  // the laser's light in colour frames
   Progress progress_;
   cv::Mat mono_, overlay_;
   std::int64_t next_frame_ = 0, processed_ = 0, failures_ = 0, laser_off_frames_ = 0;

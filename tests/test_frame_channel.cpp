@@ -1,0 +1,68 @@
+// Frames from files as the detectors see them: the laser's channel of colour frames, mono and
+// 16-bit frames, against values computed by hand.
+#include "tools/frame_channel.hpp"
+
+#include <gtest/gtest.h>
+
+#include <opencv2/core.hpp>
+
+namespace laserline::tools {
+namespace {
+
+cv::Mat convert(const cv::Mat& raw, const std::string& channel) {
+  cv::Mat out;
+  std::string problem;
+  EXPECT_TRUE(to_laser_mono8(raw, hal::parse_laser_channel(channel), out, problem)) << problem;
+  EXPECT_EQ(out.type(), CV_8UC1);
+  return out;
+}
+
+TEST(FrameChannel, ColourChannels) {
+  // One pixel B = 10, G = 100, R = 200 and one white pixel; OpenCV's order is BGR.
+  cv::Mat bgr(1, 2, CV_8UC3);
+  bgr.at<cv::Vec3b>(0, 0) = {10, 100, 200};
+  bgr.at<cv::Vec3b>(0, 1) = {180, 180, 180};
+  EXPECT_EQ(convert(bgr, "red").at<std::uint8_t>(0, 0), 200);
+  EXPECT_EQ(convert(bgr, "green").at<std::uint8_t>(0, 0), 100);
+  EXPECT_EQ(convert(bgr, "blue").at<std::uint8_t>(0, 0), 10);
+  // 0.299 * 200 + 0.587 * 100 + 0.114 * 10 = 119.34
+  EXPECT_EQ(convert(bgr, "grey").at<std::uint8_t>(0, 0), 119);
+  // red - (green + blue) / 2: 200 - 55 = 145 on the red pixel, 0 on white light.
+  const cv::Mat difference = convert(bgr, "red - (green + blue) / 2");
+  EXPECT_EQ(difference.at<std::uint8_t>(0, 0), 145);
+  EXPECT_EQ(difference.at<std::uint8_t>(0, 1), 0);
+  // Clipped below 0 and above 255.
+  EXPECT_EQ(convert(bgr, "blue - red").at<std::uint8_t>(0, 0), 0);
+  EXPECT_EQ(convert(bgr, "2 * red").at<std::uint8_t>(0, 0), 255);
+  // An alpha channel changes nothing.
+  cv::Mat bgra;
+  cv::merge(std::vector<cv::Mat>{bgr, cv::Mat(1, 2, CV_8UC1, cv::Scalar(7))}, bgra);
+  EXPECT_EQ(convert(bgra, "red").at<std::uint8_t>(0, 0), 200);
+  EXPECT_EQ(convert(bgra, "red - (green + blue) / 2").at<std::uint8_t>(0, 0), 145);
+}
+
+TEST(FrameChannel, MonoAnd16Bit) {
+  const cv::Mat grey(1, 1, CV_8UC1, cv::Scalar(77));
+  EXPECT_EQ(convert(grey, "red").at<std::uint8_t>(0, 0), 77);  // mono: as it is
+  cv::Mat grey_alpha(1, 1, CV_8UC2, cv::Scalar(66, 255));
+  EXPECT_EQ(convert(grey_alpha, "green").at<std::uint8_t>(0, 0), 66);
+  const cv::Mat deep(1, 1, CV_16UC1, cv::Scalar(65535));
+  EXPECT_EQ(convert(deep, "green").at<std::uint8_t>(0, 0), 255);
+  cv::Mat deep_colour(1, 1, CV_16UC3, cv::Scalar(0, 0, 32896));  // red at half range
+  EXPECT_EQ(convert(deep_colour, "red").at<std::uint8_t>(0, 0), 128);
+  EXPECT_EQ(convert(deep_colour, "red - green / 2").at<std::uint8_t>(0, 0), 128);
+}
+
+TEST(FrameChannel, Problems) {
+  cv::Mat out;
+  std::string problem;
+  EXPECT_FALSE(to_laser_mono8(cv::Mat(), {}, out, problem));
+  EXPECT_EQ(problem, "empty image");
+  EXPECT_FALSE(to_laser_mono8(cv::Mat(2, 2, CV_32FC1), {}, out, problem));
+  EXPECT_EQ(problem, "unsupported pixel type (only 8 and 16 bit unsigned integers)");
+  EXPECT_FALSE(to_laser_mono8(cv::Mat(2, 2, CV_8UC(5)), {}, out, problem));
+  EXPECT_EQ(problem, "unsupported number of channels (5)");
+}
+
+}  // namespace
+}  // namespace laserline::tools
