@@ -25,8 +25,8 @@ TEST(FrameChannel, ColourChannels) {
   EXPECT_EQ(convert(bgr, "red").at<std::uint8_t>(0, 0), 200);
   EXPECT_EQ(convert(bgr, "green").at<std::uint8_t>(0, 0), 100);
   EXPECT_EQ(convert(bgr, "blue").at<std::uint8_t>(0, 0), 10);
-  // 0.299 * 200 + 0.587 * 100 + 0.114 * 10 = 119.34
-  EXPECT_EQ(convert(bgr, "grey").at<std::uint8_t>(0, 0), 119);
+  // 0.299 * 200 + 0.587 * 100 + 0.114 * 10 = 119.64
+  EXPECT_EQ(convert(bgr, "grey").at<std::uint8_t>(0, 0), 120);
   // red - (green + blue) / 2: 200 - 55 = 145 on the red pixel, 0 on white light.
   const cv::Mat difference = convert(bgr, "red - (green + blue) / 2");
   EXPECT_EQ(difference.at<std::uint8_t>(0, 0), 145);
