@@ -240,12 +240,12 @@ TEST_F(DaemonOverLcm, ProfilesMatchTheSimulatorGroundTruth) {
   double worst_depth_m = 0;
   for (const auto& p : rx.profiles) {
     scene.ground_truth(static_cast<std::uint64_t>(p.sequence), true, truth);
-    for (float row : truth.row)
+    for (float row : truth.position)
       truth_columns += std::isfinite(row) ? 1 : 0;
     for (const auto& pt : p.points) {
       ASSERT_GE(pt.u, 0);
       ASSERT_LT(pt.u, 640);
-      const float expected = truth.row[static_cast<std::size_t>(pt.u)];
+      const float expected = truth.position[static_cast<std::size_t>(pt.u)];
       ++points;
       const double err = std::isfinite(expected) ? std::abs(pt.v - expected) : 1e9;
       if (err > 0.5) ++far;
@@ -314,12 +314,12 @@ TEST_F(DaemonOverLcm, BackgroundDetectorFindsTheLineUnderStrongAmbientLight) {
     EXPECT_EQ(p.detector, "background");
     if (p.num_points == 0) continue;  // the first frame has no previous one to subtract
     scene.ground_truth(static_cast<std::uint64_t>(p.sequence), true, truth);
-    for (float row : truth.row)
+    for (float row : truth.position)
       truth_columns += std::isfinite(row) ? 1 : 0;
     for (const auto& pt : p.points) {
       if (!pt.valid) continue;
       ++valid;
-      const float expected = truth.row[static_cast<std::size_t>(pt.u)];
+      const float expected = truth.position[static_cast<std::size_t>(pt.u)];
       if (std::isfinite(expected) && std::abs(pt.v - expected) <= 2.0f) ++correct;
     }
   }

@@ -85,15 +85,16 @@ struct Accuracy {
 Accuracy compare(const std::vector<CsvPoint>& points, const hal::SimGroundTruth& truth,
                  double tolerance_px) {
   Accuracy a;
-  for (float row : truth.row)
+  for (float row : truth.position)
     a.truth_columns += std::isfinite(row) ? 1 : 0;
   for (const auto& p : points) {
     if (p.valid != 1) continue;
-    if (p.u < 0 || p.u >= static_cast<int>(truth.row.size()) || !std::isfinite(truth.row[p.u])) {
+    if (p.u < 0 || p.u >= static_cast<int>(truth.position.size()) ||
+        !std::isfinite(truth.position[p.u])) {
       ++a.outside;
       continue;
     }
-    const double error = std::abs(p.v - truth.row[p.u]);
+    const double error = std::abs(p.v - truth.position[p.u]);
     if (error > tolerance_px) {
       ++a.outside;
       continue;
@@ -227,7 +228,7 @@ TEST_F(LaserlineExtract, ColourPngUsesTheGreenChannel) {
   cv::Mat red_blue = cv::Mat::zeros(kHeight, kWidth, CV_8UC1);
   red_blue.rowRange(200, 205).setTo(255);
   for (int u = 0; u < kWidth; ++u)
-    ASSERT_LT(truth.row[u], 180.0f) << "the stripe must be away from the laser";
+    ASSERT_LT(truth.position[u], 180.0f) << "the stripe must be away from the laser";
   cv::Mat bgr;
   cv::merge(std::vector<cv::Mat>{red_blue, green, red_blue}, bgr);
   ASSERT_TRUE(cv::imwrite(path("colour.png"), bgr));

@@ -137,10 +137,10 @@ int expect_fit_matches_truth(const Image& img, const SimGroundTruth& truth, doub
   int used = 0;
   double worst = 0;
   for (int u = 0; u < img.width; ++u) {
-    if (!std::isfinite(truth.row[u])) continue;
+    if (!std::isfinite(truth.position[u])) continue;
     const double fit = gaussian_peak(img, u);
-    EXPECT_NEAR(fit, truth.row[u], tol) << "column " << u;
-    if (std::isfinite(fit)) worst = std::max(worst, std::abs(fit - truth.row[u]));
+    EXPECT_NEAR(fit, truth.position[u], tol) << "column " << u;
+    if (std::isfinite(fit)) worst = std::max(worst, std::abs(fit - truth.position[u]));
     ++used;
   }
   std::printf("  worst |fit - truth| over %d columns: %.4f px\n", used, worst);
@@ -205,8 +205,9 @@ TEST(SimScene, DeterministicFromOptionsSequenceAndLaserState) {
 
   // The truth is equally reproducible.
   const SimGroundTruth ta = truth_of(a, 11, true), tb = truth_of(b, 11, true);
-  for (std::size_t u = 0; u < ta.row.size(); ++u) {
-    EXPECT_TRUE(ta.row[u] == tb.row[u] || (std::isnan(ta.row[u]) && std::isnan(tb.row[u])));
+  for (std::size_t u = 0; u < ta.position.size(); ++u) {
+    EXPECT_TRUE(ta.position[u] == tb.position[u] ||
+                (std::isnan(ta.position[u]) && std::isnan(tb.position[u])));
   }
 }
 
@@ -216,19 +217,19 @@ TEST(SimScene, LaserOffHasNoTruthAndChangesOnlyTheLine) {
   SimScene scene(o);
   const std::uint64_t seq = 9;
   const SimGroundTruth off = truth_of(scene, seq, false);
-  EXPECT_EQ(finite_count(off.row), 0);
+  EXPECT_EQ(finite_count(off.position), 0);
   EXPECT_EQ(finite_count(off.depth_m), 0);
   EXPECT_EQ(finite_count(off.width_px), 0);
 
   const SimGroundTruth on = truth_of(scene, seq, true);
-  ASSERT_EQ(finite_count(on.row), o.calibration.camera.width);
+  ASSERT_EQ(finite_count(on.position), o.calibration.camera.width);
   const Image lit = render(scene, seq, true), dark = render(scene, seq, false);
   int changed = 0;
   for (int u = 0; u < lit.width; ++u) {
     for (int v = 0; v < lit.height; ++v) {
       if (lit.at(u, v) == dark.at(u, v)) continue;
       ++changed;
-      EXPECT_LE(std::abs(v - on.row[u]), 5 * on.width_px[u] + 0.5)
+      EXPECT_LE(std::abs(v - on.position[u]), 5 * on.width_px[u] + 0.5)
           << "pixel (" << u << ", " << v << ") changed away from the line";
     }
   }
@@ -253,9 +254,9 @@ TEST(SimScene, GroundTruthIsExactWithTiltAndSway) {
   const SimGroundTruth truth = truth_of(scene, seq, true);
   const SimGroundTruth at_start = truth_of(scene, 0, true);
   float moved = 0;
-  for (std::size_t u = 0; u < truth.row.size(); ++u) {
-    if (std::isfinite(truth.row[u]) && std::isfinite(at_start.row[u]))
-      moved = std::max(moved, std::abs(truth.row[u] - at_start.row[u]));
+  for (std::size_t u = 0; u < truth.position.size(); ++u) {
+    if (std::isfinite(truth.position[u]) && std::isfinite(at_start.position[u]))
+      moved = std::max(moved, std::abs(truth.position[u] - at_start.position[u]));
   }
   EXPECT_GT(moved, 2.0f);
   EXPECT_GT(expect_fit_matches_truth(render(scene, seq, true), truth, 0.02), 200);
@@ -269,10 +270,10 @@ TEST(SimScene, GroundTruthIsExactWithTiltAndSway) {
   const SimGroundTruth t2 = truth_of(textured, seq, true);
   const Image img = render(textured, seq, true);
   for (int u = 0; u < img.width; ++u) {
-    if (!std::isfinite(t2.row[u])) continue;
-    const int v = static_cast<int>(std::lround(t2.row[u]));
+    if (!std::isfinite(t2.position[u])) continue;
+    const int v = static_cast<int>(std::lround(t2.position[u]));
     if (img.at(u, v) < 30 || img.at(u, v) == 255) continue;  // too dark to fit, or clipped
-    EXPECT_NEAR(gaussian_peak(img, u), t2.row[u], rounding_bound(img, u, t2.width_px[u]))
+    EXPECT_NEAR(gaussian_peak(img, u), t2.position[u], rounding_bound(img, u, t2.width_px[u]))
         << "column " << u;
     ++used;
   }
@@ -294,7 +295,7 @@ TEST(SimScene, LineBrightnessFollowsTheSurfaceAlbedo) {
   const Image line = render(lit, seq, true), surface = render(ambient, seq, false);
   std::vector<double> a, b;
   for (int u = 0; u < line.width; ++u) {
-    const double v = truth.row[u];
+    const double v = truth.position[u];
     const int v0 = static_cast<int>(std::floor(v));
     const double f = v - v0;
     // The ambient albedo interpolated to the line centre; the line's peak from the fitted
@@ -341,7 +342,7 @@ TEST(SimScene, TruthIsNaNNearTheTopAndBottomBorder) {
   };
   for (double row : {0.2, 1.0, 1.4, height - 2.4, height - 1.3}) {
     const auto [truth, img] = truth_with_line_at(row);
-    EXPECT_EQ(finite_count(truth.row), 0) << "line at row " << row;
+    EXPECT_EQ(finite_count(truth.position), 0) << "line at row " << row;
     EXPECT_EQ(finite_count(truth.depth_m), 0);
     // The line is still drawn.
     const int nearest = static_cast<int>(std::lround(row));
@@ -349,9 +350,9 @@ TEST(SimScene, TruthIsNaNNearTheTopAndBottomBorder) {
   }
   for (double row : {1.6, 2.5, height - 2.6}) {
     const auto [truth, img] = truth_with_line_at(row);
-    EXPECT_EQ(finite_count(truth.row), o.calibration.camera.width) << "line at row " << row;
-    EXPECT_NEAR(truth.row[10], row, 1e-3);
-    EXPECT_NEAR(gaussian_peak(img, 10), truth.row[10], 0.02);
+    EXPECT_EQ(finite_count(truth.position), o.calibration.camera.width) << "line at row " << row;
+    EXPECT_NEAR(truth.position[10], row, 1e-3);
+    EXPECT_NEAR(gaussian_peak(img, 10), truth.position[10], 0.02);
   }
 }
 
@@ -369,7 +370,7 @@ TEST(SimScene, TruthMatchesTheTriangulationModel) {
     SimScene scene(o);
     const SimGroundTruth truth = truth_of(scene, seq, true);
     for (int u = 0; u < o.calibration.camera.width; ++u) {
-      EXPECT_NEAR(truth.row[u], expected, 1e-3) << "column " << u;
+      EXPECT_NEAR(truth.position[u], expected, 1e-3) << "column " << u;
       EXPECT_NEAR(truth.depth_m[u], o.distance_m, 1e-5);
       const double sheet =
           fy * o.calibration.laser.sheet_width_m / o.distance_m / 2.3548200450309493;
@@ -384,22 +385,22 @@ TEST(SimScene, TruthMatchesTheTriangulationModel) {
   SimScene scene(calibrated);
   const SimGroundTruth truth = truth_of(scene, 0, true);
   for (int u = 0; u < o.calibration.camera.width; ++u)
-    EXPECT_NEAR(truth.row[u], expected, 1e-3);
+    EXPECT_NEAR(truth.position[u], expected, 1e-3);
 
   // Scaling the plane equation does not move the sheet.
   calibrated.calibration.laser.plane =
       std::array<double, 4>{0.0, -3.0, 3.0 * std::tan(std::numbers::pi / 2 - beta), -3.0 * d};
   SimScene scaled(calibrated);
-  EXPECT_NEAR(truth_of(scaled, 0, true).row[100], expected, 1e-3);
+  EXPECT_NEAR(truth_of(scaled, 0, true).position[100], expected, 1e-3);
 
   // A surface turned about the y axis slants the line.
   o.tilt_y_deg = 20;
   SimScene tilted(o);
   const SimGroundTruth slant = truth_of(tilted, 0, true);
-  ASSERT_TRUE(std::isfinite(slant.row.front()) && std::isfinite(slant.row.back()));
-  EXPECT_GT(std::abs(slant.row.front() - slant.row.back()), 10.0f);
+  ASSERT_TRUE(std::isfinite(slant.position.front()) && std::isfinite(slant.position.back()));
+  EXPECT_GT(std::abs(slant.position.front() - slant.position.back()), 10.0f);
   for (int u = 1; u < o.calibration.camera.width; ++u) {
-    EXPECT_NE(slant.row[u], slant.row[u - 1]);
+    EXPECT_NE(slant.position[u], slant.position[u - 1]);
   }
 }
 
@@ -471,7 +472,7 @@ TEST(SimScene, BackscatterBrightensOnlyTheCameraSideOfTheLine) {
   SimScene turbid(o);
   const std::uint64_t seq = 3;
   const SimGroundTruth truth = truth_of(clear, seq, true);
-  const int line = static_cast<int>(std::lround(truth.row[0]));
+  const int line = static_cast<int>(std::lround(truth.position[0]));
   const int margin = static_cast<int>(std::ceil(5 * truth.width_px[0])) + 1;
   ASSERT_GT(line - margin - 40, 0);
   ASSERT_LT(line + margin + 40, o.calibration.camera.height);
@@ -511,7 +512,7 @@ TEST(SimScene, SaturatesAt255) {
   const SimGroundTruth truth = truth_of(scene, 2, true);
   int saturated = 0;
   for (int u = 0; u < img.width; ++u) {
-    const int v = static_cast<int>(std::lround(truth.row[u]));
+    const int v = static_cast<int>(std::lround(truth.position[u]));
     saturated += img.at(u, v) == 255 ? 1 : 0;
   }
   EXPECT_EQ(saturated, img.width);
@@ -680,7 +681,7 @@ TEST(SimSceneRelief, ZeroReliefIsThePlaneWhateverTheOtherReliefOptions) {
   EXPECT_EQ(render(plane, 12, true).data, render(flat, 12, true).data);
   EXPECT_EQ(flat.relief_height(0.1, 0.2), 0.0);
   const SimGroundTruth a = truth_of(plane, 12, true), b = truth_of(flat, 12, true);
-  EXPECT_EQ(a.row, b.row);
+  EXPECT_EQ(a.position, b.position);
   EXPECT_EQ(a.depth_m, b.depth_m);
 }
 
@@ -701,7 +702,7 @@ TEST(SimSceneRelief, TruthOnTheReliefMatchesABruteForceSearchAlongTheCameraRays)
   int checked = 0, on_relief = 0;
   double worst_row = 0, worst_depth = 0;
   for (int u = 0; u < o.calibration.camera.width; u += 4) {
-    if (!std::isfinite(truth.row[u])) continue;
+    if (!std::isfinite(truth.position[u])) continue;
     int crossings = 0;
     double lo = 0, hi = 0;
     double previous = sheet_side(u, 0);
@@ -723,9 +724,9 @@ TEST(SimSceneRelief, TruthOnTheReliefMatchesABruteForceSearchAlongTheCameraRays)
     const double row = 0.5 * (lo + hi);
     const Vec3 world = ray_hit(scene, pose, u, row);
     const double depth = to_camera(pose, world)[2];
-    EXPECT_NEAR(truth.row[u], row, 1e-3) << "column " << u;
+    EXPECT_NEAR(truth.position[u], row, 1e-3) << "column " << u;
     EXPECT_NEAR(truth.depth_m[u], depth, 1e-5) << "column " << u;
-    worst_row = std::max(worst_row, std::abs(truth.row[u] - row));
+    worst_row = std::max(worst_row, std::abs(truth.position[u] - row));
     worst_depth = std::max(worst_depth, std::abs(truth.depth_m[u] - depth));
     const Vec3 d{world[0] - f.origin[0], world[1] - f.origin[1], world[2] - f.origin[2]};
     on_relief += dot3(f.normal, d) > 0.05 ? 1 : 0;
@@ -742,8 +743,8 @@ TEST(SimSceneRelief, TruthOnTheReliefMatchesABruteForceSearchAlongTheCameraRays)
   const SimGroundTruth t2 = truth_of(lit, seq, true);
   int used = 0;
   for (int u = 0; u < img.width; ++u) {
-    if (!std::isfinite(t2.row[u])) continue;
-    EXPECT_NEAR(gaussian_peak(img, u), t2.row[u], 0.03) << "column " << u;
+    if (!std::isfinite(t2.position[u])) continue;
+    EXPECT_NEAR(gaussian_peak(img, u), t2.position[u], 0.03) << "column " << u;
     ++used;
   }
   EXPECT_GT(used, 300);
@@ -887,10 +888,10 @@ TEST(SimScene, LargeFramesRenderWithoutHeapAllocation) {
 
   // The frame is sane: a bright line where the truth says.
   const int u = 1024;
-  ASSERT_TRUE(std::isfinite(truth.row[u]));
-  const int v = static_cast<int>(std::lround(truth.row[u]));
+  ASSERT_TRUE(std::isfinite(truth.position[u]));
+  const int v = static_cast<int>(std::lround(truth.position[u]));
   const double fit = gaussian_peak(Image{2048, 1536, buffer}, u);
-  EXPECT_NEAR(fit, truth.row[u], 1.0);
+  EXPECT_NEAR(fit, truth.position[u], 1.0);
   EXPECT_GT(buffer[static_cast<std::size_t>(v) * 2048 + u], 120);
 
   if (!kSanitized) {

@@ -43,12 +43,12 @@ TEST(Triangulation, CleanSceneAtOneAndAHalfMetresIsWithinOneMillimetreRms) {
     long matched = 0, truth_columns = 0, unmatched = 0, not_triangulated = 0;
     double sum_sq = 0, sum_sq_truth_row = 0, max_error = 0, sum_z = 0;
     tools::evaluate(scenario, detector, {}, 2.0, [&](const tools::ScoredFrame& f) {
-      for (float row : f.truth->row)
+      for (float row : f.truth->position)
         truth_columns += std::isfinite(row) ? 1 : 0;
       for (const ProfilePoint& p : f.profile->points()) {
         if (!p.valid) continue;
         const auto u = static_cast<std::size_t>(p.u);
-        const double row = f.truth->row[u], z = f.truth->depth_m[u];
+        const double row = f.truth->position[u], z = f.truth->depth_m[u];
         if (!std::isfinite(row) || std::abs(p.v - row) > 2.0) {
           ++unmatched;
           continue;

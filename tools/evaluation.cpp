@@ -124,7 +124,7 @@ Score evaluate(const Scenario& scenario, const std::string& detector_name,
     for (const pipeline::ProfilePoint& p : profile.points()) {
       if (!p.valid) continue;
       ++score.points;
-      const float row = truth.row[static_cast<std::size_t>(p.u)];
+      const float row = truth.position[static_cast<std::size_t>(p.u)];
       if (std::isnan(row)) continue;
       const double error = p.v - row;
       if (std::abs(error) <= tolerance_px) ++score.correct_points;
@@ -132,7 +132,7 @@ Score evaluate(const Scenario& scenario, const std::string& detector_name,
       if (std::abs(error) < std::abs(b)) b = error;
     }
     for (int u = 0; u < width; ++u) {
-      if (std::isnan(truth.row[static_cast<std::size_t>(u)])) continue;
+      if (std::isnan(truth.position[static_cast<std::size_t>(u)])) continue;
       ++score.truth_columns;
       const double error = best[static_cast<std::size_t>(u)];
       if (!(std::abs(error) <= tolerance_px)) continue;
@@ -152,7 +152,7 @@ bool write_overlay(const std::string& path, const ScoredFrame& frame, double tol
   cv::Mat colour;
   cv::cvtColor(grey, colour, cv::COLOR_GRAY2BGR);
   for (int u = 0; u < frame.width; ++u) {
-    const float row = frame.truth->row[static_cast<std::size_t>(u)];
+    const float row = frame.truth->position[static_cast<std::size_t>(u)];
     if (std::isnan(row)) continue;
     const int v = static_cast<int>(std::lround(row)) - 6;
     if (v >= 0 && v < frame.height) colour.at<cv::Vec3b>(v, u) = {255, 128, 0};  // truth, above
@@ -162,7 +162,7 @@ bool write_overlay(const std::string& path, const ScoredFrame& frame, double tol
   for (const bool valid : {false, true}) {
     for (const pipeline::ProfilePoint& p : frame.profile->points()) {
       if (p.valid != valid) continue;
-      const float row = frame.truth->row[static_cast<std::size_t>(p.u)];
+      const float row = frame.truth->position[static_cast<std::size_t>(p.u)];
       const bool correct = !std::isnan(row) && std::abs(p.v - row) <= tolerance_px;
       const int v = static_cast<int>(std::lround(p.v));
       if (v < 0 || v >= frame.height) continue;

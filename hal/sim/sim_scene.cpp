@@ -5,165 +5,25 @@
 #include <bit>
 #include <cmath>
 #include <limits>
-#include <numbers>
 #include <stdexcept>
 #include <string>
 
+#include "hal/sim/sim_lines.hpp"
+#include "hal/sim/sim_surface.hpp"
+
 namespace laserline::hal {
+
+using namespace sim;
 
 namespace {
 
-constexpr double kPi = std::numbers::pi;
-constexpr double kDeg = kPi / 180.0;
 constexpr int kMaxImageSide = 16384;
-constexpr int kTextureLog2 = 10;  // 1024 x 1024 texels, wrapping
-constexpr int kTextureSize = 1 << kTextureLog2;
-// Stored with a copy of the first row and column after the last, so that the four texels of a
-// bilinear sample are at i, i + 1, i + kTextureStride and i + kTextureStride + 1.
-constexpr int kTextureStride = kTextureSize + 1;
-constexpr int kFinestSpacing = 4;  // lattice spacing (texels) of the finest noise octave
-constexpr std::size_t kNoiseTableSize = std::size_t{1} << 22;
-constexpr float kNoiseTableScale = 16.0f;  // table holds round(16 * N(0, 1)), clipped to int8
-constexpr double kFwhmToSigma = 2.3548200450309493;
 constexpr float kBandSigmas = 5.0f;  // the laser profile is evaluated within +-5 sigma
 constexpr float kEdgeRows = 1.5f;    // truth is NaN when the centre is within 2 px of the border
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-constexpr float kNoGlow = 1e30f;  // inverse depth floor of the glow in columns without a line
-// The relief: a wrapping tile of heights on a square lattice, bilinearly interpolated, stored like
-// the texture with a copy of the first row and column after the last.
-constexpr int kReliefLog2 = 10;  // 1024 x 1024 lattice points
-constexpr int kReliefSize = 1 << kReliefLog2;
-constexpr int kReliefStride = kReliefSize + 1;
-constexpr double kReliefCellM = 0.005;  // lattice spacing: the tile repeats every 5.12 m
-constexpr int kNewtonSteps = 3;         // per pixel, from the base plane onto the relief
-
-using Vec3 = std::array<double, 3>;
-using Mat3 = std::array<double, 9>;  // row-major
-
-std::uint64_t mix64(std::uint64_t x) {
-  x += 0x9e3779b97f4a7c15ULL;
-  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
-  return x ^ (x >> 31);
-}
-
-// xoshiro256**: our own generator so the frames are the same with every standard library.
-class Rng {
- public:
-  explicit Rng(std::uint64_t seed) {
-    for (auto& s : s_) {
-      seed = mix64(seed);
-      s = seed;
-    }
-  }
-  std::uint64_t next() {
-    const std::uint64_t result = std::rotl(s_[1] * 5, 7) * 9;
-    const std::uint64_t t = s_[1] << 17;
-    s_[2] ^= s_[0];
-    s_[3] ^= s_[1];
-    s_[1] ^= s_[2];
-    s_[0] ^= s_[3];
-    s_[2] ^= t;
-    s_[3] = std::rotl(s_[3], 45);
-    return result;
-  }
-  // Uniform in (0, 1].
-  double uniform() { return static_cast<double>((next() >> 11) + 1) * 0x1.0p-53; }
-  double uniform(double lo, double hi) { return lo + (hi - lo) * uniform(); }
-
- private:
-  std::array<std::uint64_t, 4> s_{};
-};
-
-Vec3 mul_transposed(const Mat3& m, const Vec3& v) {
-  return {m[0] * v[0] + m[3] * v[1] + m[6] * v[2], m[1] * v[0] + m[4] * v[1] + m[7] * v[2],
-          m[2] * v[0] + m[5] * v[1] + m[8] * v[2]};
-}
-
-Mat3 mul(const Mat3& a, const Mat3& b) {
-  Mat3 r{};
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) {
-      r[i * 3 + j] = a[i * 3] * b[j] + a[i * 3 + 1] * b[3 + j] + a[i * 3 + 2] * b[6 + j];
-    }
-  }
-  return r;
-}
-
-double dot(const Vec3& a, const Vec3& b) {
-  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-
-Mat3 rot_x(double a) {
-  const double c = std::cos(a), s = std::sin(a);
-  return {1, 0, 0, 0, c, -s, 0, s, c};
-}
-Mat3 rot_y(double a) {
-  const double c = std::cos(a), s = std::sin(a);
-  return {c, 0, s, 0, 1, 0, -s, 0, c};
-}
-Mat3 rot_z(double a) {
-  const double c = std::cos(a), s = std::sin(a);
-  return {c, -s, 0, s, c, 0, 0, 0, 1};
-}
-
-// Everything render() and ground_truth() need about one frame, in the camera frame.
-struct FrameGeometry {
-  bool surface = false;  // the surface plane is in front of the camera
-  Vec3 n{};              // surface: n . X = d_surface, n pointing away from the camera
-  double d_surface = 0;
-  std::array<double, 9> h{};   // pixel (u, v, 1) -> (S, T, W); texel coordinates are S/W, T/W
-  std::array<double, 4> lp{};  // laser sheet a X + b Y + c Z + e = 0
-  double fx = 1, fy = 1, cx = 0, cy = 0;
-  // For the relief: surface coordinates (metres) of a camera-frame point X are
-  // x = e1 . X + c1, y = e2 . X + c2, height toward the camera d_surface - n . X.
-  Vec3 e1{}, e2{};
-  double c1 = 0, c2 = 0;
-  double texel_m = 1;
-};
-
-struct ColumnLine {
-  bool hit = false;
-  double v = 0;  // row of the line centre
-  double z = 0;  // depth of the lit surface point
-  double s = 0;  // texel coordinates of the lit surface point (set on relief only)
-  double t = 0;
-};
-
-// Where the sheet meets the surface along column u, in closed form: with X = Z (xn, yn, 1) the
-// sheet gives Z (a xn + b yn + c) = -e and the surface Z (n . r) = D; eliminating Z is linear in
-// yn.
-ColumnLine solve_column(const FrameGeometry& g, double u) {
-  ColumnLine out;
-  if (!g.surface) return out;
-  const auto& [a, b, c, e] = g.lp;
-  const double xn = (u - g.cx) / g.fx;
-  const double den = g.d_surface * b + e * g.n[1];
-  if (std::abs(den) < 1e-12) return out;
-  const double yn = -(e * (g.n[0] * xn + g.n[2]) + g.d_surface * (a * xn + c)) / den;
-  const double nr = g.n[0] * xn + g.n[1] * yn + g.n[2];
-  if (!(nr > 0)) return out;
-  out.z = g.d_surface / nr;
-  out.v = g.cy + g.fy * yn;
-  out.hit = std::isfinite(out.v) && std::isfinite(out.z) && out.z > 0;
-  return out;
-}
-
-// Bilinear sample of the wrapping albedo tile at texel coordinates (s, t), |s|, |t| < 2^31.
-inline float sample_tile(const float* tex, float s, float t) {
-  constexpr int kMask = kTextureSize - 1;
-  int is = static_cast<int>(s);
-  int it = static_cast<int>(t);
-  is -= s < static_cast<float>(is) ? 1 : 0;  // floor without a libm call
-  it -= t < static_cast<float>(it) ? 1 : 0;
-  const float fs = s - static_cast<float>(is);
-  const float ft = t - static_cast<float>(it);
-  const float* p = tex + (it & kMask) * kTextureStride + (is & kMask);
-  const float p00 = p[0], p01 = p[1], p10 = p[kTextureStride], p11 = p[kTextureStride + 1];
-  const float top = p00 + fs * (p01 - p00);
-  const float bottom = p10 + fs * (p11 - p10);
-  return top + ft * (bottom - top);
-}
+constexpr float kNoGlow = 1e30f;  // inverse depth floor of the glow in lines without a line
+constexpr int kMaxSnow = 100000;
+constexpr int kNewtonSteps = 3;  // per pixel, from the base plane onto the relief
 
 // min and max without branches: GCC does not if-convert a select that feeds a float-to-int
 // conversion (it might trap), which would stop the row kernels from vectorising. Exact enough
@@ -237,6 +97,8 @@ struct ReliefRow {
   float texel_to_cell;                  // relief lattice cells per texel
   float relief_max;                     // m
   float ambient;
+  // The objects (relief, and the texture on them) moved by this much along the surface's x axis.
+  float shift_cells, shift_texels;
 };
 
 void relief_row(const float* __restrict tex, const float* __restrict relief, const ReliefRow& r,
@@ -262,7 +124,7 @@ void relief_row(const float* __restrict tex, const float* __restrict relief, con
     }
     for (int step = 0; step < kNewtonSteps; ++step) {
       for (int k = 0; k < kBlock; ++k) {
-        const float gs = (sb[k] + h[k] * ks[k]) * r.texel_to_cell;
+        const float gs = (sb[k] + h[k] * ks[k]) * r.texel_to_cell - r.shift_cells;
         const float gt = (tb[k] + h[k] * kt[k]) * r.texel_to_cell;
         std::int32_t is = static_cast<std::int32_t>(gs), it = static_cast<std::int32_t>(gt);
         is -= gs < static_cast<float>(is) ? 1 : 0;  // floor without a libm call
@@ -292,7 +154,8 @@ void relief_row(const float* __restrict tex, const float* __restrict relief, con
       }
     }
     for (int k = 0; k < kBlock; ++k) {
-      const float s = sb[k] + h[k] * ks[k], t = tb[k] + h[k] * kt[k];
+      const float moved = h[k] > 1e-4f ? r.shift_texels : 0.0f;  // on an object
+      const float s = sb[k] + h[k] * ks[k] - moved, t = tb[k] + h[k] * kt[k];
       std::int32_t is = static_cast<std::int32_t>(s), it = static_cast<std::int32_t>(t);
       is -= s < static_cast<float>(is) ? 1 : 0;
       it -= t < static_cast<float>(it) ? 1 : 0;
@@ -348,12 +211,27 @@ void quantise_row(const float* __restrict row, const std::int8_t* __restrict noi
   }
 }
 
-void require(bool ok, const std::string& message) {
-  if (!ok) throw std::invalid_argument("SimScene: " + message);
-}
+// The caustic light on the surface: two drifting copies of the caustic tile at different scales
+// (so the pattern changes as well as moves), as a factor on the ambient light.
+struct CausticMap {
+  float scale1, s1, t1, scale2, s2, t2;  // caustic texel = texel * scale + offset
+  float strength, inverse_mean;
+};
 
-bool finite_nonneg(double x) {
-  return std::isfinite(x) && x >= 0;
+// Multiplies `count` pixels (a multiple of kBlock) of ambient light by the caustic light at the
+// base-plane point each sees (texel coordinates as in ambient_row).
+void caustic_row(const float* __restrict caustic, float s0, float su, float t0, float tu, float w0,
+                 float wu, float w_min, const CausticMap& m, int count, float* __restrict row) {
+  for (int u0 = 0; u0 < count; u0 += kBlock) {
+    for (int k = 0; k < kBlock; ++k) {
+      const float fu = static_cast<float>(u0 + k);
+      const float inv = 1.0f / branchless_max(w0 + fu * wu, w_min);
+      const float s = (s0 + fu * su) * inv, t = (t0 + fu * tu) * inv;
+      const float c = sample_tile(caustic, s * m.scale1 + m.s1, t * m.scale1 + m.t1) +
+                      sample_tile(caustic, s * m.scale2 + m.s2, t * m.scale2 + m.t2);
+      row[u0 + k] *= (1.0f - m.strength) + m.strength * 0.5f * c * m.inverse_mean;
+    }
+  }
 }
 
 void validate(const SimSceneOptions& o) {
@@ -387,6 +265,25 @@ void validate(const SimSceneOptions& o) {
   // of a pixel in range.
   require(o.ambient <= 1e4 && o.laser_peak <= 1e4 && o.backscatter <= 1e4 && o.noise_sigma <= 1e3,
           "ambient, laser_peak and backscatter must be <= 1e4, noise_sigma <= 1e3");
+  require(finite_nonneg(o.forward_scatter) && o.forward_scatter <= 1 && finite_nonneg(o.veiling) &&
+              o.veiling <= 1 && finite_nonneg(o.caustics) && o.caustics <= 1,
+          "forward_scatter, veiling and caustics must be within [0, 1]");
+  require(finite_nonneg(o.scatter_halo_px) && o.scatter_halo_px <= 1000,
+          "scatter_halo_px must be within [0, 1000]");
+  require(std::isfinite(o.caustic_scale_m) && o.caustic_scale_m >= 0.01 &&
+              o.caustic_scale_m <= 100 && std::isfinite(o.caustic_speed_m_s) &&
+              std::abs(o.caustic_speed_m_s) <= 100,
+          "caustic_scale_m must be within [0.01, 100], caustic_speed_m_s within [-100, 100]");
+  require(o.snow_per_frame >= 0 && o.snow_per_frame <= kMaxSnow,
+          "snow_per_frame must be within [0, " + std::to_string(kMaxSnow) + "]");
+  require(std::isfinite(o.snow_size_px) && o.snow_size_px > 0 && o.snow_size_px <= 50 &&
+              finite_nonneg(o.snow_brightness) && o.snow_brightness <= 100 &&
+              std::isfinite(o.snow_min_depth_m) && o.snow_min_depth_m > 0,
+          "snow_size_px must be within (0, 50], snow_brightness within [0, 100], "
+          "snow_min_depth_m > 0");
+  require(finite_nonneg(o.marks_per_m2) && o.marks_per_m2 <= 10000 &&
+              finite_nonneg(o.marks_albedo) && o.marks_albedo <= 100,
+          "marks_per_m2 must be within [0, 10000], marks_albedo within [0, 100]");
   require(finite_nonneg(o.sway_m) && finite_nonneg(o.sway_deg), "sway_m and sway_deg must be >= 0");
   require(std::isfinite(o.sway_period_s) && o.sway_period_s > 0, "sway_period_s must be > 0");
   require(finite_nonneg(o.scan_rate_deg_s) && o.scan_rate_deg_s <= 1000,
@@ -408,241 +305,31 @@ void validate(const SimSceneOptions& o) {
   require(o.relief_height_m <= 0.72 * o.relief_max_slope,
           "relief_height_m / relief_max_slope must be <= 0.72 m (features must fit the 5.12 m "
           "relief tile)");
-  require(std::isfinite(o.vehicle_speed_m_s) && std::abs(o.vehicle_speed_m_s) <= 10,
-          "vehicle_speed_m_s must be within [-10, 10]");
+  require(std::isfinite(o.vehicle_speed_m_s) && std::abs(o.vehicle_speed_m_s) <= 10 &&
+              std::isfinite(o.object_speed_m_s) && std::abs(o.object_speed_m_s) <= 10,
+          "vehicle_speed_m_s and object_speed_m_s must be within [-10, 10]");
 }
 
-// Shoulder of a relief feature at distance x beyond its top: 1 on the top, falling to 0 over
-// `width` along half a cosine (smooth, with no tail). Its steepest slope is (pi / 2) / width.
-double shoulder(double x, double width) {
-  if (x <= 0) return 1.0;
-  if (x >= width) return 0.0;
-  return 0.5 * (1.0 + std::cos(kPi * x / width));
+// The light of the line across it, at distance d from its centre (pixels along the epipolar
+// line): the Gaussian core and, in turbid water, the forward-scattered halo of the same energy.
+struct LineProfile {
+  float core_gain, core_sigma, halo_gain, halo_sigma, reach;
+};
+
+LineProfile line_profile(float gain, float sigma, const SimSceneOptions& o) {
+  const auto f = static_cast<float>(o.forward_scatter);
+  const float halo_sigma = std::hypot(sigma, static_cast<float>(o.scatter_halo_px));
+  LineProfile p{gain * (1.0f - f), sigma, gain * f * sigma / halo_sigma, halo_sigma,
+                kBandSigmas * (f > 0 ? halo_sigma : sigma)};
+  return p;
 }
 
-// The relief tile: round bumps (a cosine dome), flat-topped posts (a disc with a shoulder) and
-// elongated piles (a capsule with a shoulder), combined by their maximum so that no flank is
-// steeper than the steepest feature's. Heights in metres at the lattice points.
-std::vector<float> make_relief(const SimSceneOptions& o) {
-  const int n = kReliefSize;
-  const double period = n * kReliefCellM;
-  std::vector<double> height(static_cast<std::size_t>(n) * n, 0.0);
-  Rng rng(o.seed ^ 0x72656c6965663031ULL);
-  const auto count = static_cast<int>(std::lround(o.relief_per_m2 * period * period));
-  for (int k = 0; k < count; ++k) {
-    const double cx = rng.uniform(0.0, period), cy = rng.uniform(0.0, period);
-    const double amplitude = rng.uniform(o.relief_min_height_m, o.relief_height_m);
-    const double width = amplitude * 0.5 * kPi / o.relief_max_slope * rng.uniform(1.0, 1.4);
-    const double kind = rng.uniform();
-    double half_length = 0, top = 0;  // capsule: a segment of 2 half_length, top half-width
-    if (kind < 0.4) {
-      // A round bump.
-    } else if (kind < 0.65) {
-      top = rng.uniform(0.02, 0.10);  // a post
-    } else {
-      half_length = rng.uniform(0.15, 0.6);  // a pile lying along the surface
-      top = rng.uniform(0.0, 0.04);
-    }
-    const double angle = rng.uniform(0.0, kPi);
-    const double dx = std::cos(angle), dy = std::sin(angle);
-    const double reach = std::min(half_length + top + width, 0.45 * period);
-    const int i0 = static_cast<int>(std::floor((cx - reach) / kReliefCellM));
-    const int i1 = static_cast<int>(std::ceil((cx + reach) / kReliefCellM));
-    const int j0 = static_cast<int>(std::floor((cy - reach) / kReliefCellM));
-    const int j1 = static_cast<int>(std::ceil((cy + reach) / kReliefCellM));
-    for (int j = j0; j <= j1; ++j) {
-      for (int i = i0; i <= i1; ++i) {
-        const double px = i * kReliefCellM - cx, py = j * kReliefCellM - cy;
-        const double along = std::clamp(px * dx + py * dy, -half_length, half_length);
-        const double ex = px - along * dx, ey = py - along * dy;
-        const double h = amplitude * shoulder(std::sqrt(ex * ex + ey * ey) - top, width);
-        double& cell = height[static_cast<std::size_t>(j & (n - 1)) * n + (i & (n - 1))];
-        cell = std::max(cell, h);
-      }
-    }
-  }
-  std::vector<float> tile(static_cast<std::size_t>(kReliefStride) * kReliefStride);
-  for (int y = 0; y < kReliefStride; ++y) {
-    for (int x = 0; x < kReliefStride; ++x) {
-      tile[static_cast<std::size_t>(y) * kReliefStride + x] =
-          static_cast<float>(height[static_cast<std::size_t>(y & (n - 1)) * n + (x & (n - 1))]);
-    }
-  }
-  return tile;
-}
-
-// Bilinear height of the relief tile at surface coordinates (x, y) in metres.
-double relief_at(const float* relief, double x, double y) {
-  const double gx = std::clamp(x / kReliefCellM, -1e9, 1e9);
-  const double gy = std::clamp(y / kReliefCellM, -1e9, 1e9);
-  const double fx0 = std::floor(gx), fy0 = std::floor(gy);
-  const double fx = gx - fx0, fy = gy - fy0;
-  const auto ix = static_cast<std::int64_t>(fx0) & (kReliefSize - 1);
-  const auto iy = static_cast<std::int64_t>(fy0) & (kReliefSize - 1);
-  const float* p = relief + iy * kReliefStride + ix;
-  const double top = p[0] + fx * (p[1] - p[0]);
-  const double bottom = p[kReliefStride] + fx * (p[kReliefStride + 1] - p[kReliefStride]);
-  return top + fy * (bottom - top);
-}
-
-// Smooth value noise on a wrapping lattice of `spacing` texels, values in [-1, 1], added * amp.
-void add_value_noise(std::vector<float>& dst, int spacing, float amp, Rng& rng) {
-  const int n = kTextureSize;
-  const int cells = n / spacing;
-  std::vector<float> lattice(static_cast<std::size_t>(cells) * cells);
-  for (float& x : lattice)
-    x = static_cast<float>(rng.uniform(-1.0, 1.0));
-  std::vector<float> weight(spacing);
-  for (int i = 0; i < spacing; ++i) {
-    const float f = static_cast<float>(i) / static_cast<float>(spacing);
-    weight[i] = f * f * (3.0f - 2.0f * f);
-  }
-  for (int y = 0; y < n; ++y) {
-    const int cy0 = y / spacing, cy1 = (cy0 + 1) % cells;
-    const float wy = weight[y % spacing];
-    const float* r0 = &lattice[static_cast<std::size_t>(cy0) * cells];
-    const float* r1 = &lattice[static_cast<std::size_t>(cy1) * cells];
-    float* out = &dst[static_cast<std::size_t>(y) * n];
-    for (int x = 0; x < n; ++x) {
-      const int cx0 = x / spacing, cx1 = (cx0 + 1) % cells;
-      const float wx = weight[x % spacing];
-      const float top = r0[cx0] + wx * (r0[cx1] - r0[cx0]);
-      const float bottom = r1[cx0] + wx * (r1[cx1] - r1[cx0]);
-      out[x] += amp * (top + wy * (bottom - top));
-    }
-  }
-}
-
-// Surface texture: multi-octave value noise plus hard-edged rectangles and discs, so that a
-// corner detector finds features to track. Returns the albedo tile.
-std::vector<float> make_texture(std::uint64_t seed, double contrast) {
-  const int n = kTextureSize;
-  Rng rng(seed ^ 0x7465787475726531ULL);
-  std::vector<float> smooth(static_cast<std::size_t>(n) * n, 0.0f);
-  float amp = 1.0f;
-  for (int spacing = kFinestSpacing; spacing <= 128; spacing *= 2) {
-    add_value_noise(smooth, spacing, amp, rng);
-    amp *= 0.8f;
-  }
-  float peak = 1e-6f;
-  for (float x : smooth)
-    peak = std::max(peak, std::abs(x));
-
-  std::vector<float> blobs(static_cast<std::size_t>(n) * n, 0.0f);
-  const int count = 3500;
-  for (int k = 0; k < count; ++k) {
-    const int x0 = static_cast<int>(rng.uniform(0.0, n));
-    const int y0 = static_cast<int>(rng.uniform(0.0, n));
-    const double size_lo = kFinestSpacing, size_hi = 12.0 * kFinestSpacing;
-    const int w = static_cast<int>(size_lo * std::pow(size_hi / size_lo, rng.uniform()));
-    const int h = static_cast<int>(size_lo * std::pow(size_hi / size_lo, rng.uniform()));
-    const float value =
-        static_cast<float>((rng.uniform() < 0.5 ? -1.0 : 1.0) * rng.uniform(0.6, 1.0));
-    const bool disc = rng.uniform() < 0.4;
-    const int r2 = (w / 2) * (w / 2);
-    for (int dy = 0; dy < (disc ? w : h); ++dy) {
-      for (int dx = 0; dx < w; ++dx) {
-        if (disc) {
-          const int ox = dx - w / 2, oy = dy - w / 2;
-          if (ox * ox + oy * oy > r2) continue;
-        }
-        const int x = (x0 + dx) & (n - 1), y = (y0 + dy) & (n - 1);
-        blobs[static_cast<std::size_t>(y) * n + x] = value;
-      }
-    }
-  }
-
-  std::vector<float> albedo(static_cast<std::size_t>(kTextureStride) * kTextureStride);
-  for (int y = 0; y < kTextureStride; ++y) {
-    for (int x = 0; x < kTextureStride; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y & (n - 1)) * n + (x & (n - 1));
-      const float noise = std::clamp(0.4f * smooth[i] / peak + blobs[i], -1.0f, 1.0f);
-      albedo[static_cast<std::size_t>(y) * kTextureStride + x] =
-          std::max(0.0f, 1.0f + static_cast<float>(contrast) * noise);
-    }
-  }
-  return albedo;
-}
-
-void validate_checkerboard(const SimSceneOptions& o) {
-  const SimSceneOptions::Checkerboard& board = o.checkerboard;
-  require(board.columns >= 0 && board.rows >= 0, "checkerboard columns and rows must be >= 0");
-  if (board.columns > 0 && board.rows > 0) {
-    const double texel = o.texture_scale_m / kFinestSpacing;
-    const double squares = board.square_m / texel;
-    require(std::isfinite(squares) && squares >= 1 &&
-                std::abs(squares - std::round(squares)) < 1e-6 * squares,
-            "checkerboard square_m must be a whole number of texels (texture_scale_m / " +
-                std::to_string(kFinestSpacing) + ")");
-    // The board and its margin (one square each side) must fit in the half of the wrapping
-    // texture tile around the surface point.
-    const double reach = std::round(squares) * (std::max(board.columns, board.rows) + 3) / 2.0 +
-                         std::max(std::abs(board.offset_x_m), std::abs(board.offset_y_m)) / texel;
-    require(std::isfinite(reach) && reach <= kTextureSize / 2,
-            "checkerboard with its margin and offset must lie within " +
-                std::to_string(kTextureSize / 2) + " texels of the surface point");
-    require(finite_nonneg(board.dark_albedo) && board.dark_albedo <= 1,
-            "checkerboard dark_albedo must be within [0, 1]");
-  }
-}
-
-// Paints the calibration checkerboard (if any) into the albedo tile. Texel i is the albedo at
-// texture coordinate i (wrapping), and bilinear sampling puts an edge between texels i - 1 and i
-// exactly at i - 1/2: the board's edges are laid on half-integers so its squares are exact.
-void paint_checkerboard(std::vector<float>& albedo, const SimSceneOptions& o) {
-  validate_checkerboard(o);
-  const SimSceneOptions::Checkerboard& board = o.checkerboard;
-  if (board.columns <= 0 || board.rows <= 0) return;
-  const int square =
-      static_cast<int>(std::lround(board.square_m * kFinestSpacing / o.texture_scale_m));
-  const int squares_x = board.columns + 1, squares_y = board.rows + 1;
-  // Board coordinate (in texels from the board's top-left edge) of texel 0's centre.
-  const double texel = o.texture_scale_m / kFinestSpacing;
-  const int origin_x =
-      squares_x * square / 2 - static_cast<int>(std::lround(board.offset_x_m / texel));
-  const int origin_y =
-      squares_y * square / 2 - static_cast<int>(std::lround(board.offset_y_m / texel));
-  const auto dark = static_cast<float>(board.dark_albedo);
-  for (int y = 0; y < kTextureStride; ++y) {
-    for (int x = 0; x < kTextureStride; ++x) {
-      // The tile wraps: texel x stands for texture coordinate x or x - kTextureSize, whichever
-      // is nearer 0 (the board lies within half a tile of it).
-      const int sx = (x & (kTextureSize - 1)) < kTextureSize / 2
-                         ? (x & (kTextureSize - 1))
-                         : (x & (kTextureSize - 1)) - kTextureSize;
-      const int sy = (y & (kTextureSize - 1)) < kTextureSize / 2
-                         ? (y & (kTextureSize - 1))
-                         : (y & (kTextureSize - 1)) - kTextureSize;
-      // Texel centre in board coordinates is bx + 1/2: never on an edge (a multiple of square).
-      const int bx = sx + origin_x, by = sy + origin_y;
-      if (bx < -square || bx >= (squares_x + 1) * square || by < -square ||
-          by >= (squares_y + 1) * square) {
-        continue;  // outside board and margin: the texture stays
-      }
-      float value = 1.0f;  // margin
-      if (bx >= 0 && bx < squares_x * square && by >= 0 && by < squares_y * square) {
-        value = (bx / square + by / square) % 2 == 0 ? dark : 1.0f;
-      }
-      albedo[static_cast<std::size_t>(y) * kTextureStride + x] = value;
-    }
-  }
-}
-
-// round(16 * N(0, 1)) by Box-Muller over our own uniform generator (std::normal_distribution is
-// implementation-defined).
-std::vector<std::int8_t> make_noise_table(std::uint64_t seed) {
-  Rng rng(seed ^ 0x6e6f697365746162ULL);
-  std::vector<std::int8_t> table(kNoiseTableSize);
-  auto quantise = [](double z) {
-    return static_cast<std::int8_t>(std::clamp(std::lround(z * kNoiseTableScale), -127L, 127L));
-  };
-  for (std::size_t i = 0; i + 1 < table.size(); i += 2) {
-    const double r = std::sqrt(-2.0 * std::log(rng.uniform()));
-    const double phi = 2.0 * kPi * rng.uniform();
-    table[i] = quantise(r * std::cos(phi));
-    table[i + 1] = quantise(r * std::sin(phi));
-  }
-  return table;
+inline float line_light(float d, const LineProfile& p) {
+  if (!(std::abs(d) <= p.reach)) return 0.0f;
+  float light = p.core_gain * std::exp(-d * d / (2.0f * p.core_sigma * p.core_sigma));
+  if (p.halo_gain > 0)
+    light += p.halo_gain * std::exp(-d * d / (2.0f * p.halo_sigma * p.halo_sigma));
+  return light;
 }
 
 }  // namespace
@@ -652,158 +339,27 @@ struct SimScene::Pose {
   Vec3 t{};
 };
 
-namespace {
-
-FrameGeometry make_geometry(const SimSceneOptions& o, const Mat3& r, const Vec3& t) {
-  FrameGeometry g;
-  const CameraIntrinsics& cam = o.calibration.camera;
-  g.fx = cam.fx;
-  g.fy = cam.fy;
-  g.cx = cam.cx;
-  g.cy = cam.cy;
-  g.lp = o.calibration.laser.plane_coefficients();
-
-  // The surface in the world: through p0, normal n_w toward the camera, texture axes e1, e2.
-  const Mat3 basis = mul(rot_x(o.tilt_x_deg * kDeg), rot_y(o.tilt_y_deg * kDeg));
-  const Vec3 e1{basis[0], basis[3], basis[6]};
-  const Vec3 e2{basis[1], basis[4], basis[7]};
-  const Vec3 n_w{-basis[2], -basis[5], -basis[8]};
-  const Vec3 p0{0.0, 0.0, o.distance_m};
-
-  // In the camera frame: n_c . X = D with n_c = -R^T n_w, D = n_w . T - n_w . p0 (> 0 in front).
-  const Vec3 rn = mul_transposed(r, n_w);
-  g.n = {-rn[0], -rn[1], -rn[2]};
-  g.d_surface = dot(n_w, t) - dot(n_w, p0);
-  g.surface = g.d_surface > 0;
-  if (!g.surface) return g;
-
-  // Texture coordinate s = e1 . (X_w - p0) = Z (R^T e1) . r + e1 . (T - p0) with Z = D / (n_c . r),
-  // so s (n_c . r) is linear in the ray r: a homography, here in texels and pixel coordinates.
-  const double texel = o.texture_scale_m / kFinestSpacing;
-  const Vec3 tp{t[0] - p0[0], t[1] - p0[1], t[2] - p0[2]};
-  const Vec3 re1 = mul_transposed(r, e1), re2 = mul_transposed(r, e2);
-  const double c1 = dot(e1, tp), c2 = dot(e2, tp);
-  g.e1 = re1;
-  g.e2 = re2;
-  g.c1 = c1;
-  g.c2 = c2;
-  g.texel_m = texel;
-  const std::array<Vec3, 3> rows{Vec3{(g.d_surface * re1[0] + c1 * g.n[0]) / texel,
-                                      (g.d_surface * re1[1] + c1 * g.n[1]) / texel,
-                                      (g.d_surface * re1[2] + c1 * g.n[2]) / texel},
-                                 Vec3{(g.d_surface * re2[0] + c2 * g.n[0]) / texel,
-                                      (g.d_surface * re2[1] + c2 * g.n[1]) / texel,
-                                      (g.d_surface * re2[2] + c2 * g.n[2]) / texel},
-                                 g.n};
-  for (int i = 0; i < 3; ++i) {
-    const Vec3& m = rows[i];
-    g.h[i * 3 + 0] = m[0] / g.fx;
-    g.h[i * 3 + 1] = m[1] / g.fy;
-    g.h[i * 3 + 2] = m[2] - m[0] * g.cx / g.fx - m[1] * g.cy / g.fy;
-  }
-  return g;
-}
-
-float albedo_at(const FrameGeometry& g, const float* tex, double u, double v) {
-  const double s = g.h[0] * u + g.h[1] * v + g.h[2];
-  const double t = g.h[3] * u + g.h[4] * v + g.h[5];
-  const double w = g.h[6] * u + g.h[7] * v + g.h[8];
-  if (!(w > 0)) return 0.0f;
-  return sample_tile(tex, static_cast<float>(std::clamp(s / w, -1e7, 1e7)),
-                     static_cast<float>(std::clamp(t / w, -1e7, 1e7)));
-}
-
-// Where the sheet meets the relieved surface along column u. The sheet's points in the column
-// form a line P + l D (the sheet cut by the plane through the camera and the column); the relief
-// lies between heights 0 and relief_max, so the crossing is within the stretch of that line
-// between those heights. Walked from the top in steps of at most one lattice cell, then bisected
-// to double precision: the bilinear surface is continuous, so the sign change brackets a root.
-// The first crossing from the top is the lit one (the slope limit makes it the only one).
-ColumnLine solve_column_relief(const FrameGeometry& g, const float* relief, double relief_max,
-                               double u) {
-  ColumnLine out;
-  if (!g.surface) return out;
-  const auto& [a, b, c, e] = g.lp;
-  const double xn = (u - g.cx) / g.fx;
-  const Vec3 n1{1.0, 0.0, -xn}, n2{a, b, c};
-  const Vec3 dir{n1[1] * n2[2] - n1[2] * n2[1], n1[2] * n2[0] - n1[0] * n2[2],
-                 n1[0] * n2[1] - n1[1] * n2[0]};
-  // P = alpha n1 + beta n2 with n1 . P = 0 (in the column plane) and n2 . P = -e (on the sheet).
-  const double g11 = dot(n1, n1), g12 = dot(n1, n2), g22 = dot(n2, n2);
-  const double det = g11 * g22 - g12 * g12;
-  if (!(det > 1e-18 * g11 * g22)) return out;
-  const double alpha = e * g12 / det, beta = -e * g11 / det;
-  const Vec3 p{alpha * n1[0] + beta * n2[0], alpha * n1[1] + beta * n2[1],
-               alpha * n1[2] + beta * n2[2]};
-  // Height above the base plane along the line: q0 - l qd.
-  const double q0 = g.d_surface - dot(g.n, p), qd = dot(g.n, dir);
-  if (!(std::abs(qd) > 1e-12)) return out;
-  const double margin = 1e-3;
-  const double l_top = (q0 - (relief_max + margin)) / qd, l_bottom = (q0 + margin) / qd;
-  const double x0 = dot(g.e1, p) + g.c1, xd = dot(g.e1, dir);
-  const double y0 = dot(g.e2, p) + g.c2, yd = dot(g.e2, dir);
-  auto above = [&](double l) {
-    return (q0 - l * qd) - relief_at(relief, x0 + l * xd, y0 + l * yd);
-  };
-  const double span = std::abs(l_bottom - l_top) * std::hypot(xd, yd);
-  const int steps = static_cast<int>(std::clamp(std::ceil(span / kReliefCellM), 2.0, 100000.0));
-  double lo = l_top, hi = l_bottom;  // above(lo) > 0 >= above(hi) once bracketed
-  for (int k = 1; k <= steps; ++k) {
-    const double l = l_top + (l_bottom - l_top) * k / steps;
-    if (above(l) <= 0) {
-      hi = l;
-      break;
-    }
-    lo = l;
-  }
-  for (int k = 0; k < 200 && lo != hi; ++k) {
-    const double mid = 0.5 * (lo + hi);
-    if (mid == lo || mid == hi) break;
-    (above(mid) > 0 ? lo : hi) = mid;
-  }
-  const double l = 0.5 * (lo + hi);
-  const Vec3 x{p[0] + l * dir[0], p[1] + l * dir[1], p[2] + l * dir[2]};
-  if (!(x[2] > 0)) return out;
-  out.z = x[2];
-  out.v = g.cy + g.fy * x[1] / x[2];
-  out.s = (x0 + l * xd) / g.texel_m;
-  out.t = (y0 + l * yd) / g.texel_m;
-  out.hit =
-      std::isfinite(out.v) && std::isfinite(out.z) && std::isfinite(out.s) && std::isfinite(out.t);
-  return out;
-}
-
-// Where the sheet meets the surface in column u: on the relief when there is one.
-ColumnLine column_line(const FrameGeometry& g, const std::vector<float>& relief, double relief_max,
-                       int u) {
-  if (relief.empty()) return solve_column(g, u);
-  return solve_column_relief(g, relief.data(), relief_max, u);
-}
-
-double line_sigma(const SimSceneOptions& o, double z) {
-  const double sheet =
-      o.calibration.camera.fy * o.calibration.laser.sheet_width_m / z / kFwhmToSigma;
-  return std::max(1e-3, std::sqrt(sheet * sheet + o.blur_px * o.blur_px));
-}
-
-}  // namespace
-
 SimScene::SimScene(const SimSceneOptions& options) : options_(options) {
   validate(options_);
+  lines_ = epipolar_lines(options_.calibration);
   const auto width = static_cast<std::size_t>(options_.calibration.camera.width);
-  texture_size_ = kTextureSize;
-  texture_ = make_texture(options_.seed, options_.texture_contrast);
+  const auto lines = static_cast<std::size_t>(lines_.count);
+  texture_ = make_texture(options_);
   paint_checkerboard(texture_, options_);
+  if (options_.caustics > 0) caustics_ = make_caustics(options_.seed, caustic_mean_);
   noise_ = make_noise_table(options_.seed);
-  // One image row, then the per-column 1 / Z of the lit point (for the backscatter glow), each
-  // padded to whole kernel blocks; the padding never glows.
+  // One image row, then the glow floor of each of its pixels, each padded to whole kernel blocks;
+  // the padding never glows.
   const std::size_t padded = (width + kBlock - 1) / kBlock * kBlock;
   row_buffer_.assign(2 * padded, kNoGlow);
-  scratch_truth_.row.assign(width, kNaN);
-  scratch_truth_.depth_m.assign(width, kNaN);
-  scratch_truth_.width_px.assign(width, kNaN);
-  line_gain_.assign(width, 0.0f);
+  scratch_truth_.lines = lines_;
+  scratch_truth_.position.assign(lines, kNaN);
+  scratch_truth_.depth_m.assign(lines, kNaN);
+  scratch_truth_.width_px.assign(lines, kNaN);
+  line_gain_.assign(lines, 0.0f);
+  glow_floor_.assign(std::max(lines, padded), kNoGlow);
   if (options_.relief_height_m > 0 && options_.relief_per_m2 > 0) relief_ = make_relief(options_);
+  snow_.reserve(static_cast<std::size_t>(options_.snow_per_frame));
 }
 
 FrameFormat SimScene::format() const {
@@ -869,52 +425,166 @@ std::array<double, 3> SimScene::surface_point(double x_m, double y_m) const {
   return out;
 }
 
+void SimScene::place_snow(std::uint64_t sequence) {
+  snow_.clear();
+  if (options_.snow_per_frame == 0 || options_.laser_peak <= 0) return;
+  const CameraIntrinsics& cam = options_.calibration.camera;
+  const auto [a, b, c, e] = options_.calibration.laser.plane_coefficients();
+  Rng rng(mix64(options_.seed ^ 0x736e6f7766616c6cULL) ^ mix64(sequence));
+  const float* depth = scratch_truth_.depth_m.data();
+  for (int i = 0; i < options_.snow_per_frame; ++i) {
+    // A particle on a lit line, in the sheet somewhere between the nearest depth and the surface.
+    int k = -1;
+    for (int attempt = 0; attempt < 8 && k < 0; ++attempt) {
+      const int pick = std::min(static_cast<int>(rng.uniform(0.0, lines_.count)), lines_.count - 1);
+      if (std::isfinite(depth[pick])) k = pick;
+    }
+    if (k < 0 || e == 0) continue;
+    const double far = depth[k] - 0.02;
+    if (!(far > options_.snow_min_depth_m)) continue;
+    const double z = rng.uniform(options_.snow_min_depth_m, far);
+    // Along the line the sheet's inverse depth is affine in the position:
+    // 1/Z = -(a xn + b yn + c) / e with xn = (x - cx) / fx, yn = (y - cy) / fy.
+    const auto [x0, y0] = lines_.to_image(k, 0.0);
+    const double base = a * (x0 - cam.cx) / cam.fx + b * (y0 - cam.cy) / cam.fy + c;
+    const double rate = a * lines_.along[0] / cam.fx + b * lines_.along[1] / cam.fy;
+    if (!(std::abs(rate) > 0)) continue;
+    const double position = (-e / z - base) / rate;
+    const auto [x, y] = lines_.to_image(k, position);
+    if (!(x >= 0 && x <= cam.width - 1 && y >= 0 && y <= cam.height - 1)) continue;
+    const double peak = options_.snow_brightness * options_.laser_peak * rng.uniform(0.3, 1.0) *
+                        std::exp(-2.0 * options_.attenuation_per_m * z);
+    snow_.push_back({static_cast<float>(x), static_cast<float>(y),
+                     static_cast<float>(options_.snow_size_px * rng.uniform(0.6, 1.4)),
+                     static_cast<float>(peak)});
+  }
+}
+
+void SimScene::add_laser_row(int v, float* light) const {
+  const int width = options_.calibration.camera.width;
+  const float* centre = scratch_truth_.position.data();
+  const float* sigma = scratch_truth_.width_px.data();
+  const float* gain = line_gain_.data();
+  const float fv = static_cast<float>(v);
+  if (lines_.line_step[0] == 1.0 && lines_.along[1] == 1.0) {
+    // Columns: the line's centre row in each.
+    if (options_.forward_scatter == 0) {
+      for (int u = 0; u < width; ++u) {
+        const float d = fv - centre[u];
+        const float reach = kBandSigmas * sigma[u];
+        if (d >= -reach && d <= reach) {
+          light[u] += gain[u] * std::exp(-d * d / (2.0f * sigma[u] * sigma[u]));
+        }
+      }
+    } else {
+      for (int u = 0; u < width; ++u) {
+        if (std::isnan(centre[u])) continue;
+        light[u] += line_light(fv - centre[u], line_profile(gain[u], sigma[u], options_));
+      }
+    }
+  } else if (lines_.line_step[1] == 1.0 && lines_.along[0] == 1.0) {
+    // Rows: row v is line v, the line's centre column in it.
+    if (!std::isnan(centre[v])) {
+      const LineProfile p = line_profile(gain[v], sigma[v], options_);
+      const int lo = std::max(0, static_cast<int>(std::ceil(centre[v] - p.reach)));
+      const int hi = std::min(width - 1, static_cast<int>(std::floor(centre[v] + p.reach)));
+      for (int u = lo; u <= hi; ++u)
+        light[u] += line_light(static_cast<float>(u) - centre[v], p);
+    }
+  } else {
+    // At an angle: each pixel between two lines, the line's centre, width and brightness
+    // interpolated between them (the nearer alone where the other is not lit).
+    for (int u = 0; u < width; ++u) {
+      const auto [line, position] = lines_.to_family(u, v);
+      const int k0 = static_cast<int>(std::floor(line));
+      const double t = line - k0;
+      const bool lit0 = k0 >= 0 && k0 < lines_.count && !std::isnan(centre[k0]);
+      const bool lit1 = k0 + 1 >= 0 && k0 + 1 < lines_.count && !std::isnan(centre[k0 + 1]);
+      float c = 0, s = 0, g = 0;
+      if (lit0 && lit1) {
+        const auto w = static_cast<float>(t);
+        c = centre[k0] + w * (centre[k0 + 1] - centre[k0]);
+        s = sigma[k0] + w * (sigma[k0 + 1] - sigma[k0]);
+        g = gain[k0] + w * (gain[k0 + 1] - gain[k0]);
+      } else if (lit0 && t < 0.5) {
+        c = centre[k0], s = sigma[k0], g = gain[k0];
+      } else if (lit1 && t >= 0.5) {
+        c = centre[k0 + 1], s = sigma[k0 + 1], g = gain[k0 + 1];
+      } else {
+        continue;
+      }
+      light[u] += line_light(static_cast<float>(position) - c, line_profile(g, s, options_));
+    }
+  }
+  // Marine snow: round spots.
+  for (const Particle& p : snow_) {
+    const float reach = 4.0f * p.sigma;
+    const float dy = fv - p.y;
+    if (!(std::abs(dy) <= reach)) continue;
+    const int lo = std::max(0, static_cast<int>(std::ceil(p.x - reach)));
+    const int hi = std::min(width - 1, static_cast<int>(std::floor(p.x + reach)));
+    const float inverse = 1.0f / (2.0f * p.sigma * p.sigma);
+    for (int u = lo; u <= hi; ++u) {
+      const float dx = static_cast<float>(u) - p.x;
+      light[u] += p.peak * std::exp(-(dx * dx + dy * dy) * inverse);
+    }
+  }
+}
+
 void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint8_t> dst) {
   const FrameFormat fmt = format();
   if (dst.size() < fmt.bytes()) throw std::invalid_argument("SimScene::render: buffer too small");
   const int width = fmt.width, height = fmt.height;
+  const double time = static_cast<double>(sequence) / options_.frame_rate_hz;
   const Pose pose = pose_at(sequence);
-  const FrameGeometry g = make_geometry(options_, pose.r, pose.t);
+  const FrameGeometry g = make_geometry(options_, pose.r, pose.t, options_.object_speed_m_s * time);
   const float* tex = texture_.data();
 
-  // row_buffer_: one image row, then 1 / Z of the lit point per column (the glow floor), each
-  // padded to whole kernel blocks.
+  // row_buffer_: one image row, then the glow floor of each of its pixels (the inverse depth of
+  // the lit point of its line), each padded to whole kernel blocks.
   const int padded = (width + kBlock - 1) / kBlock * kBlock;
   float* row = row_buffer_.data();
-  float* glow_floor = row_buffer_.data() + padded;
-  float* centre = scratch_truth_.row.data();
+  float* pixel_floor = row_buffer_.data() + padded;
+  float* centre = scratch_truth_.position.data();
   float* sigma = scratch_truth_.width_px.data();
   float* depth = scratch_truth_.depth_m.data();
   float* gain = line_gain_.data();
+  float* glow_floor = glow_floor_.data();
 
-  // Per column: the line centre, its width and brightness. Rows [band_lo, band_hi] hold all bands.
+  // Per line: the line centre, its width and brightness. Rows [band_lo, band_hi] hold all of it.
   float band_lo = std::numeric_limits<float>::infinity();
   float band_hi = -std::numeric_limits<float>::infinity();
   float min_floor = kNoGlow;
   const bool laser = laser_on && (options_.laser_peak > 0 || options_.backscatter > 0);
-  for (int u = 0; u < width; ++u) {
-    const ColumnLine line =
-        laser ? column_line(g, relief_, options_.relief_height_m, u) : ColumnLine{};
+  const float* relief = relief_.empty() ? nullptr : relief_.data();
+  const auto across = static_cast<float>(std::abs(lines_.along[1]));
+  const auto between = static_cast<float>(std::abs(lines_.line_step[1]));
+  for (int k = 0; k < lines_.count; ++k) {
+    const LineHit line =
+        laser ? solve_line(g, lines_, k, relief, options_.relief_height_m) : LineHit{};
     if (!line.hit) {
-      centre[u] = sigma[u] = depth[u] = kNaN;
-      gain[u] = 0.0f;
-      glow_floor[u] = kNoGlow;
+      centre[k] = sigma[k] = depth[k] = kNaN;
+      gain[k] = 0.0f;
+      glow_floor[k] = kNoGlow;
       continue;
     }
-    centre[u] = static_cast<float>(line.v);
-    sigma[u] = static_cast<float>(line_sigma(options_, line.z));
-    depth[u] = static_cast<float>(line.z);
-    glow_floor[u] = static_cast<float>(1.0 / line.z);
-    const float albedo = relief_.empty()
-                             ? albedo_at(g, tex, u, centre[u])
+    centre[k] = static_cast<float>(line.position);
+    sigma[k] = static_cast<float>(line_sigma(options_, lines_, line.z));
+    depth[k] = static_cast<float>(line.z);
+    glow_floor[k] = static_cast<float>(1.0 / line.z);
+    const auto [x, y] = lines_.to_image(k, centre[k]);
+    const float albedo = relief == nullptr
+                             ? albedo_at(g, tex, x, y)
                              : sample_tile(tex, static_cast<float>(std::clamp(line.s, -1e7, 1e7)),
                                            static_cast<float>(std::clamp(line.t, -1e7, 1e7)));
-    gain[u] = static_cast<float>(options_.laser_peak * albedo *
+    gain[k] = static_cast<float>(options_.laser_peak * albedo *
                                  std::exp(-2.0 * options_.attenuation_per_m * line.z));
-    band_lo = std::min(band_lo, centre[u] - kBandSigmas * sigma[u]);
-    band_hi = std::max(band_hi, centre[u] + kBandSigmas * sigma[u]);
-    min_floor = std::min(min_floor, glow_floor[u]);
+    const float reach = line_profile(gain[k], sigma[k], options_).reach;
+    band_lo = std::min(band_lo, static_cast<float>(y) - (reach * across + between));
+    band_hi = std::max(band_hi, static_cast<float>(y) + (reach * across + between));
+    min_floor = std::min(min_floor, glow_floor[k]);
   }
+  place_snow(sequence);
 
   const std::uint64_t frame_hash = mix64(mix64(options_.seed) ^ mix64(sequence + 0x51ce5eedULL));
   const std::uint64_t offsets = kNoiseTableSize - static_cast<std::size_t>(width) + 1;
@@ -924,6 +594,25 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
   const bool glow = laser && options_.backscatter > 0 && le != 0.0;
   const float backscatter = static_cast<float>(options_.backscatter);
   const float attenuation = static_cast<float>(options_.attenuation_per_m);
+  const bool columns = lines_.line_step[0] == 1.0 && lines_.along[1] == 1.0;
+  const bool rows = lines_.line_step[1] == 1.0 && lines_.along[0] == 1.0;
+  // The caustics drift over the surface: two copies of the pattern, one at 0.77 times the scale of
+  // the other, moving in different directions.
+  CausticMap caustic{};
+  if (!caustics_.empty()) {
+    const double caustic_texel = options_.caustic_scale_m * kCausticCells / kCausticSize;
+    const double scale = g.texel_m / caustic_texel;
+    const double travel = options_.caustic_speed_m_s * time / caustic_texel;
+    caustic = {static_cast<float>(scale),
+               static_cast<float>(0.96 * travel),
+               static_cast<float>(0.28 * travel),
+               static_cast<float>(0.77 * scale),
+               static_cast<float>(-0.35 * travel + 311.7),
+               static_cast<float>(0.94 * travel + 157.3),
+               static_cast<float>(options_.caustics),
+               1.0f / caustic_mean_};
+  }
+  const float veil = static_cast<float>(options_.veiling);
 
   for (int v = 0; v < height; ++v) {
     const double dv = v;
@@ -957,32 +646,48 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
                           static_cast<float>(1.0 / std::max(g.d_surface, options_.relief_height_m)),
                           static_cast<float>(texel_to_cell),
                           static_cast<float>(options_.relief_height_m),
-                          ambient};
+                          ambient,
+                          static_cast<float>(g.object_shift_m / kReliefCellM),
+                          static_cast<float>(g.object_shift_m / g.texel_m)};
         relief_row(tex, relief_.data(), r, padded, row);
+      }
+      if (!caustics_.empty()) {
+        caustic_row(caustics_.data(), static_cast<float>(s_row), static_cast<float>(g.h[0]),
+                    static_cast<float>(t_row), static_cast<float>(g.h[3]),
+                    static_cast<float>(g.h[7] * dv + g.h[8]), static_cast<float>(g.h[6]), w_min,
+                    caustic, padded, row);
       }
     } else {
       std::fill(row, row + padded, 0.0f);
+    }
+    if (veil > 0) {
+      // Ambient light scattered by the water into a uniform glare, taken from the image's
+      // contrast.
+      for (int u = 0; u < padded; ++u)
+        row[u] = (1.0f - veil) * row[u] + veil * ambient;
     }
 
     // Inverse depth where the ray of (u, v) meets the sheet: -(a xn + b yn + c) / e. Rows where
     // it nowhere exceeds the glow floor have no glow.
     const double p_row = glow ? -(lb * (dv - g.cy) / g.fy + lc - la * g.cx / g.fx) / le : 0.0;
     if (glow && p_row + std::max(0.0, -la / g.fx / le * padded) > min_floor) {
+      const float* floor = glow_floor;  // columns: each pixel's line is its column
+      if (!columns) {
+        for (int u = 0; u < width; ++u) {
+          const double line = rows ? static_cast<double>(v) : std::round(lines_.to_family(u, v)[0]);
+          pixel_floor[u] = line >= 0 && line < lines_.count
+                               ? glow_floor[static_cast<std::size_t>(line)]
+                               : kNoGlow;
+        }
+        floor = pixel_floor;
+      }
       glow_row(static_cast<float>(p_row), static_cast<float>(-la / g.fx / le), attenuation,
-               backscatter, glow_floor, padded, row);
+               backscatter, floor, padded, row);
     }
 
-    // The laser line: a Gaussian across the line, point-sampled at pixel centres.
+    // The laser line (and marine snow).
     const float fv = static_cast<float>(v);
-    if (laser && fv >= band_lo && fv <= band_hi) {
-      for (int u = 0; u < width; ++u) {
-        const float d = fv - centre[u];
-        const float reach = kBandSigmas * sigma[u];
-        if (d >= -reach && d <= reach) {
-          row[u] += gain[u] * std::exp(-d * d / (2.0f * sigma[u] * sigma[u]));
-        }
-      }
-    }
+    if (laser && ((fv >= band_lo && fv <= band_hi) || !snow_.empty())) add_laser_row(v, row);
 
     // Sensor noise from the table at a hashed offset per row.
     const std::uint64_t offset = mix64(frame_hash + static_cast<std::uint64_t>(v)) % offsets;
@@ -992,26 +697,44 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
 }
 
 void SimScene::ground_truth(std::uint64_t sequence, bool laser_on, SimGroundTruth& truth) const {
+  ground_truth(sequence, laser_on, lines_, truth);
+}
+
+void SimScene::ground_truth(std::uint64_t sequence, bool laser_on, const SimLineFamily& lines,
+                            SimGroundTruth& truth) const {
   const int width = options_.calibration.camera.width;
-  const float last_row = static_cast<float>(options_.calibration.camera.height - 1);
-  truth.row.resize(static_cast<std::size_t>(width));
-  truth.depth_m.resize(static_cast<std::size_t>(width));
-  truth.width_px.resize(static_cast<std::size_t>(width));
+  const int height = options_.calibration.camera.height;
+  const auto count = static_cast<std::size_t>(lines.count);
+  truth.lines = lines;
+  truth.position.resize(count);
+  truth.depth_m.resize(count);
+  truth.width_px.resize(count);
   const Pose pose = pose_at(sequence);
-  const FrameGeometry g = make_geometry(options_, pose.r, pose.t);
+  const double time = static_cast<double>(sequence) / options_.frame_rate_hz;
+  const FrameGeometry g = make_geometry(options_, pose.r, pose.t, options_.object_speed_m_s * time);
   const bool laser = laser_on && options_.laser_peak > 0;
-  for (int u = 0; u < width; ++u) {
-    const ColumnLine line =
-        laser ? column_line(g, relief_, options_.relief_height_m, u) : ColumnLine{};
+  const float* relief = relief_.empty() ? nullptr : relief_.data();
+  // The centre must lie 1.5 px inside the frame along each image axis the line crosses.
+  const std::array<float, 2> last{static_cast<float>(width - 1), static_cast<float>(height - 1)};
+  for (int k = 0; k < lines.count; ++k) {
+    const LineHit line =
+        laser ? solve_line(g, lines, k, relief, options_.relief_height_m) : LineHit{};
     // The same float the renderer centres the profile on.
-    const float v = static_cast<float>(line.v);
-    if (!line.hit || !(v >= kEdgeRows && v <= last_row - kEdgeRows)) {
-      truth.row[u] = truth.depth_m[u] = truth.width_px[u] = kNaN;
+    const float position = static_cast<float>(line.position);
+    bool inside = line.hit;
+    const auto image = lines.to_image(k, position);
+    for (int axis = 0; axis < 2 && inside; ++axis) {
+      const auto at = static_cast<float>(image[axis]);
+      const float edge = lines.along[axis] != 0 ? kEdgeRows : 0.0f;
+      inside = at >= edge && at <= last[axis] - edge;
+    }
+    if (!inside) {
+      truth.position[k] = truth.depth_m[k] = truth.width_px[k] = kNaN;
       continue;
     }
-    truth.row[u] = v;
-    truth.depth_m[u] = static_cast<float>(line.z);
-    truth.width_px[u] = static_cast<float>(line_sigma(options_, line.z));
+    truth.position[k] = position;
+    truth.depth_m[k] = static_cast<float>(line.z);
+    truth.width_px[k] = static_cast<float>(line_sigma(options_, lines, line.z));
   }
 }
 

@@ -49,6 +49,31 @@ struct SimSceneOptions {
   double noise_sigma = 2.0;  // additive Gaussian sensor noise
   double backscatter = 0.0;  // glow of the sheet in the water just in front of the surface
   double attenuation_per_m = 0.0;  // water attenuation of the laser along its path
+  // Turbid water besides: forward scatter spreads this share of the line's light into a halo
+  // (a Gaussian as wide as the line and scatter_halo_px added in quadrature, the same energy);
+  // veiling light is this share of the ambient light scattered into a uniform glare.
+  double forward_scatter = 0.0;
+  double scatter_halo_px = 8.0;
+  double veiling = 0.0;
+  // Sunlight caustics: the ambient light on the surface focused into a network of thin bright
+  // curves by the waves, cells of caustic_scale_m, drifting at caustic_speed_m_s over the surface
+  // (independently of the surface and the camera). caustics is the share of the ambient light in
+  // the pattern (0: none, 1: all of it; the mean light is the same).
+  double caustics = 0.0;
+  double caustic_scale_m = 0.15;
+  double caustic_speed_m_s = 0.2;
+  // Marine snow: particles in the water lit where they cross the laser sheet, in front of the
+  // surface: this many per frame (new ones each frame: they drift), Gaussian spots of about
+  // snow_size_px (sigma), as bright as snow_brightness times laser_peak at most, at depths from
+  // snow_min_depth_m to the surface.
+  int snow_per_frame = 0;
+  double snow_size_px = 1.2;
+  double snow_brightness = 1.0;
+  double snow_min_depth_m = 0.3;
+  // Bright marks with sharp edges on the surface (paint strokes, shells): this many per square
+  // metre, of albedo up to marks_albedo (the texture's mean albedo is 1).
+  double marks_per_m2 = 0.0;
+  double marks_albedo = 3.0;
 
   // Sway of the free-floating camera: sinusoidal translation and rotation.
   double sway_m = 0.02;
@@ -76,7 +101,36 @@ struct SimSceneOptions {
   // The vehicle moving along the surface: the camera (with its laser) translates at this speed
   // along the surface's x axis (the world x axis turned by the tilts), on top of sway and scan.
   double vehicle_speed_m_s = 0.0;
+  // Objects moving on a still surface (a rig scanning a moving part): the relief, with the texture
+  // on it, slides along the surface's x axis at this speed while the base plane stays.
+  double object_speed_m_s = 0.0;
 };
+
+// A family of parallel image lines: line k's pixel at `position` along it is
+// origin + k * line_step + position * along (line_step and along orthonormal).
+struct SimLineFamily {
+  std::array<double, 2> origin{0.0, 0.0};
+  std::array<double, 2> line_step{1.0, 0.0};
+  std::array<double, 2> along{0.0, 1.0};
+  int count = 0;
+
+  std::array<double, 2> to_image(double line, double position) const {
+    return {origin[0] + line * line_step[0] + position * along[0],
+            origin[1] + line * line_step[1] + position * along[1]};
+  }
+  std::array<double, 2> to_family(double x, double y) const {
+    const double dx = x - origin[0], dy = y - origin[1];
+    return {dx * line_step[0] + dy * line_step[1], dx * along[0] + dy * along[1]};
+  }
+  // The columns of a width-pixel image (line k = column k, position = row).
+  static SimLineFamily columns(int width);
+};
+
+// The epipolar lines of a scanner, along which the simulator draws and measures the line: along
+// the gradient of the laser sheet's inverse depth over the image: columns (or rows) when it lies
+// within 5 degrees of the image's v (or u) axis, else the rotated family through the image (as
+// pipeline::choose_search_axes(), which the detectors use: the same lines).
+SimLineFamily epipolar_lines(const Calibration& calibration);
 
 // The true pose of the camera for one frame, world -> camera: X_camera = rotation X_world +
 // translation (rotation row-major). The world frame is the camera frame of frame 0 at rest (x
@@ -87,11 +141,13 @@ struct SimCameraPose {
   std::array<double, 3> translation{};
 };
 
-// The exact answer for one frame.
+// The exact answer for one frame, along a family of lines (for the paper's mounting, columns:
+// position = the row of the laser centre in each column).
 struct SimGroundTruth {
-  std::vector<float> row;       // per column: sub-pixel row of the laser centre, NaN where none
-  std::vector<float> depth_m;   // per column: Z of the lit surface point, NaN where none
-  std::vector<float> width_px;  // per column: Gaussian sigma of the rendered line profile
+  SimLineFamily lines;
+  std::vector<float> position;  // per line: sub-pixel position of the laser centre, NaN where none
+  std::vector<float> depth_m;   // per line: Z of the lit surface point, NaN where none
+  std::vector<float> width_px;  // per line: Gaussian sigma of the rendered line profile
 };
 
 // Renders the simulated scanner's frames. Construction allocates (texture, noise table, scratch);
@@ -106,9 +162,15 @@ class SimScene {
   // Writes frame `sequence` as mono8 into dst (format().bytes() bytes).
   void render(std::uint64_t sequence, bool laser_on, std::span<std::uint8_t> dst);
 
-  // The exact laser centre per column for frame `sequence`. `truth` vectors are resized to the
-  // image width (allocation only the first time).
+  // The lines the renderer draws the laser along (epipolar_lines() of the calibration).
+  const SimLineFamily& lines() const { return lines_; }
+
+  // The exact laser centre along each line of `lines` (default: lines()) for frame `sequence`;
+  // NaN where the line is not lit or its centre lies within 1.5 px of the frame's border. `truth`
+  // vectors are resized to the number of lines (allocation only the first time).
   void ground_truth(std::uint64_t sequence, bool laser_on, SimGroundTruth& truth) const;
+  void ground_truth(std::uint64_t sequence, bool laser_on, const SimLineFamily& lines,
+                    SimGroundTruth& truth) const;
 
   // The true camera pose of frame `sequence` (sway, scan and vehicle motion).
   SimCameraPose camera_pose(std::uint64_t sequence) const;
@@ -124,15 +186,26 @@ class SimScene {
   struct Pose;
   Pose pose_at(std::uint64_t sequence) const;
 
+  // Draws the laser's light (the line, forward scatter, marine snow) into image row v.
+  void add_laser_row(int v, float* light) const;
+  // Places this frame's marine snow (snow_).
+  void place_snow(std::uint64_t sequence);
+
   SimSceneOptions options_;
-  std::vector<float> texture_;  // tile of surface albedo noise, texture_size_ x texture_size_
-  int texture_size_ = 0;
-  std::vector<std::int8_t> noise_;      // table of Gaussian sensor noise samples (scaled)
-  std::vector<float> row_buffer_;       // scratch for one image row
-  SimGroundTruth scratch_truth_;        // per-column truth of the frame being rendered
-  std::vector<float> line_gain_;        // per-column peak grey level of the line
-  std::vector<float> relief_;           // wrapping tile of relief heights (m), empty without relief
-  std::vector<float> line_s_, line_t_;  // per column: texel coordinates of the lit point
+  SimLineFamily lines_;
+  std::vector<float> texture_;      // tile of surface albedo
+  std::vector<float> caustics_;     // tile of the caustic pattern (empty without caustics)
+  float caustic_mean_ = 1.0f;       // its mean
+  std::vector<std::int8_t> noise_;  // table of Gaussian sensor noise samples (scaled)
+  std::vector<float> row_buffer_;   // scratch: one image row, the glow floor per pixel
+  SimGroundTruth scratch_truth_;    // per-line truth of the frame being rendered
+  std::vector<float> line_gain_;    // per line: peak grey level of the line
+  std::vector<float> glow_floor_;   // per line: inverse depth of the lit point (see render())
+  std::vector<float> relief_;       // wrapping tile of relief heights (m), empty without relief
+  struct Particle {
+    float x, y, sigma, peak;
+  };
+  std::vector<Particle> snow_;  // this frame's marine snow (capacity snow_per_frame)
 };
 
 }  // namespace laserline::hal
