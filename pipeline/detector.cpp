@@ -1,11 +1,72 @@
 #include "pipeline/detector.hpp"
 
+#include <stdexcept>
+#include <string>
+
 #include "pipeline/backprojection_detector.hpp"
 #include "pipeline/frontend_detectors.hpp"
 #include "pipeline/maxvalue_detector.hpp"
+#include "pipeline/search_axes.hpp"
 #include "pipeline/triangulation.hpp"
 
 namespace laserline::pipeline {
+
+namespace {
+
+// Any detector run in search coordinates: each frame made into its search image (the frame
+// itself, its transpose, or its rotation), the points kept within the frame and the profile told
+// how they map to it.
+class SearchAxesDetector final : public Detector {
+ public:
+  SearchAxesDetector(std::unique_ptr<Detector> detector, const SearchAxes& axes,
+                     const ScannerGeometry& geometry)
+      : detector_(std::move(detector)),
+        axes_(axes),
+        width_(geometry.width),
+        height_(geometry.height) {}
+
+  const char* name() const override { return detector_->name(); }
+  std::size_t max_points(int width, int height) const override {
+    return axes_.identity() ? detector_->max_points(width, height)
+                            : detector_->max_points(axes_.lines, axes_.length);
+  }
+  void reset(int width, int height) override {
+    if (axes_.identity()) {
+      axes_.lines = width;
+      axes_.length = height;
+      detector_->reset(width, height);
+    } else {
+      // The search image is laid out for the calibrated frame size.
+      if (width != width_ || height != height_) {
+        throw std::invalid_argument("frame size " + std::to_string(width) + "x" +
+                                    std::to_string(height) + " differs from the calibration's " +
+                                    std::to_string(width_) + "x" + std::to_string(height_));
+      }
+      detector_->reset(axes_.lines, axes_.length);
+    }
+    search_.reset(axes_, width, height);
+  }
+  void detect(const ImageView& image, const FrameContext& frame, Profile& out) override {
+    detector_->detect(search_.make(image), frame, out);
+    out.set_axes(axes_);
+    if (axes_.axis == SearchAxis::kOblique) {
+      // The search image's corners lie outside the frame: nothing seen there is in the frame.
+      const double last_x = width_ - 0.5, last_y = height_ - 0.5;
+      out.keep_if([&](const ProfilePoint& p) {
+        const auto [x, y] = axes_.to_image(p.u, p.v);
+        return x >= -0.5 && x <= last_x && y >= -0.5 && y <= last_y;
+      });
+    }
+  }
+
+ private:
+  std::unique_ptr<Detector> detector_;
+  SearchAxes axes_;
+  int width_, height_;
+  SearchImage search_;
+};
+
+}  // namespace
 
 std::vector<std::string> detector_names() {
   return {"maxvalue", "fir", "background", "backprojection"};
@@ -22,7 +83,14 @@ static std::unique_ptr<Detector> make_image_detector(const std::string& name,
 }
 
 std::unique_ptr<Detector> make_detector(const std::string& name, const DetectorOptions& options) {
-  return with_triangulation(make_image_detector(name, options), options.geometry);
+  const SearchAxes axes = choose_search_axes(options.geometry);
+  DetectorOptions search_options = options;
+  search_options.geometry = search_geometry(options.geometry, axes);
+  std::unique_ptr<Detector> detector = make_image_detector(name, search_options);
+  if (!detector) return nullptr;
+  return with_triangulation(
+      std::make_unique<SearchAxesDetector>(std::move(detector), axes, options.geometry),
+      options.geometry);
 }
 
 }  // namespace laserline::pipeline

@@ -47,8 +47,10 @@ struct FrameContext {
   bool laser_on = true;  // the laser state the frame was exposed with
 };
 
-// Finds laser points in one frame. Epipolar lines are image columns, so a detector looks for the
-// laser along each column. reset() sizes every buffer for a frame size (allocates); detect() then
+// Finds laser points in one frame, along each epipolar line. A detector itself looks along image
+// columns; make_detector() runs it on the frame's search image (pipeline/search_axes.hpp) when the
+// calibration puts the epipolar lines along rows or at an angle, and the profile says how its
+// points map to the frame. reset() sizes every buffer for a frame size (allocates); detect() then
 // does not allocate and its work is bounded by the image size. Detectors that use earlier frames
 // keep what they need themselves: the image passed to detect() is not valid after it returns.
 // Thread context: one thread at a time per instance.
@@ -63,10 +65,11 @@ class Detector {
 };
 
 std::vector<std::string> detector_names();
-// nullptr for an unknown name. Every detector's valid points come out triangulated (xyz in metres
-// in the camera frame, from options.geometry; NaN where not on the laser sheet). Throws
-// std::invalid_argument when the options cannot work (e.g. a laser plane whose lines are not image
-// rows), naming the option.
+// nullptr for an unknown name. The detector searches along the epipolar lines options.geometry
+// gives (columns, rows or at an angle: choose_search_axes()); every detector's valid points come
+// out triangulated (xyz in metres in the camera frame; NaN where not on the laser sheet). Throws
+// std::invalid_argument when the options cannot work (e.g. a laser plane through the camera
+// centre), naming the option.
 std::unique_ptr<Detector> make_detector(const std::string& name, const DetectorOptions& options);
 
 }  // namespace laserline::pipeline

@@ -76,21 +76,36 @@ inline float bilinear(const ImageView& image, float x, float y) {
 RowNormalisation::RowNormalisation(const ScannerGeometry& g, const FrontendOptions& options,
                                    int margin) {
   const auto& [a, b, c, e] = g.laser_plane;
-  (void)a;  // the width is taken on the centre column, where a does not enter
   if (!(g.sheet_width_m > 0)) throw std::invalid_argument("laser.sheet_width_m must be > 0");
   if (e == 0.0) throw std::invalid_argument("laser plane passes through the camera centre");
-  // l(v) = fy l_w / Z(cx, v), 1 / Z = -(b (v - cy) / fy + c) / e.
+  // l(v) = fy l_w / Z(cx, v), 1 / Z = -(b (v - cy) / fy + c) / e: the width is modelled on the
+  // centre column. The columns are searched when the sheet's depth changes along them within a
+  // few degrees (pipeline/search_axes.hpp), so a changes it across the image only a little:
+  // l(u, v) = l(v) + gamma (u - cx).
   beta_ = -g.sheet_width_m * b / e;
   alpha_ = -g.fy * g.sheet_width_m * (c - b * g.cy / g.fy) / e;
   if (std::abs(beta_) * g.height < 1e-6 * std::abs(alpha_) || !std::isfinite(beta_)) {
     throw std::invalid_argument(
-        "laser plane: the sheet's depth must change along the image columns (b != 0)");
+        "laser plane: the sheet's depth must change along the epipolar lines (its normal must "
+        "not be along the optical axis)");
   }
+  const double gamma = -g.fy * g.sheet_width_m * a / (e * g.fx);
   scale_ = options.normalised_width_px;
   const double l_far = g.fy * g.sheet_width_m / options.max_depth_m;
   const double l_near = g.fy * g.sheet_width_m / options.min_depth_m;
-  double v_lo = (l_far - alpha_) / beta_, v_hi = (l_near - alpha_) / beta_;
-  if (v_lo > v_hi) std::swap(v_lo, v_hi);
+  // The rows where some column sees the sheet within the depth range: the union over the first
+  // and last column (l is affine in u), kept where the centre column's width stays positive.
+  double v_lo = std::numeric_limits<double>::infinity(), v_hi = -v_lo;
+  for (const double u : {0.0, static_cast<double>(g.width - 1)}) {
+    const double offset = alpha_ + gamma * (u - g.cx);
+    for (const double l : {l_far, l_near}) {
+      v_lo = std::min(v_lo, (l - offset) / beta_);
+      v_hi = std::max(v_hi, (l - offset) / beta_);
+    }
+  }
+  const double positive = (0.5 * l_far - alpha_) / beta_;  // centre column at twice max_depth
+  if (beta_ > 0) v_lo = std::max(v_lo, positive);
+  if (beta_ < 0) v_hi = std::min(v_hi, positive);
   v_lo = std::max(v_lo, 0.0);
   v_hi = std::min(v_hi, static_cast<double>(g.height - 1));
   if (!(v_lo < v_hi)) {

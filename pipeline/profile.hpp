@@ -7,12 +7,15 @@
 #include <span>
 #include <vector>
 
+#include "pipeline/search_axes.hpp"
+
 namespace laserline::pipeline {
 
-// One laser point in original pixel coordinates (pixel centres at integers).
+// One laser point in the detector's search coordinates (Profile::axes()): for the paper's mounting
+// u is the column and v the row of the original frame (pixel centres at integers).
 struct ProfilePoint {
-  int u = 0;            // column: the epipolar line it lies on
-  float v = 0.0f;       // sub-pixel row
+  int u = 0;            // the epipolar line it lies on (a column, a row, or a line at an angle)
+  float v = 0.0f;       // sub-pixel position along that line (a row, a column, ...)
   float snr_db = 0.0f;  // 20*log10 of the detector's signal-to-noise amplitude ratio
   std::int32_t segment = -1;
   bool valid = true;
@@ -23,13 +26,13 @@ struct ProfilePoint {
 
 // The points of one frame. Its capacity is fixed at construction so that filling it on the frame
 // path never allocates; a detector that finds more points than fit stops adding and the profile
-// says it overflowed.
+// says it overflowed. It says how its points map to the image (axes()).
 class Profile {
  public:
   explicit Profile(std::size_t capacity = 0) { points_.reserve(capacity); }
   // Copies keep the capacity (std::vector's copy would not): ring slots are made by copying a
   // prototype and must be able to hold a full frame's points without allocating.
-  Profile(const Profile& other) : overflowed_(other.overflowed_) {
+  Profile(const Profile& other) : axes_(other.axes_), overflowed_(other.overflowed_) {
     points_.reserve(other.capacity());
     points_ = other.points_;
   }
@@ -37,6 +40,7 @@ class Profile {
     if (this != &other) {
       if (points_.capacity() < other.capacity()) points_.reserve(other.capacity());
       points_.assign(other.points_.begin(), other.points_.end());
+      axes_ = other.axes_;
       overflowed_ = other.overflowed_;
     }
     return *this;
@@ -58,6 +62,16 @@ class Profile {
     return true;
   }
 
+  // Keeps the points for which keep(point) holds, in order (no allocation).
+  template <class Predicate>
+  void keep_if(Predicate keep) {
+    std::size_t kept = 0;
+    for (const ProfilePoint& p : points_) {
+      if (keep(p)) points_[kept++] = p;
+    }
+    points_.resize(kept);
+  }
+
   const std::vector<ProfilePoint>& points() const { return points_; }
   // The points for a later stage to complete in place (e.g. xyz); their number stays fixed.
   std::span<ProfilePoint> mutable_points() { return points_; }
@@ -65,8 +79,17 @@ class Profile {
   std::size_t capacity() const { return points_.capacity(); }
   bool overflowed() const { return overflowed_; }
 
+  // How (u, v) of the points map to the frame's pixels; set by the detector.
+  const SearchAxes& axes() const { return axes_; }
+  void set_axes(const SearchAxes& axes) { axes_ = axes; }
+  // A point in the frame's pixel coordinates (x right, y down).
+  std::array<double, 2> image_point(const ProfilePoint& p) const {
+    return axes_.to_image(p.u, p.v);
+  }
+
  private:
   std::vector<ProfilePoint> points_;
+  SearchAxes axes_;
   bool overflowed_ = false;
 };
 

@@ -28,7 +28,8 @@ bool Triangulator::point(double u, double v, std::array<double, 3>& xyz) const {
 void Triangulator::fill(Profile& profile) const {
   for (ProfilePoint& p : profile.mutable_points()) {
     std::array<double, 3> xyz{};
-    if (p.valid && point(p.u, p.v, xyz)) {
+    const auto [x, y] = profile.image_point(p);
+    if (p.valid && point(x, y, xyz)) {
       p.xyz = {static_cast<float>(xyz[0]), static_cast<float>(xyz[1]), static_cast<float>(xyz[2])};
     } else {
       p.xyz = {kNaN, kNaN, kNaN};

@@ -20,7 +20,8 @@ class Triangulator {
   // sheet in front of the camera (or cannot be undistorted).
   bool point(double u, double v, std::array<double, 3>& xyz) const;
 
-  // Fills xyz of every valid point of the profile; NaN for rejected ones and for misses.
+  // Fills xyz of every valid point of the profile (its points mapped to the frame by its axes);
+  // NaN for rejected ones and for misses.
   void fill(Profile& profile) const;
 
  private:
