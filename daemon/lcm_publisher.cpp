@@ -43,6 +43,13 @@ bool LcmPublisher::publish(lcm::LCM& lcm, const std::string& channel, const Mess
   return lcm.publish(channel, buffer.data(), static_cast<unsigned>(size)) == 0;
 }
 
+// profile_t.search_axis carries pipeline::SearchAxis as is.
+static_assert(static_cast<int>(pipeline::SearchAxis::kColumns) ==
+              laserline::profile_t::SEARCH_COLUMNS);
+static_assert(static_cast<int>(pipeline::SearchAxis::kRows) == laserline::profile_t::SEARCH_ROWS);
+static_assert(static_cast<int>(pipeline::SearchAxis::kOblique) ==
+              laserline::profile_t::SEARCH_OBLIQUE);
+
 bool LcmPublisher::publish_profile(const ProfileSlot& slot) {
   profile_.utime = frame_utime(slot.info);
   profile_.sequence = static_cast<std::int64_t>(slot.info.sequence);
@@ -50,6 +57,11 @@ bool LcmPublisher::publish_profile(const ProfileSlot& slot) {
   profile_.laser_on = slot.info.laser_on;
   profile_.width = slot.width;
   profile_.height = slot.height;
+  const pipeline::SearchAxes& axes = slot.profile.axes();
+  profile_.search_axis = static_cast<std::int8_t>(axes.axis);
+  std::copy(axes.origin.begin(), axes.origin.end(), profile_.search_origin);
+  std::copy(axes.line_step.begin(), axes.line_step.end(), profile_.search_line_step);
+  std::copy(axes.along.begin(), axes.along.end(), profile_.search_along);
   const auto& points = slot.profile.points();
   profile_.points.resize(points.size());  // within the capacity reserved at construction
   for (std::size_t i = 0; i < points.size(); ++i) {

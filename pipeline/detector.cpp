@@ -50,11 +50,14 @@ class SearchAxesDetector final : public Detector {
     detector_->detect(search_.make(image), frame, out);
     out.set_axes(axes_);
     if (axes_.axis == SearchAxis::kOblique) {
-      // The search image's corners lie outside the frame: nothing seen there is in the frame.
-      const double last_x = width_ - 0.5, last_y = height_ - 0.5;
+      // The search image's corners lie outside the frame, where it continues the frame's edge:
+      // a point there, or within a laser width of the edge (where the line's profile is cut), is
+      // not seen.
+      constexpr double kEdge = 1.5;
+      const double last_x = width_ - 1 - kEdge, last_y = height_ - 1 - kEdge;
       out.keep_if([&](const ProfilePoint& p) {
         const auto [x, y] = axes_.to_image(p.u, p.v);
-        return x >= -0.5 && x <= last_x && y >= -0.5 && y <= last_y;
+        return x >= kEdge && x <= last_x && y >= kEdge && y <= last_y;
       });
     }
   }

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
@@ -91,7 +92,44 @@ std::vector<Scenario> standard_scenarios(int width, int height) {
     s.scene.seed = 5;
     out.push_back(s);
   }
+  {
+    Scenario s{"beside",
+               "as clean, the laser beside the camera (to its left): the line runs down the image",
+               base};
+    s.scene.ambient = 40;
+    s.scene.texture_contrast = 0.5;
+    s.scene.laser_peak = 180;
+    s.scene.noise_sigma = 1.5;
+    s.scene.seed = 11;
+    s.scene.calibration.laser.side = hal::LaserSide::kLeft;
+    s.scene.tilt_x_deg = 8.0;  // the surface turned across the line, as tilt_y is for the others
+    s.scene.tilt_y_deg = 0.0;
+    s.scene.scan_pan = true;  // the unit sweeps across the line
+    out.push_back(s);
+  }
+  {
+    Scenario s{"oblique", "as clean, the laser turned 30 degrees about the optical axis", base};
+    s.scene.ambient = 40;
+    s.scene.texture_contrast = 0.5;
+    s.scene.laser_peak = 180;
+    s.scene.noise_sigma = 1.5;
+    s.scene.seed = 13;
+    // The paper's sheet (projector 0.25 m above, 80 degrees) turned by 30 degrees.
+    const double t = std::tan(10.0 * std::numbers::pi / 180.0);
+    const double c30 = std::cos(std::numbers::pi / 6), s30 = std::sin(std::numbers::pi / 6);
+    s.scene.calibration.laser.plane = std::array<double, 4>{-s30, c30, -t, 0.25};
+    out.push_back(s);
+  }
   return out;
+}
+
+hal::SimLineFamily line_family(const pipeline::SearchAxes& axes) {
+  hal::SimLineFamily lines;
+  lines.origin = axes.origin;
+  lines.line_step = axes.line_step;
+  lines.along = axes.along;
+  lines.count = axes.lines;
+  return lines;
 }
 
 Score evaluate(const Scenario& scenario, const std::string& detector_name,
@@ -108,6 +146,7 @@ Score evaluate(const Scenario& scenario, const std::string& detector_name,
   hal::SimGroundTruth truth;
 
   Score score;
+  std::vector<double> best;
   for (int i = 0; i < scenario.frames; ++i) {
     const auto sequence = static_cast<std::uint64_t>(scenario.first_frame + i);
     const bool laser_on = !scenario.alternate || sequence % 2 == 0;
@@ -115,26 +154,27 @@ Score evaluate(const Scenario& scenario, const std::string& detector_name,
     const pipeline::ImageView view{pixels.data(), format.width, format.height, format.stride};
     detector->detect(view, {sequence, laser_on}, profile);
     if (i == 0) continue;  // warm-up
-    scene.ground_truth(sequence, laser_on, truth);
+    // The truth along the lines the detector searched.
+    scene.ground_truth(sequence, laser_on, line_family(profile.axes()), truth);
     ++score.frames;
 
-    const int width = format.width;
-    std::vector<double> best(static_cast<std::size_t>(width),
-                             std::numeric_limits<double>::infinity());
+    const auto lines = truth.position.size();
+    best.assign(lines, std::numeric_limits<double>::infinity());
     for (const pipeline::ProfilePoint& p : profile.points()) {
       if (!p.valid) continue;
       ++score.points;
-      const float row = truth.position[static_cast<std::size_t>(p.u)];
-      if (std::isnan(row)) continue;
-      const double error = p.v - row;
+      if (p.u < 0 || static_cast<std::size_t>(p.u) >= lines) continue;
+      const float position = truth.position[static_cast<std::size_t>(p.u)];
+      if (std::isnan(position)) continue;
+      const double error = p.v - position;
       if (std::abs(error) <= tolerance_px) ++score.correct_points;
       double& b = best[static_cast<std::size_t>(p.u)];
       if (std::abs(error) < std::abs(b)) b = error;
     }
-    for (int u = 0; u < width; ++u) {
-      if (std::isnan(truth.position[static_cast<std::size_t>(u)])) continue;
+    for (std::size_t k = 0; k < lines; ++k) {
+      if (std::isnan(truth.position[k])) continue;
       ++score.truth_columns;
-      const double error = best[static_cast<std::size_t>(u)];
+      const double error = best[k];
       if (!(std::abs(error) <= tolerance_px)) continue;
       ++score.found_columns;
       score.sum_error += error;
@@ -151,24 +191,32 @@ bool write_overlay(const std::string& path, const ScoredFrame& frame, double tol
                      const_cast<std::uint8_t*>(frame.pixels->data()));
   cv::Mat colour;
   cv::cvtColor(grey, colour, cv::COLOR_GRAY2BGR);
-  for (int u = 0; u < frame.width; ++u) {
-    const float row = frame.truth->position[static_cast<std::size_t>(u)];
-    if (std::isnan(row)) continue;
-    const int v = static_cast<int>(std::lround(row)) - 6;
-    if (v >= 0 && v < frame.height) colour.at<cv::Vec3b>(v, u) = {255, 128, 0};  // truth, above
+  auto paint = [&](double x, double y, const cv::Vec3b& bgr) {
+    const auto u = static_cast<int>(std::lround(x)), v = static_cast<int>(std::lround(y));
+    if (u >= 0 && u < frame.width && v >= 0 && v < frame.height) colour.at<cv::Vec3b>(v, u) = bgr;
+  };
+  // The truth 6 px before the line along its epipolar lines (above a line across the image).
+  const hal::SimLineFamily& lines = frame.truth->lines;
+  for (std::size_t k = 0; k < frame.truth->position.size(); ++k) {
+    const float position = frame.truth->position[k];
+    if (std::isnan(position)) continue;
+    const auto [x, y] = lines.to_image(static_cast<double>(k), position - 6.0);
+    paint(x, y, {255, 128, 0});
   }
   // Rejected candidates first (dim yellow), valid points over them: green where within the
   // tolerance of the truth, red where not.
   for (const bool valid : {false, true}) {
     for (const pipeline::ProfilePoint& p : frame.profile->points()) {
       if (p.valid != valid) continue;
-      const float row = frame.truth->position[static_cast<std::size_t>(p.u)];
-      const bool correct = !std::isnan(row) && std::abs(p.v - row) <= tolerance_px;
-      const int v = static_cast<int>(std::lround(p.v));
-      if (v < 0 || v >= frame.height) continue;
-      colour.at<cv::Vec3b>(v, p.u) = !valid    ? cv::Vec3b{0, 140, 140}
-                                     : correct ? cv::Vec3b{0, 255, 0}
-                                               : cv::Vec3b{0, 0, 255};
+      const bool on_line = p.u >= 0 && static_cast<std::size_t>(p.u) < frame.truth->position.size();
+      const float position = on_line ? frame.truth->position[static_cast<std::size_t>(p.u)]
+                                     : std::numeric_limits<float>::quiet_NaN();
+      const bool correct = !std::isnan(position) && std::abs(p.v - position) <= tolerance_px;
+      const auto [x, y] = frame.profile->image_point(p);
+      paint(x, y,
+            !valid    ? cv::Vec3b{0, 140, 140}
+            : correct ? cv::Vec3b{0, 255, 0}
+                      : cv::Vec3b{0, 0, 255});
     }
   }
   return cv::imwrite(path, colour);

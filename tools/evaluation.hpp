@@ -26,9 +26,10 @@ struct Scenario {
 // (saturated core).
 std::vector<Scenario> standard_scenarios(int width = 1280, int height = 1024);
 
+// Counted per epipolar line (for the paper's mounting, per column).
 struct Score {
   int frames = 0;           // scored frames
-  long truth_columns = 0;   // columns where the laser is visible
+  long truth_columns = 0;   // lines where the laser is visible
   long found_columns = 0;   // of those, with a point within the tolerance
   long points = 0;          // valid points the detector returned
   long correct_points = 0;  // of those, within the tolerance of the truth
@@ -51,8 +52,12 @@ struct ScoredFrame {
   const pipeline::Profile* profile = nullptr;
 };
 
+// The simulator's lines for a detector's search axes.
+hal::SimLineFamily line_family(const pipeline::SearchAxes& axes);
+
 // Runs `detector` over the scenario and scores it: a point is correct within `tolerance_px` of the
-// true row in its column. `options` supplies everything but the geometry (taken from the scene).
+// true position along its epipolar line (the truth is taken along the lines the detector searched).
+// `options` supplies everything but the geometry (taken from the scene).
 Score evaluate(const Scenario& scenario, const std::string& detector,
                pipeline::DetectorOptions options, double tolerance_px,
                const std::function<void(const ScoredFrame&)>& on_frame = {});

@@ -18,18 +18,22 @@ namespace {
 // Plain functions rather than member handlers: GCC 12's UBSan misreports LCM's member dispatch.
 void on_profile(const lcm::ReceiveBuffer*, const std::string&, const laserline::profile_t* p,
                 void*) {
-  // Points carry sub-pixel rows v (pixel centres at integers, v down) and xyz in metres in the
-  // camera frame (NaN for rejected points and where the ray misses the laser sheet).
-  double v_sum = 0;
+  // Points carry their epipolar line u and sub-pixel position v along it (pixel centres at
+  // integers; for SEARCH_COLUMNS the column and the row), mapped to the frame's pixel (x, y) by
+  // the profile's search axes, and xyz in metres in the camera frame (NaN for rejected points and
+  // where the ray misses the laser sheet).
+  double x_sum = 0, y_sum = 0;
   int valid = 0;
   for (const auto& point : p->points) {
     if (!point.valid) continue;
-    v_sum += point.v;
+    x_sum += p->search_origin[0] + point.u * p->search_line_step[0] + point.v * p->search_along[0];
+    y_sum += p->search_origin[1] + point.u * p->search_line_step[1] + point.v * p->search_along[1];
     ++valid;
   }
-  std::printf("profile %lld utime %lld laser %s: %d points, mean row %.2f\n",
+  std::printf("profile %lld utime %lld laser %s: %d points, mean pixel (%.2f, %.2f)\n",
               static_cast<long long>(p->sequence), static_cast<long long>(p->utime),
-              p->laser_on ? "on" : "off", p->num_points, valid > 0 ? v_sum / valid : NAN);
+              p->laser_on ? "on" : "off", p->num_points, valid > 0 ? x_sum / valid : NAN,
+              valid > 0 ? y_sum / valid : NAN);
 }
 
 void on_status(const lcm::ReceiveBuffer*, const std::string&, const laserline::status_t* s, void*) {

@@ -165,8 +165,13 @@ bool write_overlay(const Listener& l, const std::string& path) {
   if (match != nullptr) {
     constexpr int kShift = 4;  // sub-pixel drawing: coordinates in 1/16 px
     for (const auto& pt : match->points) {
-      const cv::Point centre(static_cast<int>(std::lround((pt.u - x0) / k * 16.0)),
-                             static_cast<int>(std::lround((pt.v - y0) / k * 16.0)));
+      // The point's frame pixel, from the profile's search axes (see point_t).
+      const double x = match->search_origin[0] + pt.u * match->search_line_step[0] +
+                       pt.v * match->search_along[0];
+      const double y = match->search_origin[1] + pt.u * match->search_line_step[1] +
+                       pt.v * match->search_along[1];
+      const cv::Point centre(static_cast<int>(std::lround((x - x0) / k * 16.0)),
+                             static_cast<int>(std::lround((y - y0) / k * 16.0)));
       // Valid points red, rejected candidates blue.
       const cv::Scalar colour = pt.valid ? cv::Scalar(0, 0, 255) : cv::Scalar(255, 128, 0);
       // Half a pixel: the point marks the centre and leaves the line's flanks visible.

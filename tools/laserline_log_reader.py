@@ -80,7 +80,10 @@ def main():
     points_out = open(args.points, "w", newline="") if args.points else None
     writer = csv.writer(points_out) if points_out else None
     if writer:
-        writer.writerow(["sequence", "utime", "u", "v", "snr_db", "segment", "valid", "x", "y", "z"])
+        # u, v: the point's epipolar line and position along it (the column and row for the usual
+        # mounting); pixel_x, pixel_y: the frame pixel; x, y, z: metres in the camera frame.
+        writer.writerow(["sequence", "utime", "u", "v", "pixel_x", "pixel_y", "snr_db", "segment",
+                         "valid", "x", "y", "z"])
     events = 0
     try:
         for number, utime, channel, data in read_events(args.log, report):
@@ -100,8 +103,11 @@ def main():
             if decoder is laserline.profile_t:
                 profiles.append((msg.sequence, msg.num_points))
                 if writer:
+                    o, l, a = msg.search_origin, msg.search_line_step, msg.search_along
                     for p in msg.points:
+                        pixel = (o[0] + p.u * l[0] + p.v * a[0], o[1] + p.u * l[1] + p.v * a[1])
                         writer.writerow([msg.sequence, msg.utime, p.u, "%.3f" % p.v,
+                                         "%.3f" % pixel[0], "%.3f" % pixel[1],
                                          "%.1f" % p.snr_db, p.segment, int(p.valid)] +
                                         ["" if math.isnan(c) else "%.5f" % c for c in p.xyz])
             elif decoder is laserline.status_t:

@@ -390,8 +390,8 @@ SimScene::Pose SimScene::pose_at(std::uint64_t sequence) const {
     const double x = std::fmod(options_.scan_rate_deg_s * time + a, 4.0 * a);  // in [0, 4A)
     scan = (x < 2.0 * a ? x - a : 3.0 * a - x) * kDeg;
   }
-  const double ax = amp * wave(0.9 * phase, 0.5) + scan;
-  const double ay = amp * 0.7 * wave(1.1 * phase, 2.3);
+  const double ax = amp * wave(0.9 * phase, 0.5) + (options_.scan_pan ? 0.0 : scan);
+  const double ay = amp * 0.7 * wave(1.1 * phase, 2.3) + (options_.scan_pan ? scan : 0.0);
   const double az = amp * 0.5 * wave(0.8 * phase, 4.1);
   pose.r = mul(rot_z(az), mul(rot_y(ay), rot_x(ax)));
   return pose;

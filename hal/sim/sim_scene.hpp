@@ -84,6 +84,9 @@ struct SimSceneOptions {
   // up. The scene then moves across the laser line, as the paper's background subtraction needs.
   double scan_rate_deg_s = 0.0;
   double scan_amplitude_deg = 10.0;
+  // The unit pans (turns about the camera's y axis) instead: the scene then moves across a line
+  // that runs down the image (a laser beside the camera).
+  bool scan_pan = false;
 
   // Relief on the surface (a pier with piles and overgrowth): smooth round bumps, elongated
   // ridges and flat-topped posts, raised along the surface normal toward the camera, placed from

@@ -29,6 +29,9 @@ public class LcmTypesJarTest {
     p.laser_on = true;
     p.width = 1280;
     p.height = 1024;
+    p.search_axis = profile_t.SEARCH_ROWS;
+    p.search_line_step = new double[] {0, 1};
+    p.search_along = new double[] {1, 0};
     p.num_points = 2;
     p.points = new point_t[2];
     for (int i = 0; i < 2; ++i) {
@@ -42,6 +45,9 @@ public class LcmTypesJarTest {
     profile_t back = new profile_t(encode(p));
     check(back.sequence == 42 && back.utime == p.utime, "profile header");
     check(back.detector.equals("maxvalue") && back.laser_on, "profile detector and laser");
+    check(back.search_axis == profile_t.SEARCH_ROWS && back.search_line_step[1] == 1.0
+              && back.search_along[0] == 1.0 && back.search_origin[0] == 0.0,
+          "profile search axes");
     check(back.num_points == 2 && back.points[1].u == 101 && back.points[1].v == 512.25f,
           "profile points");
 
