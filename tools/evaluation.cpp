@@ -93,6 +93,119 @@ std::vector<Scenario> standard_scenarios(int width, int height) {
     out.push_back(s);
   }
   {
+    Scenario s{"dark", "deep water at night: no ambient light, the laser and sensor noise only",
+               base};
+    s.scene.ambient = 0;
+    s.scene.laser_peak = 120;
+    s.scene.attenuation_per_m = 0.1;
+    s.scene.noise_sigma = 2.0;
+    s.scene.seed = 17;
+    out.push_back(s);
+  }
+  {
+    Scenario s{"hover",
+               "daylight on a textured wall, the vehicle holding station: the camera moves by "
+               "millimetres and hundredths of a degree between frames",
+               base};
+    s.scene.ambient = 150;
+    s.scene.texture_contrast = 0.6;
+    s.scene.laser_peak = 100;
+    s.scene.noise_sigma = 2.0;
+    s.scene.seed = 19;
+    s.scene.scan_rate_deg_s = 0;
+    s.scene.sway_m = 0.003;
+    s.scene.sway_deg = 0.05;
+    s.scene.sway_period_s = 6.0;
+    out.push_back(s);
+  }
+  {
+    Scenario s{"static-rig",
+               "a fixed rig in a lit tank: the wall stays, objects of 5-15 cm on it move past at "
+               "5 cm/s",
+               base};
+    s.scene.ambient = 100;
+    s.scene.texture_contrast = 0.5;
+    s.scene.laser_peak = 120;
+    s.scene.noise_sigma = 2.0;
+    s.scene.seed = 23;
+    s.scene.scan_rate_deg_s = 0;
+    s.scene.sway_m = 0;
+    s.scene.sway_deg = 0;
+    s.scene.relief_height_m = 0.15;
+    s.scene.relief_min_height_m = 0.05;
+    s.scene.relief_per_m2 = 2.0;
+    s.scene.relief_max_slope = 0.7;
+    s.scene.object_speed_m_s = 0.05;
+    out.push_back(s);
+  }
+  {
+    Scenario s{"caustics",
+               "sunlit shallow water: caustics drift over a wall with bright paint marks and "
+               "shells while the unit scans",
+               base};
+    s.scene.ambient = 100;
+    s.scene.texture_contrast = 0.6;
+    s.scene.laser_peak = 110;
+    s.scene.noise_sigma = 2.0;
+    s.scene.seed = 29;
+    s.scene.caustic_peak = 2.5;
+    s.scene.caustic_scale_m = 0.2;
+    s.scene.caustic_speed_m_s = 0.3;
+    s.scene.marks_per_m2 = 40;
+    s.scene.marks_albedo = 2.5;
+    out.push_back(s);
+  }
+  {
+    Scenario s{"marine-snow",
+               "a night dive in turbid water: particles lit where they cross the sheet in front "
+               "of the wall",
+               base};
+    s.scene.ambient = 20;
+    s.scene.texture_contrast = 0.4;
+    s.scene.laser_peak = 140;
+    s.scene.noise_sigma = 2.0;
+    s.scene.seed = 31;
+    s.scene.backscatter = 8;
+    s.scene.attenuation_per_m = 0.2;
+    s.scene.snow_per_frame = 300;
+    s.scene.snow_size_px = 1.2;
+    s.scene.snow_brightness = 1.5;
+    out.push_back(s);
+  }
+  for (int level = 1; level <= 3; ++level) {
+    Scenario s{"turbid-" + std::to_string(level),
+               "turbid water, level " + std::to_string(level) +
+                   " of 3: attenuation, backscatter, forward scatter and veiling light",
+               base};
+    s.scene.ambient = 30;
+    s.scene.texture_contrast = 0.4;
+    s.scene.laser_peak = 120;
+    s.scene.noise_sigma = 2.0;
+    s.scene.seed = 37 + static_cast<std::uint64_t>(level);
+    s.scene.attenuation_per_m = 0.3 * level;
+    s.scene.backscatter = 12.0 * level;
+    s.scene.forward_scatter = 0.15 * level;
+    s.scene.scatter_halo_px = 6.0 * level;
+    s.scene.veiling = 0.15 * level;
+    out.push_back(s);
+  }
+  {
+    Scenario s{"checkerboard",
+               "daylight on a wall with a large checkerboard (6 cm squares): sharp edges of full "
+               "contrast along and across the line",
+               base};
+    s.scene.ambient = 140;
+    s.scene.texture_contrast = 0.5;
+    s.scene.laser_peak = 100;
+    s.scene.noise_sigma = 2.0;
+    s.scene.seed = 43;
+    s.scene.checkerboard.columns = 11;
+    s.scene.checkerboard.rows = 8;
+    s.scene.checkerboard.square_m = 0.06;
+    s.scene.checkerboard.dark_albedo = 0.08;
+    out.push_back(s);
+  }
+  {
     Scenario s{"beside",
                "as clean, the laser beside the camera (to its left): the line runs down the image",
                base};

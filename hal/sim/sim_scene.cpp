@@ -215,7 +215,7 @@ void quantise_row(const float* __restrict row, const std::int8_t* __restrict noi
 // (so the pattern changes as well as moves), as a factor on the ambient light.
 struct CausticMap {
   float scale1, s1, t1, scale2, s2, t2;  // caustic texel = texel * scale + offset
-  float strength, inverse_mean;
+  float base, gain;  // light = base + gain * pattern, the pattern's mean giving 1
 };
 
 // Multiplies `count` pixels (a multiple of kBlock) of ambient light by the caustic light at the
@@ -229,7 +229,7 @@ void caustic_row(const float* __restrict caustic, float s0, float su, float t0, 
       const float s = (s0 + fu * su) * inv, t = (t0 + fu * tu) * inv;
       const float c = sample_tile(caustic, s * m.scale1 + m.s1, t * m.scale1 + m.t1) +
                       sample_tile(caustic, s * m.scale2 + m.s2, t * m.scale2 + m.t2);
-      row[u0 + k] *= (1.0f - m.strength) + m.strength * 0.5f * c * m.inverse_mean;
+      row[u0 + k] *= m.base + m.gain * 0.5f * c;
     }
   }
 }
@@ -266,8 +266,10 @@ void validate(const SimSceneOptions& o) {
   require(o.ambient <= 1e4 && o.laser_peak <= 1e4 && o.backscatter <= 1e4 && o.noise_sigma <= 1e3,
           "ambient, laser_peak and backscatter must be <= 1e4, noise_sigma <= 1e3");
   require(finite_nonneg(o.forward_scatter) && o.forward_scatter <= 1 && finite_nonneg(o.veiling) &&
-              o.veiling <= 1 && finite_nonneg(o.caustics) && o.caustics <= 1,
-          "forward_scatter, veiling and caustics must be within [0, 1]");
+              o.veiling <= 1,
+          "forward_scatter and veiling must be within [0, 1]");
+  require(std::isfinite(o.caustic_peak) && o.caustic_peak >= 1 && o.caustic_peak <= 100,
+          "caustic_peak must be within [1, 100]");
   require(finite_nonneg(o.scatter_halo_px) && o.scatter_halo_px <= 1000,
           "scatter_halo_px must be within [0, 1000]");
   require(std::isfinite(o.caustic_scale_m) && o.caustic_scale_m >= 0.01 &&
@@ -346,7 +348,7 @@ SimScene::SimScene(const SimSceneOptions& options) : options_(options) {
   const auto lines = static_cast<std::size_t>(lines_.count);
   texture_ = make_texture(options_);
   paint_checkerboard(texture_, options_);
-  if (options_.caustics > 0) caustics_ = make_caustics(options_.seed, caustic_mean_);
+  if (options_.caustic_peak > 1) caustics_ = make_caustics(options_.seed, caustic_mean_);
   noise_ = make_noise_table(options_.seed);
   // One image row, then the glow floor of each of its pixels, each padded to whole kernel blocks;
   // the padding never glows.
@@ -609,8 +611,11 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
                static_cast<float>(0.77 * scale),
                static_cast<float>(-0.35 * travel + 311.7),
                static_cast<float>(0.94 * travel + 157.3),
-               static_cast<float>(options_.caustics),
-               1.0f / caustic_mean_};
+               0.0f,
+               0.0f};
+    // base + gain * mean = 1 and base + gain = caustic_peak: the curves' light, the mean kept.
+    caustic.gain = static_cast<float>((options_.caustic_peak - 1.0) / (1.0 - caustic_mean_));
+    caustic.base = 1.0f - caustic.gain * caustic_mean_;
   }
   const float veil = static_cast<float>(options_.veiling);
 

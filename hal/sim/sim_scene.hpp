@@ -57,9 +57,9 @@ struct SimSceneOptions {
   double veiling = 0.0;
   // Sunlight caustics: the ambient light on the surface focused into a network of thin bright
   // curves by the waves, cells of caustic_scale_m, drifting at caustic_speed_m_s over the surface
-  // (independently of the surface and the camera). caustics is the share of the ambient light in
-  // the pattern (0: none, 1: all of it; the mean light is the same).
-  double caustics = 0.0;
+  // (independently of the surface and the camera). caustic_peak is how bright the curves are
+  // against the mean ambient light, which stays the same (1: no caustics).
+  double caustic_peak = 1.0;
   double caustic_scale_m = 0.15;
   double caustic_speed_m_s = 0.2;
   // Marine snow: particles in the water lit where they cross the laser sheet, in front of the

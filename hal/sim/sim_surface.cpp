@@ -298,7 +298,7 @@ std::vector<float> make_caustics(std::uint64_t seed, float& mean) {
     peak = std::max(peak, std::abs(x));
   // Bright where the noise crosses zero: thin curves that close into cells, as light focused by a
   // wavy water surface does.
-  constexpr float kHalfWidth = 0.06f;
+  constexpr float kHalfWidth = 0.035f;
   std::vector<float> tile(static_cast<std::size_t>(kTextureStride) * kTextureStride);
   double sum = 0;
   for (int y = 0; y < kTextureStride; ++y) {
