@@ -1,16 +1,34 @@
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
+#include <limits>
+#include <stdexcept>
 
 #include "pipeline/frontend_detectors.hpp"
 
 namespace laserline::pipeline {
 
+namespace {
+
+// Points of the last profile kept to measure the motion across the line at (at most).
+constexpr std::size_t kProbes = 32;
+
+}  // namespace
+
 BackgroundDetector::BackgroundDetector(const DetectorOptions& options, bool estimate_camera_motion)
     : frontend_(options.geometry, options.frontend),
       geometry_(options.geometry),
+      options_(options.background),
       estimate_camera_motion_(estimate_camera_motion),
-      motion_(options.motion) {}
+      motion_(options.motion) {
+  if (options_.history_frames < 1 || options_.history_frames > 64) {
+    throw std::invalid_argument("background history_frames must be 1..64");
+  }
+  if (!(options_.min_motion_widths >= 0) || !(options_.min_motion_widths <= 100)) {
+    throw std::invalid_argument("background min_motion_widths must be 0..100");
+  }
+}
 
 std::size_t BackgroundDetector::max_points(int width, int /*height*/) const {
   return frontend_.max_points(width);
@@ -27,30 +45,153 @@ void BackgroundDetector::reset(int width, int height) {
   const int margin = std::max(64, height / 8);
   band_first_ = std::max(static_cast<int>(std::floor(lo)) - margin, 0);
   band_rows_ = std::min(static_cast<int>(std::ceil(hi)) + margin, height - 1) - band_first_ + 1;
-  background_.assign(static_cast<std::size_t>(width) * band_rows_, 0);
-  have_background_ = false;
+  history_.assign(static_cast<std::size_t>(options_.history_frames), History{});
+  for (History& h : history_)
+    h.rows.assign(static_cast<std::size_t>(width) * band_rows_, 0);
+  newest_ = -1;
+  probes_.assign(kProbes, {0.0f, 0.0f});
+  probe_count_ = 0;
   width_ = width;
   height_ = height;
+}
+
+BackgroundDetector::Motion BackgroundDetector::motion_across_line(const History& h) const {
+  const RowNormalisation& rows = frontend_.rows();
+  const int far = -rows.near_side();
+  Motion least{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
+  auto probe = [&](double u, double v) {
+    const auto [hu, hv] = h.to_history.map(u, v);
+    (void)hu;
+    const double width = std::max(rows.width_px(v), 1.0);
+    least.across = std::min(least.across, std::abs(hv - v) / width);
+    least.toward_far = std::min(least.toward_far, far * (hv - v) / width);
+  };
+  if (probe_count_ > 0) {
+    for (std::size_t i = 0; i < probe_count_; ++i)
+      probe(probes_[i][0], probes_[i][1]);
+  } else {
+    // Nowhere seen yet: across the rows searched, at both ends and the middle of the image.
+    const double top = rows.source_row(0), bottom = rows.source_row(rows.rows() - 1);
+    for (const double u : {0.0, 0.5 * (width_ - 1), static_cast<double>(width_ - 1)}) {
+      for (const double t : {0.0, 0.5, 1.0})
+        probe(u, top + t * (bottom - top));
+    }
+  }
+  return least;
+}
+
+bool BackgroundDetector::glow_before_line(const ImageView& image) const {
+  if (probe_count_ == 0) return false;
+  // At each point where the line was last seen: the mean brightness of the few widths just in
+  // front of it (the near side) and just behind it, and the line's own peak. The glow is a
+  // brightness that ends at the line on its near side; texture is as bright on either side.
+  const RowNormalisation& rows = frontend_.rows();
+  const int near = rows.near_side();
+  std::array<float, kProbes> excess{}, line{};
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < probe_count_; ++i) {
+    const int u = std::clamp(static_cast<int>(std::lround(probes_[i][0])), 0, image.width - 1);
+    const double v = probes_[i][1];
+    const int w = std::max(1, static_cast<int>(std::lround(rows.width_px(v))));
+    auto mean = [&](int side) {
+      int sum = 0, count = 0;
+      for (int d = w; d <= 4 * w; ++d) {
+        const int r = static_cast<int>(std::lround(v)) + side * d;
+        if (r < 0 || r >= image.height) continue;
+        sum += image.at(u, r);
+        ++count;
+      }
+      return count > 0 ? static_cast<float>(sum) / static_cast<float>(count) : -1.0f;
+    };
+    const float in_front = mean(near), behind = mean(-near);
+    if (in_front < 0 || behind < 0) continue;
+    const int r = std::clamp(static_cast<int>(std::lround(v)), 0, image.height - 1);
+    excess[n] = in_front - behind;
+    line[n] = static_cast<float>(image.at(u, r)) - behind;
+    ++n;
+  }
+  if (n == 0) return false;
+  const auto middle = static_cast<std::ptrdiff_t>(n / 2);
+  std::nth_element(excess.begin(), excess.begin() + middle, excess.begin() + n);
+  std::nth_element(line.begin(), line.begin() + middle, line.begin() + n);
+  // Half the line's contrast in front of it, all along: the water glows (texture would give as
+  // much in front as behind, half the time more, half less).
+  return excess[middle] > 0.5f * std::max(line[middle], 1.0f);
+}
+
+const BackgroundDetector::History* BackgroundDetector::choose_background(
+    const ImageView& image) const {
+  if (newest_ < 0) return nullptr;
+  const int n = static_cast<int>(history_.size());
+  const bool glow = glow_before_line(image);
+  // Newest first: a laser-off frame wins outright; else the first laser-on frame the scene moved
+  // far enough from (toward the far side of the line where the water glows).
+  const History* moved = nullptr;
+  for (int age = 0; age < n; ++age) {
+    const History& h = history_[static_cast<std::size_t>((newest_ - age + n) % n)];
+    if (!h.usable) break;  // older ones are cut off from the current frame too
+    if (!h.laser_on) return &h;
+    if (moved != nullptr) continue;
+    const Motion m = motion_across_line(h);
+    const double needed = options_.min_motion_widths;
+    if (glow ? m.toward_far >= needed : m.across >= needed) moved = &h;
+  }
+  return moved;
 }
 
 void BackgroundDetector::detect(const ImageView& image, const FrameContext& frame, Profile& out) {
   out.clear();
   last_motion_ = motion_.update(image);
-  if (frame.laser_on && have_background_ && last_motion_.valid) {
-    const ImageView background{background_.data(), width_, band_rows_, width_};
-    // Current pixel -> previous frame -> row within the kept band.
-    Homography to_band = last_motion_.previous_to_current.inverse();
-    for (int i = 0; i < 3; ++i)
-      to_band.h[3 + i] -= band_first_ * to_band.h[6 + i];
-    frontend_.set_frame_minus_background(image, background, to_band);
+  // Chain the kept frames' motion to this frame; without a motion estimate none of them can be
+  // warped onto it.
+  const Homography to_previous = last_motion_.previous_to_current.inverse();
+  for (History& h : history_) {
+    h.usable = h.usable && last_motion_.valid;
+    if (h.usable) h.to_history = h.to_history.after(to_previous);
+  }
+  if (frame.laser_on) {
+    const History* background = choose_background(image);
+    if (background != nullptr) {
+      const ImageView rows{background->rows.data(), width_, band_rows_, width_};
+      // Current pixel -> the background frame -> row within the kept band.
+      Homography to_band = background->to_history;
+      for (int i = 0; i < 3; ++i)
+        to_band.h[3 + i] -= band_first_ * to_band.h[6 + i];
+      frontend_.set_frame_minus_background(image, rows, to_band);
+    } else {
+      frontend_.set_frame(image);
+    }
     frontend_.find_candidates(out);
+    if (background != nullptr) {
+      out.set_background(static_cast<std::int64_t>(background->sequence), !background->laser_on);
+    }
+    // Where the line is now: where the next frames measure the motion across it.
+    std::size_t valid = 0;
+    for (const ProfilePoint& p : out.points())
+      valid += p.valid ? 1 : 0;
+    if (valid > 0) {
+      const std::size_t step = std::max<std::size_t>(1, valid / kProbes);
+      probe_count_ = 0;
+      std::size_t seen = 0;
+      for (const ProfilePoint& p : out.points()) {
+        if (!p.valid) continue;
+        if (seen++ % step == 0 && probe_count_ < kProbes) {
+          probes_[probe_count_++] = {static_cast<float>(p.u), p.v};
+        }
+      }
+    }
   }
-  // This frame is the background of the next one.
+  // This frame joins the history, in place of the oldest.
+  newest_ = (newest_ + 1) % static_cast<int>(history_.size());
+  History& h = history_[static_cast<std::size_t>(newest_)];
   for (int v = 0; v < band_rows_; ++v) {
-    std::memcpy(background_.data() + static_cast<std::size_t>(v) * width_,
-                image.row(band_first_ + v), static_cast<std::size_t>(width_));
+    std::memcpy(h.rows.data() + static_cast<std::size_t>(v) * width_, image.row(band_first_ + v),
+                static_cast<std::size_t>(width_));
   }
-  have_background_ = true;
+  h.sequence = frame.sequence;
+  h.laser_on = frame.laser_on;
+  h.usable = true;
+  h.to_history = Homography{};
 }
 
 }  // namespace laserline::pipeline

@@ -31,12 +31,26 @@ struct FrontendOptions {
   int saturation_level = 255;  // a run at or above this is a clipped core: its centre is the peak
 };
 
+// Which earlier frame `background` subtracts (paper III-A). The previous frame only removes the
+// texture when the scene moved across the laser line between the two frames by more than the
+// line is wide; else the previous frame's line lies on this one's and takes it away.
+struct BackgroundOptions {
+  // Frames kept as candidate backgrounds (the newest first): the most recent one exposed with the
+  // laser off; else the most recent one the scene moved far enough from (its motion chained
+  // frame to frame); else none, and the frame is searched as it is (as `fir`).
+  int history_frames = 8;
+  // How far the scene must have moved across the line, in laser line widths (the width the
+  // calibration gives where the line is).
+  double min_motion_widths = 1.0;
+};
+
 // Options of every detector, filled from the configuration. Each detector reads its own part.
 struct DetectorOptions {
   // maxvalue: a column's maximum is a laser point when it is at least this bright (grey level).
   int maxvalue_threshold = 40;
   ScannerGeometry geometry;
   FrontendOptions frontend;
+  BackgroundOptions background;
   MotionOptions motion;
   ValidationOptions validation;  // `backprojection` (Section IV)
 };

@@ -43,6 +43,9 @@ class RowNormalisation {
   float to_source_single(float r) const;
   // Laser width in original pixels at original row v.
   double width_px(double v) const { return alpha_ + beta_ * v; }
+  // +1 when rows further down see the sheet nearer the camera, -1 when further up: the side of the
+  // line where the laser lights the water in front of the surface.
+  int near_side() const { return beta_ > 0 ? 1 : -1; }
 
  private:
   double alpha_ = 0, beta_ = 0;  // l(v) = alpha + beta v

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -26,11 +27,18 @@ class FirDetector final : public Detector {
   Frontend frontend_;
 };
 
-// The paper's "Background" detector: the previous frame, warped onto this one by the homography
-// estimated from tracked features (III-A), is subtracted before the FIR stages. With the laser
-// alternating, the previous frame is the laser-off one: the classic on/off subtraction, motion
-// compensated. Laser-off frames and frames without a motion estimate (the first one) give no
-// points. Keeps a copy of the previous frame (of the rows the warp can reach).
+// The paper's "Background" detector: an earlier frame, warped onto this one by the homography
+// estimated from tracked features (III-A), is subtracted before the FIR stages. Which frame
+// (BackgroundOptions): the most recent laser-off frame (with the laser alternating: the classic
+// on/off subtraction, motion compensated); else the most recent frame the scene has moved far
+// enough from across the laser line that its line does not lie on this one's (the previous frame
+// while the unit scans); else none: a frame without a motion estimate (the first, a dark or
+// featureless one) or a still camera (hovering, a fixed rig) is searched as it is, as by `fir`.
+// In turbid water the laser lights the water in front of the surface: a glow that ends at the
+// line and moves with the camera, not the scene; a background warped toward that side would lay
+// its glow over the line, so then only one warped the other way is used. Each profile says which
+// frame it subtracted. Laser-off frames give no points. Keeps a copy of the last history_frames
+// frames (of the rows the warp can reach).
 class BackgroundDetector final : public Detector {
  public:
   // estimate_camera_motion: the motion estimate also gives the camera's rotation and translation
@@ -46,14 +54,38 @@ class BackgroundDetector final : public Detector {
   const MotionEstimate& last_motion() const { return last_motion_; }
 
  private:
+  // A frame kept as a candidate background: the rows the warp can reach.
+  struct History {
+    std::vector<std::uint8_t> rows;
+    std::uint64_t sequence = 0;
+    bool laser_on = false;
+    bool usable = false;    // its motion to the current frame is known
+    Homography to_history;  // a current frame's pixel -> where it was in this frame
+  };
+  // The background for the current frame `image` (nullptr: none).
+  const History* choose_background(const ImageView& image) const;
+  // How far the scene moved across the line between `h` and the current frame, in line widths,
+  // at the points where the line was last seen (or across the rows searched): the least, and the
+  // least toward the far side of the line (negative where it moved toward the near side).
+  struct Motion {
+    double across = 0, toward_far = 0;
+  };
+  Motion motion_across_line(const History& h) const;
+  // Whether the water in front of the surface glows (backscatter) in `image`, next to where the
+  // line was last seen.
+  bool glow_before_line(const ImageView& image) const;
+
   Frontend frontend_;
   ScannerGeometry geometry_;
+  BackgroundOptions options_;
   bool estimate_camera_motion_ = false;
   MotionEstimator motion_;
   MotionEstimate last_motion_;
-  std::vector<std::uint8_t> background_;  // the previous frame's rows the warp can reach, packed
-  int band_first_ = 0, band_rows_ = 0;    // which rows those are
-  bool have_background_ = false;
+  std::vector<History> history_;
+  int newest_ = -1;                           // index in history_ of the last frame kept
+  int band_first_ = 0, band_rows_ = 0;        // which rows of a frame are kept
+  std::vector<std::array<float, 2>> probes_;  // where the line was last seen (u, v)
+  std::size_t probe_count_ = 0;
   int width_ = 0, height_ = 0;
 };
 

@@ -130,6 +130,10 @@ Homography Homography::inverse() const {
   return to_homography(adjugate / det);
 }
 
+Homography Homography::after(const Homography& first) const {
+  return to_homography(to_matrix(*this) * to_matrix(first));
+}
+
 struct MotionEstimator::State {
   int width = 0;
   int height = 0;

@@ -60,6 +60,8 @@ struct Homography {
   }
   // p_previous ~ inverse() p_current, scaled so that h[8] = 1 where possible; all zero if singular.
   Homography inverse() const;
+  // The map p -> this(first(p)), scaled likewise.
+  Homography after(const Homography& first) const;
 };
 
 // A feature of the previous frame and where it was found in the current one.

@@ -32,7 +32,11 @@ class Profile {
   explicit Profile(std::size_t capacity = 0) { points_.reserve(capacity); }
   // Copies keep the capacity (std::vector's copy would not): ring slots are made by copying a
   // prototype and must be able to hold a full frame's points without allocating.
-  Profile(const Profile& other) : axes_(other.axes_), overflowed_(other.overflowed_) {
+  Profile(const Profile& other)
+      : axes_(other.axes_),
+        background_sequence_(other.background_sequence_),
+        background_laser_off_(other.background_laser_off_),
+        overflowed_(other.overflowed_) {
     points_.reserve(other.capacity());
     points_ = other.points_;
   }
@@ -41,6 +45,8 @@ class Profile {
       if (points_.capacity() < other.capacity()) points_.reserve(other.capacity());
       points_.assign(other.points_.begin(), other.points_.end());
       axes_ = other.axes_;
+      background_sequence_ = other.background_sequence_;
+      background_laser_off_ = other.background_laser_off_;
       overflowed_ = other.overflowed_;
     }
     return *this;
@@ -51,6 +57,8 @@ class Profile {
   void clear() {
     points_.clear();
     overflowed_ = false;
+    background_sequence_ = -1;
+    background_laser_off_ = false;
   }
   // Adds a point unless full; returns false (and marks the overflow) when full.
   bool add(const ProfilePoint& point) {
@@ -79,6 +87,15 @@ class Profile {
   std::size_t capacity() const { return points_.capacity(); }
   bool overflowed() const { return overflowed_; }
 
+  // The frame subtracted as the background (paper III-A): its sequence number, -1 for none (the
+  // frame was searched as it is), and whether it was exposed with the laser off.
+  std::int64_t background_sequence() const { return background_sequence_; }
+  bool background_laser_off() const { return background_laser_off_; }
+  void set_background(std::int64_t sequence, bool laser_off) {
+    background_sequence_ = sequence;
+    background_laser_off_ = laser_off;
+  }
+
   // How (u, v) of the points map to the frame's pixels; set by the detector.
   const SearchAxes& axes() const { return axes_; }
   void set_axes(const SearchAxes& axes) { axes_ = axes; }
@@ -90,6 +107,8 @@ class Profile {
  private:
   std::vector<ProfilePoint> points_;
   SearchAxes axes_;
+  std::int64_t background_sequence_ = -1;
+  bool background_laser_off_ = false;
   bool overflowed_ = false;
 };
 
