@@ -62,6 +62,10 @@ Backends create_backends(DaemonConfig& config) {
         " leaves no pixel of a " + std::to_string(roi_w) + "x" + std::to_string(roi_h) + " region");
   }
 
+  check_laser_sheet_in_view(
+      config.calibration, config.calibration_source,
+      searches_depth_range(config.detector) ? &config.detector_options.frontend : nullptr,
+      config.source);
   b.detector = pipeline::make_detector(config.detector, config.detector_options);
   return b;
 }

@@ -1,5 +1,8 @@
 #include "daemon/config.hpp"
 
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <filesystem>
 
 namespace laserline::daemon {
@@ -13,7 +16,8 @@ int power_of_two(hal::YamlMap& map, const std::string& key, int fallback) {
   return value;
 }
 
-hal::Calibration read_calibration_section(hal::YamlMap& root, const std::string& source) {
+hal::Calibration read_calibration_section(hal::YamlMap& root, const std::string& source,
+                                          CalibrationSource& where) {
   if (root.has("calibration")) {
     YAML::Node node = root.node("calibration");
     if (node.IsScalar()) {
@@ -22,13 +26,34 @@ hal::Calibration read_calibration_section(hal::YamlMap& root, const std::string&
       if (path.is_relative() && source.find('/') != std::string::npos) {
         path = std::filesystem::path(source).parent_path() / path;
       }
+      where = {path.string(), "laser"};
       return hal::load_calibration_file(path.string());
     }
   }
+  where = {source, "calibration.laser"};
   hal::YamlMap section = root.map("calibration");
   hal::Calibration calibration = hal::read_calibration(section);
   section.finish();
   return calibration;
+}
+
+std::string format_number(double value) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3g", value);
+  return text;
+}
+
+// The sheet as the calibration gives it: the plane, or the mount it is computed from.
+std::string describe_sheet(const hal::LaserMount& laser) {
+  if (laser.plane) {
+    const auto& [a, b, c, e] = *laser.plane;
+    return "the sheet [" + format_number(a) + ", " + format_number(b) + ", " + format_number(c) +
+           ", " + format_number(e) + "]";
+  }
+  const bool beside = laser.side == hal::LaserSide::kLeft || laser.side == hal::LaserSide::kRight;
+  return std::string("the sheet of a laser ") + hal::to_string(laser.side) + (beside ? " of" : "") +
+         " the camera at baseline_m " + format_number(laser.baseline_m) + ", angle_deg " +
+         format_number(laser.angle_deg);
 }
 
 }  // namespace
@@ -122,6 +147,55 @@ pipeline::ScannerGeometry scanner_geometry(const hal::Calibration& calibration) 
   return g;
 }
 
+void check_laser_sheet_in_view(const hal::Calibration& calibration,
+                               const CalibrationSource& calibration_source,
+                               const pipeline::FrontendOptions* depth_range,
+                               const std::string& depth_range_source) {
+  const pipeline::ScannerGeometry g = scanner_geometry(calibration);
+  const std::string key =
+      calibration_source.laser_key + (calibration.laser.plane ? std::string(".plane") : "");
+  const std::string where = calibration_source.file + ": " + key + ": ";
+  if (g.laser_plane[3] == 0.0) {
+    throw hal::ConfigError(where + describe_sheet(calibration.laser) +
+                           " passes through the camera centre: the camera sees it edge-on and "
+                           "cannot triangulate (e must not be 0)");
+  }
+  // 1/Z on the sheet is affine in the pixel (distortion left out, as the front-end does), so its
+  // range over the image is its range over the four corners, whichever way the line runs.
+  const double right = g.width - 1, bottom = g.height - 1;
+  const double corners[] = {g.inverse_depth(0, 0), g.inverse_depth(right, 0),
+                            g.inverse_depth(0, bottom), g.inverse_depth(right, bottom)};
+  const double nearest = *std::max_element(std::begin(corners), std::end(corners));
+  const double farthest = *std::min_element(std::begin(corners), std::end(corners));
+  const std::string image = std::to_string(g.width) + "x" + std::to_string(g.height) + " image";
+  if (!(nearest > 0)) {
+    throw hal::ConfigError(
+        where + describe_sheet(calibration.laser) +
+        " lies behind the camera at every pixel of the " + image +
+        ", so no point can be triangulated" +
+        (calibration.laser.plane
+             ? " (with e of the other sign it would be in front: a sign flipped?)"
+             : " (check side and angle_deg)"));
+  }
+  if (depth_range == nullptr) return;
+  // Depths seen: from 1/nearest to 1/farthest, or to infinity where the horizon is in view.
+  const double min_seen = 1.0 / nearest;
+  const double max_seen = farthest > 0 ? 1.0 / farthest : INFINITY;
+  if (max_seen < depth_range->min_depth_m || min_seen > depth_range->max_depth_m) {
+    throw hal::ConfigError(
+        where + "the " + image + " sees the laser sheet at depths " + format_number(min_seen) +
+        " m to " + (std::isfinite(max_seen) ? format_number(max_seen) + " m" : "infinity") +
+        ", none of them within the depth range searched, " +
+        format_number(depth_range->min_depth_m) + " to " + format_number(depth_range->max_depth_m) +
+        " m (detector.frontend.min_depth_m and " + "max_depth_m of " + depth_range_source +
+        "): check the calibration or the range");
+  }
+}
+
+bool searches_depth_range(const std::string& detector) {
+  return detector != "maxvalue";
+}
+
 DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source) {
   DaemonConfig c;
   c.source = source;
@@ -134,7 +208,7 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
   // The backend reads the rest of the section (and rejects unknown keys) when it is created.
   c.camera_options = camera;
 
-  c.calibration = read_calibration_section(root, source);
+  c.calibration = read_calibration_section(root, source, c.calibration_source);
 
   hal::YamlMap laser = root.map("laser");
   c.laser_backend = laser.string("backend", c.laser_backend);

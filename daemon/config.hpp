@@ -29,6 +29,13 @@ struct RawFrameOptions {
   int zlib_level = 1;  // fast: the image thread must keep up at full size
 };
 
+// Where a calibration was read from, for messages: the file, and the key of its laser section
+// there ("laser" in a calibration file of its own, "calibration.laser" inline in a configuration).
+struct CalibrationSource {
+  std::string file;
+  std::string laser_key = "laser";
+};
+
 struct DaemonConfig {
   std::string source;  // where it was read from (a path, or "built-in default")
 
@@ -39,6 +46,7 @@ struct DaemonConfig {
   hal::YamlMap camera_options;
 
   hal::Calibration calibration;
+  CalibrationSource calibration_source;
 
   std::string laser_backend = "sim";
   LaserMode laser_mode = LaserMode::kOn;
@@ -69,6 +77,19 @@ struct DaemonConfig {
 void read_detector_options(hal::YamlMap& detector, pipeline::DetectorOptions& options);
 // The pipeline's view of a calibration.
 pipeline::ScannerGeometry scanner_geometry(const hal::Calibration& calibration);
+
+// Whether the camera can see the laser sheet at all, checked once before any frame, whichever way
+// the line runs in the image: throws hal::ConfigError ("FILE: laser...: what is wrong") when the
+// sheet passes through the camera centre or lies behind the camera at every pixel (nothing could be
+// triangulated), or, given a `depth_range` (the front-end's, read from `depth_range_source`), when
+// no pixel sees the sheet between its min_depth_m and max_depth_m (nothing would be searched).
+void check_laser_sheet_in_view(const hal::Calibration& calibration,
+                               const CalibrationSource& calibration_source,
+                               const pipeline::FrontendOptions* depth_range,
+                               const std::string& depth_range_source);
+// Whether a detector searches only where the sheet lies within the front-end's depth range (all
+// but maxvalue, which takes each line's brightest pixel wherever it is).
+bool searches_depth_range(const std::string& detector);
 
 // The configuration compiled into the daemon (config/laserline.yaml).
 const char* builtin_config_text();

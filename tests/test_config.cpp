@@ -327,3 +327,76 @@ TEST(Config, HardwareBackendOptionsAreValidatedWithoutHardware) {
 
 }  // namespace
 }  // namespace laserline::daemon
+
+namespace laserline::daemon {
+namespace {
+
+// A laser sheet the camera cannot see is one line naming the calibration, before any frame,
+// whichever way the line runs in the image (laser above or beside the camera).
+TEST(Config, LaserSheetOutOfViewIsOneLine) {
+  EXPECT_EQ(error_of("calibration:\n  laser: {angle_deg: 150}\n"),
+            "test.yaml: calibration.laser: the sheet of a laser above the camera at baseline_m "
+            "0.25, angle_deg 150 lies behind the camera at every pixel of the 1280x1024 image, so "
+            "no point can be triangulated (check side and angle_deg)");
+  EXPECT_EQ(error_of("calibration:\n  laser: {side: left, angle_deg: 150}\n"),
+            "test.yaml: calibration.laser: the sheet of a laser left of the camera at baseline_m "
+            "0.25, angle_deg 150 lies behind the camera at every pixel of the 1280x1024 image, so "
+            "no point can be triangulated (check side and angle_deg)");
+  EXPECT_EQ(error_of("calibration:\n  laser: {plane: [0, 0.5, 0.866, 0.25]}\n"),
+            "test.yaml: calibration.laser.plane: the sheet [0, 0.5, 0.866, 0.25] lies behind the "
+            "camera at every pixel of the 1280x1024 image, so no point can be triangulated (with e "
+            "of the other sign it would be in front: a sign flipped?)");
+  EXPECT_EQ(error_of("calibration:\n  laser: {plane: [0, 1, -0.2, 0]}\n"),
+            "test.yaml: calibration.laser.plane: the sheet [0, 1, -0.2, 0] passes through the "
+            "camera centre: the camera sees it edge-on and cannot triangulate (e must not be 0)");
+  // The sheet of e of the other sign is seen in part of the image: not refused here (the points
+  // it drops are counted where they are triangulated).
+  EXPECT_EQ(error_of("calibration:\n  laser: {plane: [0, 0.985, -0.174, -0.25]}\n"
+                     "detector: {name: maxvalue}\n"),
+            "");
+
+  // Nearest seen: 1/Z = (tan 10deg + 0.365) / 0.25 at the top rows (above), at the left columns
+  // (left of the camera, the line running down the image).
+  const std::string near_range = "detector: {frontend: {min_depth_m: 0.1, max_depth_m: 0.3}}\n";
+  EXPECT_EQ(error_of(near_range),
+            "test.yaml: calibration.laser: the 1280x1024 image sees the laser sheet at depths "
+            "0.462 m to infinity, none of them within the depth range searched, 0.1 to 0.3 m "
+            "(detector.frontend.min_depth_m and max_depth_m of test.yaml): check the calibration "
+            "or the range");
+  EXPECT_EQ(error_of("calibration:\n  laser: {side: left}\n" + near_range),
+            "test.yaml: calibration.laser: the 1280x1024 image sees the laser sheet at depths "
+            "0.395 m to infinity, none of them within the depth range searched, 0.1 to 0.3 m "
+            "(detector.frontend.min_depth_m and max_depth_m of test.yaml): check the calibration "
+            "or the range");
+  // A sheet steep enough to stay near: seen up to a finite depth.
+  EXPECT_EQ(error_of("calibration:\n  laser: {angle_deg: 60}\n"
+                     "detector: {frontend: {min_depth_m: 3, max_depth_m: 10}}\n"),
+            "test.yaml: calibration.laser: the 1280x1024 image sees the laser sheet at depths "
+            "0.265 m to 1.18 m, none of them within the depth range searched, 3 to 10 m "
+            "(detector.frontend.min_depth_m and max_depth_m of test.yaml): check the calibration "
+            "or the range");
+  // maxvalue looks at every pixel: the front-end's range is not its business.
+  EXPECT_EQ(error_of("detector:\n  name: maxvalue\n  frontend: {min_depth_m: 0.1, max_depth_m: "
+                     "0.3}\n"),
+            "");
+}
+
+TEST(Config, LaserSheetOutOfViewNamesTheCalibrationFile) {
+  const auto dir = std::filesystem::temp_directory_path() / "laserline_test_config_sheet";
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir / "calib.yaml") << "laser: {angle_deg: 150}\n";
+  std::ofstream(dir / "daemon.yaml") << "calibration: calib.yaml\n";
+  try {
+    DaemonConfig config = load_config_file((dir / "daemon.yaml").string());
+    create_backends(config);
+    FAIL() << "a sheet behind the camera must be an error";
+  } catch (const hal::ConfigError& e) {
+    EXPECT_EQ(std::string(e.what()).rfind((dir / "calib.yaml").string() + ": laser: the sheet", 0),
+              0u)
+        << e.what();
+  }
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace laserline::daemon

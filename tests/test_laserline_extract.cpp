@@ -10,6 +10,7 @@
 #include <lcm/lcm-cpp.hpp>
 #include "run_command.hpp"
 
+#include <algorithm>
 #include <array>
 #include <bit>
 #include <cmath>
@@ -17,6 +18,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -48,8 +50,29 @@ struct CsvPoint {
 struct Csv {
   std::string header;
   std::map<long, std::vector<CsvPoint>> frames;
+  std::map<long, std::string> sources;  // frame -> its source column
   std::size_t rows = 0;
 };
+
+// The fields of one CSV line, RFC 4180 quoting undone.
+std::vector<std::string> csv_fields(const std::string& line) {
+  std::vector<std::string> fields(1);
+  bool quoted = false;
+  for (std::size_t i = 0; i < line.size(); ++i) {
+    const char c = line[i];
+    if (quoted && c == '"' && i + 1 < line.size() && line[i + 1] == '"') {
+      fields.back() += '"';
+      ++i;
+    } else if (c == '"') {
+      quoted = !quoted;
+    } else if (c == ',' && !quoted) {
+      fields.emplace_back();
+    } else {
+      fields.back() += c;
+    }
+  }
+  return fields;
+}
 
 Csv read_csv(const std::string& path) {
   Csv csv;
@@ -57,13 +80,19 @@ Csv read_csv(const std::string& path) {
   std::getline(in, csv.header);
   std::string line;
   while (std::getline(in, line)) {
-    std::istringstream fields(line);
-    long frame = 0;
+    const std::vector<std::string> f = csv_fields(line);
+    EXPECT_EQ(f.size(), 7u) << "bad CSV line: " << line;
+    if (f.size() != 7u) continue;
+    const long frame = std::stol(f[0]);
     CsvPoint p;
-    char c1 = 0, c2 = 0, c3 = 0, c4 = 0, c5 = 0;
-    fields >> frame >> c1 >> p.u >> c2 >> p.v >> c3 >> p.snr_db >> c4 >> p.segment >> c5 >> p.valid;
-    EXPECT_TRUE(fields && c1 == ',' && c5 == ',') << "bad CSV line: " << line;
+    p.u = std::stoi(f[2]);
+    p.v = std::stod(f[3]);
+    p.snr_db = std::stod(f[4]);
+    p.segment = std::stoi(f[5]);
+    p.valid = std::stoi(f[6]);
     csv.frames[frame].push_back(p);
+    const auto [source, added] = csv.sources.emplace(frame, f[1]);
+    EXPECT_EQ(source->second, f[1]) << "one source per frame: " << line;
     ++csv.rows;
   }
   return csv;
@@ -106,6 +135,10 @@ Accuracy compare(const std::vector<CsvPoint>& points, const hal::SimGroundTruth&
   return a;
 }
 
+std::size_t lines(const std::string& text) {
+  return static_cast<std::size_t>(std::count(text.begin(), text.end(), '\n'));
+}
+
 constexpr int kWidth = 320;
 constexpr int kHeight = 256;
 constexpr double kTolerancePx = 0.5;
@@ -123,9 +156,9 @@ hal::SimSceneOptions scene_options() {
   return o;
 }
 
-cv::Mat render(hal::SimScene& scene, std::uint64_t sequence) {
+cv::Mat render(hal::SimScene& scene, std::uint64_t sequence, bool laser_on = true) {
   cv::Mat image(kHeight, kWidth, CV_8UC1);
-  scene.render(sequence, true,
+  scene.render(sequence, laser_on,
                std::span<std::uint8_t>(image.data, static_cast<std::size_t>(kWidth) * kHeight));
   return image;
 }
@@ -163,26 +196,42 @@ class LaserlineExtract : public ::testing::Test {
 
   std::string path(const std::string& name) const { return (dir_ / name).string(); }
 
-  RunResult extract(const std::string& args, const std::string& detector = "maxvalue") {
-    return run_command(std::string(LASERLINE_EXTRACT_PATH) + " --calib " + calib_ + " --detector " +
-                       detector + " --output " + path("points.csv") + " " + args);
+  RunResult extract(const std::string& args, const std::string& detector = "maxvalue",
+                    const std::string& calib = "") {
+    return run_command(std::string(LASERLINE_EXTRACT_PATH) + " --calib " +
+                       (calib.empty() ? calib_ : calib) + " --detector " + detector + " --output " +
+                       path("points.csv") + " " + args);
   }
 
   // Every frame in `expected` (CSV frame -> scene sequence) is found within the tolerance.
   void expect_frames_match(const Csv& csv, const std::map<long, std::uint64_t>& expected,
                            const hal::SimScene& scene, double tolerance_px = kTolerancePx) {
     for (const auto& [frame, sequence] : expected) {
-      ASSERT_TRUE(csv.frames.count(frame)) << "frame " << frame << " missing from the CSV";
-      const Accuracy a = compare(csv.frames.at(frame), truth_of(scene, sequence), tolerance_px);
-      std::printf(
-          "frame %ld (scene frame %llu): %zu/%zu columns within %.2f px, rms %.3f px, "
-          "max %.3f px, %zu outside\n",
-          frame, static_cast<unsigned long long>(sequence), a.found, a.truth_columns, tolerance_px,
-          a.rms(), a.max_error, a.outside);
-      EXPECT_GT(a.truth_columns, static_cast<std::size_t>(kWidth * 0.9));
-      EXPECT_GE(a.recall(), 0.99) << "frame " << frame;
-      EXPECT_EQ(a.outside, 0u) << "frame " << frame;
+      expect_frame_matches(csv, frame, truth_of(scene, sequence),
+                           "scene frame " + std::to_string(sequence), tolerance_px);
     }
+  }
+
+  void expect_frame_matches(const Csv& csv, long frame, const hal::SimGroundTruth& truth,
+                            const std::string& label, double tolerance_px = kTolerancePx) {
+    ASSERT_TRUE(csv.frames.count(frame)) << "frame " << frame << " missing from the CSV";
+    const Accuracy a = compare(csv.frames.at(frame), truth, tolerance_px);
+    std::printf(
+        "frame %ld (%s): %zu/%zu columns within %.2f px, rms %.3f px, max %.3f px, %zu outside\n",
+        frame, label.c_str(), a.found, a.truth_columns, tolerance_px, a.rms(), a.max_error,
+        a.outside);
+    EXPECT_GT(a.truth_columns, static_cast<std::size_t>(kWidth * 0.9));
+    EXPECT_GE(a.recall(), 0.99) << "frame " << frame;
+    EXPECT_EQ(a.outside, 0u) << "frame " << frame;
+  }
+
+  // A calibration in laserline's own layout: the test camera, the given laser section.
+  std::string write_calibration(const std::string& name, const std::string& laser) {
+    const auto& c = options_.calibration.camera;
+    std::ofstream(path(name)) << "camera: {width: " << c.width << ", height: " << c.height
+                              << ", fx: " << c.fx << ", fy: " << c.fy << ", cx: " << c.cx
+                              << ", cy: " << c.cy << "}\nlaser: " << laser << "\n";
+    return path(name);
   }
 
   hal::SimSceneOptions options_ = scene_options();
@@ -204,7 +253,7 @@ TEST_F(LaserlineExtract, MonoPngFolderAndFilesInInputOrder) {
   EXPECT_NE(r.out.find("3 frames from 1 inputs, 3 processed with maxvalue"), std::string::npos)
       << r.out;
   Csv csv = read_csv(path("points.csv"));
-  EXPECT_EQ(csv.header, "frame,u,v,snr_db,segment,valid");
+  EXPECT_EQ(csv.header, "frame,source,u,v,snr_db,segment,valid");
   EXPECT_EQ(csv.frames.size(), 3u);
   expect_frames_match(csv, {{0, 0}, {1, 1}, {2, 2}}, scene);
 
@@ -374,9 +423,10 @@ TEST_F(LaserlineExtract, LcmLogOfImageMessages) {
       p.num_points = 0;
       write_event(log, "LASERLINE_PROFILE", encode(p), utime += 10);
     }
-    // Frames 1 and 2: 16-bit little and big endian.
+    // Frames 1 and 2: 16-bit little and big endian; frame 2 with the laser off, as its profile
+    // says.
     for (int k : {1, 2}) {
-      const cv::Mat image = render(scene, k);
+      const cv::Mat image = render(scene, k, k != 2);
       laserline::image_t m = image_message(image, k);
       m.pixelformat = k == 1
                           ? static_cast<std::int32_t>(laserline::image_t::PIXEL_FORMAT_LE_GRAY16)
@@ -434,12 +484,15 @@ TEST_F(LaserlineExtract, LcmLogOfImageMessages) {
             std::string::npos)
       << r.out;
   EXPECT_NE(r.out.find("laserline-extract: 1 of the processed frames were exposed with the laser "
-                       "off (from the log's profiles)\n"),
+                       "off (1 from the log's profiles): no points taken from them\n"),
             std::string::npos)
       << r.out;
   const Csv csv = read_csv(path("points.csv"));
   EXPECT_EQ(csv.frames.count(3), 0u);
-  expect_frames_match(csv, {{0, 0}, {1, 1}, {2, 2}, {4, 4}}, scene);
+  EXPECT_EQ(csv.frames.count(2), 0u) << "a laser-off frame gives no points";
+  expect_frames_match(csv, {{0, 0}, {1, 1}, {4, 4}}, scene);
+  EXPECT_EQ(csv.sources.at(0), log_path + " event 0 (LASERLINE_IMAGE)");
+  EXPECT_EQ(csv.sources.at(4), log_path + " event 6 (LASERLINE_IMAGE)");
 }
 
 TEST_F(LaserlineExtract, CorruptImageBetweenGoodOnesKeepsTheOthers) {
@@ -633,8 +686,13 @@ TEST_F(LaserlineExtract, ConfigurationOptionsAreUsed) {
   ASSERT_TRUE(cv::imwrite(path("f.png"), render(scene, 0)));
   std::ofstream(path("high.yaml")) << "detector:\n  maxvalue: {threshold: 250}\n";
   RunResult r = extract("--config " + path("high.yaml") + " " + path("f.png"));
-  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_EQ(r.exit_code, 3) << "no point in the whole run: " << r.out;
   EXPECT_EQ(read_csv(path("points.csv")).rows, 0u);
+  EXPECT_NE(
+      r.out.find("laserline-extract: no point accepted in any of the 1 processed frames "
+                 "(see --channel, --threshold, --roi, --mask, --laser-pattern, --detector)\n"),
+      std::string::npos)
+      << r.out;
   r = extract(path("f.png"));
   EXPECT_EQ(r.exit_code, 0) << r.out;
   expect_frames_match(read_csv(path("points.csv")), {{0, 0}}, scene);
@@ -795,6 +853,390 @@ TEST_F(LaserlineExtract, PlyFromLcmLogInterpolatesPosesAtTheFrameTime) {
   expect_moved(two_frames, read_ply(path("world.ply")), {per_frame[0], per_frame[1]},
                {cv::Matx33d::eye(), cv::Matx33d::eye()},
                {cv::Vec3d(1.0, 0, 0), cv::Vec3d(1.033333, 0, 0)});
+}
+
+// Someone else's turntable scanner: step_num1.png ... step_num12.png. The folder is read in
+// natural order (step_num2 before step_num10), each frame's CSV rows name its file, and pose row k
+// moves the image that is frame k.
+TEST_F(LaserlineExtract, FolderInNaturalOrderPairsPosesWithTheirFrames) {
+  constexpr int kFrames = 12;
+  fs::create_directories(dir_ / "steps");
+  std::vector<hal::SimGroundTruth> truths;
+  std::vector<std::string> files;
+  // Each image from its own scene at its own distance: no two frames alike.
+  for (int k = 0; k < kFrames; ++k) {
+    options_.distance_m = 1.0 + 0.1 * k;
+    hal::SimScene scene(options_);
+    truths.push_back(truth_of(scene, 0));
+    files.push_back(path("steps/step_num" + std::to_string(k + 1) + ".png"));
+    ASSERT_TRUE(cv::imwrite(files.back(), render(scene, 0)));
+  }
+  {
+    std::ofstream poses(path("poses.csv"));
+    for (int k = 0; k < kFrames; ++k)
+      poses << k << "," << 10 * k << ",0,0,1,0,0,0\n";
+  }
+  RunResult r =
+      extract("--ply " + path("cloud.ply") + " --poses " + path("poses.csv") + " " + path("steps"));
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_EQ(r.out.find("note:"), std::string::npos) << r.out;
+  const Csv csv = read_csv(path("points.csv"));
+  ASSERT_EQ(csv.frames.size(), static_cast<std::size_t>(kFrames));
+  for (long k = 0; k < kFrames; ++k) {
+    EXPECT_EQ(csv.sources.at(k), files[static_cast<std::size_t>(k)]);
+    expect_frame_matches(csv, k, truths[static_cast<std::size_t>(k)],
+                         "step_num" + std::to_string(k + 1));
+  }
+  // Frame k's points moved by pose row k (x + 10 k), at image k's depths.
+  const auto cloud = read_ply(path("cloud.ply"));
+  ASSERT_EQ(cloud.size(), csv.rows);
+  std::size_t i = 0;
+  for (long k = 0; k < kFrames; ++k) {
+    const auto& depth = truths[static_cast<std::size_t>(k)].depth_m;
+    for (const auto& p : csv.frames.at(k)) {
+      ASSERT_NEAR(cloud[i][0], 10.0 * static_cast<double>(k), 2.0) << "frame " << k;
+      ASSERT_NEAR(cloud[i][2], depth[static_cast<std::size_t>(p.u)], 0.02)
+          << "frame " << k << " column " << p.u;
+      ++i;
+    }
+  }
+
+  // The same files as a shell glob gives them (alphabetical): taken in the order given, and said.
+  std::vector<std::string> globbed = files;
+  std::sort(globbed.begin(), globbed.end());
+  std::string arguments;
+  for (const auto& f : globbed)
+    arguments += " " + f;
+  r = extract(arguments);
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("laserline-extract: note: the 12 image arguments from " + files[0] +
+                       " on are not in natural order (step_num12.png before step_num2.png): "
+                       "frames are numbered in the order given; give their folder to read them "
+                       "in natural order\n"),
+            std::string::npos)
+      << r.out;
+  const Csv given = read_csv(path("points.csv"));
+  EXPECT_EQ(given.sources.at(1), files[9]);
+  expect_frame_matches(given, 1, truths[9], "step_num10");
+  // In natural order: nothing to say.
+  arguments.clear();
+  for (const auto& f : files)
+    arguments += " " + f;
+  r = extract(arguments);
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_EQ(r.out.find("note:"), std::string::npos) << r.out;
+}
+
+// The source column names the file, or the video and its frame; a name with a comma or a quote is
+// quoted as CSV has it.
+TEST_F(LaserlineExtract, SourceColumnNamesEachFramesOrigin) {
+  hal::SimScene scene(options_);
+  const std::string odd = path("scan,\"1\".png");
+  ASSERT_TRUE(cv::imwrite(odd, render(scene, 0)));
+  {
+    cv::VideoWriter writer(path("scan.mkv"), cv::CAP_FFMPEG,
+                           cv::VideoWriter::fourcc('F', 'F', 'V', '1'), 30,
+                           cv::Size(kWidth, kHeight), false);
+    ASSERT_TRUE(writer.isOpened());
+    for (int k = 1; k < 3; ++k)
+      writer.write(render(scene, k));
+  }
+  const RunResult r = extract("'" + odd + "' " + path("scan.mkv"));
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const Csv csv = read_csv(path("points.csv"));
+  EXPECT_EQ(csv.sources.at(0), odd);
+  EXPECT_EQ(csv.sources.at(1), path("scan.mkv") + " frame 0");
+  EXPECT_EQ(csv.sources.at(2), path("scan.mkv") + " frame 1");
+  expect_frames_match(csv, {{0, 0}, {1, 1}, {2, 2}}, scene);
+  std::ifstream in(path("points.csv"));
+  std::string header, first;
+  std::getline(in, header);
+  std::getline(in, first);
+  EXPECT_EQ(first.rfind("0,\"" + path("scan,\"\"1\"\".png") + "\",", 0), 0u) << first;
+}
+
+// A red laser over white light: the laser is in red only, the lit texture in all three channels.
+TEST_F(LaserlineExtract, ChannelPicksTheLasersColour) {
+  hal::SimScene scene(options_);
+  const cv::Mat lit = render(scene, 0), unlit = render(scene, 0, false);
+  cv::Mat bgr;
+  cv::merge(std::vector<cv::Mat>{unlit, unlit, lit}, bgr);
+  ASSERT_TRUE(cv::imwrite(path("red.png"), bgr));
+
+  // Green, the default, holds the texture only: whatever is found there is not the laser.
+  RunResult r = extract(path("red.png"));
+  const Csv green = read_csv(path("points.csv"));
+  const Accuracy wrong =
+      compare(green.frames.count(0) ? green.frames.at(0) : std::vector<CsvPoint>{},
+              truth_of(scene, 0), kTolerancePx);
+  EXPECT_LT(wrong.recall(), 0.2) << r.out;
+
+  for (const std::string channel : {"red", "'red - (green + blue) / 2'", "r"}) {
+    r = extract("--channel " + channel + " " + path("red.png"));
+    EXPECT_EQ(r.exit_code, 0) << channel << ": " << r.out;
+    expect_frames_match(read_csv(path("points.csv")), {{0, 0}}, scene);
+  }
+
+  r = extract("--channel purple " + path("red.png"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(lines(r.out), 1u) << r.out;
+  EXPECT_EQ(r.out.rfind("laserline-extract: --channel \"purple\": ", 0), 0u) << r.out;
+}
+
+// Points outside --roi or the mask are left out; the pixels are not changed (a zeroed border
+// would be an edge the band-pass answers): inside, the points are those of the whole frame.
+TEST_F(LaserlineExtract, RoiAndMaskLeaveOutPointsNotPixels) {
+  hal::SimScene scene(options_);
+  ASSERT_TRUE(cv::imwrite(path("f.png"), render(scene, 0)));
+  const hal::SimGroundTruth truth = truth_of(scene, 0);
+  // A rectangle whose top and bottom pass 6 px from the line, within the band-pass's reach.
+  float top = kHeight, bottom = 0;
+  for (int u = 100; u < 220; ++u) {
+    top = std::min(top, truth.row[static_cast<std::size_t>(u)]);
+    bottom = std::max(bottom, truth.row[static_cast<std::size_t>(u)]);
+  }
+  const int y0 = static_cast<int>(std::floor(top)) - 6;
+  const int y1 = static_cast<int>(std::ceil(bottom)) + 6;
+  const std::string roi = "100," + std::to_string(y0) + ",120," + std::to_string(y1 - y0);
+
+  cv::Mat left_half = cv::Mat::zeros(kHeight, kWidth, CV_8UC1);
+  left_half.colRange(0, kWidth / 2).setTo(255);
+  ASSERT_TRUE(cv::imwrite(path("mask.png"), left_half));
+
+  struct Case {
+    std::string args, detector;
+    std::function<bool(const CsvPoint&)> inside;
+  };
+  const std::vector<Case> cases = {
+      {"--roi " + roi, "fir",
+       [&](const CsvPoint& p) {
+         const long v = std::lround(p.v);
+         return p.u >= 100 && p.u < 220 && v >= y0 && v < y1;
+       }},
+      {"--mask " + path("mask.png"), "maxvalue",
+       [](const CsvPoint& p) { return p.u < kWidth / 2; }},
+      {"--mask " + path("mask.png") + " --roi " + roi, "maxvalue",
+       [&](const CsvPoint& p) { return p.u >= 100 && p.u < kWidth / 2; }},
+  };
+  for (const auto& c : cases) {
+    RunResult r = extract("--all-candidates " + path("f.png"), c.detector);
+    ASSERT_EQ(r.exit_code, 0) << r.out;
+    const Csv whole = read_csv(path("points.csv"));
+    ASSERT_TRUE(whole.frames.count(0)) << r.out;
+    std::vector<CsvPoint> expected;
+    for (const auto& p : whole.frames.at(0))
+      if (c.inside(p)) expected.push_back(p);
+    r = extract("--all-candidates " + c.args + " " + path("f.png"), c.detector);
+    ASSERT_EQ(r.exit_code, 0) << c.args << ": " << r.out;
+    const Csv kept = read_csv(path("points.csv"));
+    ASSERT_GE(expected.size(), 55u) << c.args;
+    ASSERT_EQ(kept.rows, expected.size()) << c.args;
+    for (std::size_t i = 0; i < expected.size(); ++i) {
+      const CsvPoint& p = kept.frames.at(0)[i];
+      EXPECT_TRUE(p.u == expected[i].u && p.v == expected[i].v && p.snr_db == expected[i].snr_db &&
+                  p.valid == expected[i].valid)
+          << c.args << ": point " << i << " column " << p.u;
+    }
+  }
+
+  // Away from the line: nothing accepted in the whole run.
+  RunResult r = extract("--roi 0,0,320,20 " + path("f.png"));
+  EXPECT_EQ(r.exit_code, 3) << r.out;
+  EXPECT_NE(r.out.find("no point accepted in any of the 1 processed frames"), std::string::npos)
+      << r.out;
+
+  ASSERT_TRUE(cv::imwrite(path("small.png"), cv::Mat(80, 100, CV_8UC1, cv::Scalar(255))));
+  ASSERT_TRUE(cv::imwrite(path("black.png"), cv::Mat::zeros(kHeight, kWidth, CV_8UC1)));
+  const std::string frames = "320x256 frames of the calibration " + calib_;
+  for (const auto& [args, line] : std::vector<std::pair<std::string, std::string>>{
+           {"--roi 1,2,3",
+            "--roi '1,2,3': expected x,y,w,h: left column, top row (from 0), width "
+            "and height (from 1) in pixels, e.g. 0,100,1280,600"},
+           {"--roi 0,0,0,10",
+            "--roi '0,0,0,10': expected x,y,w,h: left column, top row (from 0), "
+            "width and height (from 1) in pixels, e.g. 0,100,1280,600"},
+           {"--roi 10,0,311,10", "--roi 10,0,311,10: reaches beyond the " + frames},
+           {"--mask " + path("small.png"),
+            "--mask " + path("small.png") + ": is 100x80 but must have the size of the " + frames},
+           {"--mask " + path("black.png"),
+            "--mask " + path("black.png") +
+                ": no pixel is set (points are kept on non-zero pixels)"},
+           {"--mask " + path("nothere.png"),
+            "--mask " + path("nothere.png") + ": cannot be read: No such file or directory"},
+       }) {
+    r = extract(args + " " + path("f.png"));
+    EXPECT_EQ(r.exit_code, 2) << args;
+    EXPECT_EQ(r.out, "laserline-extract: " + line + "\n");
+  }
+}
+
+TEST_F(LaserlineExtract, ThresholdInTheDetectorsOwnUnit) {
+  options_.ambient = 10;
+  options_.laser_peak = 60;
+  options_.texture_contrast = 0;
+  hal::SimScene scene(options_);
+  ASSERT_TRUE(cv::imwrite(path("f.png"), render(scene, 0)));
+  // maxvalue: a grey level. The line peaks near 60.
+  RunResult r = extract("--threshold 250 " + path("f.png"));
+  EXPECT_EQ(r.exit_code, 3) << r.out;
+  EXPECT_EQ(read_csv(path("points.csv")).rows, 0u);
+  r = extract("--threshold 30 " + path("f.png"));
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  expect_frames_match(read_csv(path("points.csv")), {{0, 0}}, scene);
+  // It overrides the configuration's.
+  std::ofstream(path("high.yaml")) << "detector:\n  maxvalue: {threshold: 250}\n";
+  r = extract("--config " + path("high.yaml") + " --threshold 30 " + path("f.png"));
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  expect_frames_match(read_csv(path("points.csv")), {{0, 0}}, scene);
+
+  // fir: an SNR in dB; no point of the line reaches 60 dB, every one passes 6.
+  r = extract("--threshold 6 " + path("f.png"), "fir");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  const Csv low = read_csv(path("points.csv"));
+  ASSERT_TRUE(low.frames.count(0)) << r.out;
+  double strongest = 0;
+  for (const auto& p : low.frames.at(0))
+    strongest = std::max(strongest, p.snr_db);
+  ASSERT_LT(strongest, 60.0);
+  r = extract("--threshold 60 " + path("f.png"), "fir");
+  EXPECT_EQ(r.exit_code, 3) << r.out;
+  EXPECT_EQ(read_csv(path("points.csv")).rows, 0u);
+
+  for (const auto& [args, detector, line] : std::vector<std::array<std::string, 3>>{
+           {"--threshold 300", "maxvalue",
+            "--threshold 300: the maxvalue detector's threshold is a grey level, a whole number "
+            "from 1 to 255"},
+           {"--threshold 6.5", "maxvalue",
+            "--threshold 6.5: the maxvalue detector's threshold is a grey level, a whole number "
+            "from 1 to 255"},
+           {"--threshold abc", "fir",
+            "--threshold abc: the fir detector's threshold is an SNR in dB, a number from 0 to 60"},
+           {"--threshold 70", "background",
+            "--threshold 70: the background detector's threshold is an SNR in dB, a number from 0 "
+            "to 60"},
+       }) {
+    r = extract(args + " " + path("f.png"), detector);
+    EXPECT_EQ(r.exit_code, 2) << args;
+    EXPECT_EQ(r.out, "laserline-extract: " + line + "\n");
+  }
+}
+
+// On/off alternation told with --laser-pattern 10: laser-off frames reach the detector (the
+// background detector subtracts them from the next frame) but give no points.
+TEST_F(LaserlineExtract, LaserPatternOffFramesAreBackgroundsNotLaserFrames) {
+  options_.texture_contrast = 0.5;
+  hal::SimScene scene(options_);
+  fs::create_directories(dir_ / "alt");
+  fs::create_directories(dir_ / "more");
+  for (int k = 0; k < 5; ++k) {  // on off on off on
+    ASSERT_TRUE(
+        cv::imwrite(path("alt/f" + std::to_string(k) + ".png"), render(scene, k, k % 2 == 0)));
+  }
+  for (int k = 5; k < 8; ++k) {  // on off on: the pattern starts again with each folder
+    ASSERT_TRUE(
+        cv::imwrite(path("more/f" + std::to_string(k) + ".png"), render(scene, k, k % 2 == 1)));
+  }
+  // Not told: maxvalue takes the texture of the laser-off frames for the laser.
+  RunResult r = extract(path("alt"));
+  EXPECT_TRUE(read_csv(path("points.csv")).frames.count(1)) << "the hazard the pattern removes";
+
+  r = extract("--laser-pattern 10 --ply " + path("cloud.ply") + " " + path("alt") + " " +
+              path("more"));
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("laserline-extract: 3 of the processed frames were exposed with the laser "
+                       "off (3 from --laser-pattern 10): no points taken from them\n"),
+            std::string::npos)
+      << r.out;
+  Csv csv = read_csv(path("points.csv"));
+  std::vector<long> frames;
+  for (const auto& [frame, points] : csv.frames)
+    frames.push_back(frame);
+  EXPECT_EQ(frames, (std::vector<long>{0, 2, 4, 5, 7}));
+  expect_frames_match(csv, {{0, 0}, {2, 2}, {4, 4}, {5, 5}, {7, 7}}, scene);
+  EXPECT_EQ(read_ply(path("cloud.ply")).size(), csv.rows) << "no laser-off points in the cloud";
+
+  // background: each laser-on frame minus the laser-off frame before it (the first has none).
+  r = extract("--laser-pattern 10 " + path("alt"), "background");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  csv = read_csv(path("points.csv"));
+  EXPECT_EQ(csv.frames.count(1) + csv.frames.count(3), 0u);
+  expect_frames_match(csv, {{2, 2}, {4, 4}}, scene);
+
+  for (const auto& [bits, line] : std::vector<std::pair<std::string, std::string>>{
+           {"1x0",
+            "--laser-pattern '1x0': expected 1 to 1024 characters 0 (laser off) or 1 "
+            "(laser on), e.g. 10 for on/off alternation"},
+           {"00", "--laser-pattern '00': has no 1, so no frame would have the laser on"},
+       }) {
+    r = extract("--laser-pattern " + bits + " " + path("alt"));
+    EXPECT_EQ(r.exit_code, 2) << bits;
+    EXPECT_EQ(r.out, "laserline-extract: " + line + "\n");
+  }
+}
+
+// A calibration the camera cannot work with stops the run before any frame, naming the file; one
+// that leaves most points without a 3-D point says so at the end.
+TEST_F(LaserlineExtract, CalibrationErrorsAreOneLine) {
+  hal::SimScene scene(options_);
+  ASSERT_TRUE(cv::imwrite(path("f.png"), render(scene, 0)));
+  const std::string behind = write_calibration("behind.yaml", "{plane: [0, 0.5, 0.866, 0.25]}");
+  RunResult r = extract(path("f.png"), "maxvalue", behind);
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.out, "laserline-extract: " + behind +
+                       ": laser.plane: the sheet [0, 0.5, 0.866, 0.25] lies behind the camera at "
+                       "every pixel of the 320x256 image, so no point can be triangulated (with e "
+                       "of the other sign it would be in front: a sign flipped?)\n");
+  EXPECT_FALSE(fs::exists(path("points.csv"))) << "stopped before any output";
+
+  std::ofstream(path("near.yaml"))
+      << "detector:\n  frontend: {min_depth_m: 0.1, max_depth_m: 0.3}\n";
+  r = extract("--config " + path("near.yaml") + " " + path("f.png"), "fir");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.out, "laserline-extract: " + calib_ +
+                       ": laser: the 320x256 image sees the laser sheet at depths 0.462 m to "
+                       "infinity, none of them within the depth range searched, 0.1 to 0.3 m "
+                       "(detector.frontend.min_depth_m and max_depth_m of " +
+                       path("near.yaml") + "): check the calibration or the range\n");
+  r = extract("--config " + path("near.yaml") + " " + path("f.png"), "maxvalue");
+  EXPECT_EQ(r.exit_code, 0) << "maxvalue does not search by depth: " << r.out;
+
+  // e of the wrong sign: the sheet is still seen at the bottom of the image, so the run goes on,
+  // but the line is where its rays miss the sheet: no point reaches the cloud.
+  const std::string flipped =
+      write_calibration("flipped.yaml", "{plane: [0, 0.985, -0.174, -0.246]}");
+  r = extract("--ply " + path("cloud.ply") + " " + path("f.png"), "maxvalue", flipped);
+  EXPECT_EQ(r.exit_code, 3) << r.out;
+  const std::size_t accepted = read_csv(path("points.csv")).rows;
+  ASSERT_GT(accepted, 300u);
+  EXPECT_NE(
+      r.out.find("laserline-extract: " + std::to_string(accepted) + " of " +
+                 std::to_string(accepted) +
+                 " accepted points (100.0%) have no 3-D point and are left out of " +
+                 path("cloud.ply") + ": their rays do not meet the laser sheet of " + flipped +
+                 " in front of the camera (is its plane's sign or the laser's "
+                 "side wrong?)\n"),
+      std::string::npos)
+      << r.out;
+  EXPECT_EQ(read_ply(path("cloud.ply")).size(), 0u);
+  // The right sign: every point in the cloud, no such line.
+  const std::string right = write_calibration("right.yaml", "{plane: [0, 0.985, -0.174, 0.246]}");
+  r = extract("--ply " + path("cloud.ply") + " " + path("f.png"), "maxvalue", right);
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_EQ(r.out.find("no 3-D point"), std::string::npos) << r.out;
+  EXPECT_EQ(read_ply(path("cloud.ply")).size(), read_csv(path("points.csv")).rows);
+}
+
+TEST_F(LaserlineExtract, HelpNamesTheNewFlagsAndExitStatuses) {
+  const RunResult r = run_command(std::string(LASERLINE_EXTRACT_PATH) + " --help");
+  EXPECT_EQ(r.exit_code, 0);
+  for (const char* text :
+       {"--threshold VALUE", "--channel NAME|EXPR", "--roi x,y,w,h", "--mask FILE",
+        "--laser-pattern BITS", "frame,source,u,v,snr_db,segment,valid",
+        "folders of images (in natural\n                     order: 2 before 10)",
+        "maxvalue a grey level 1..255", "SNR in dB 0..60", "Exit status: 0", "1 some input",
+        "2 bad arguments", "3 frames\nwere read but no point was accepted"}) {
+    EXPECT_NE(r.out.find(text), std::string::npos) << text;
+  }
 }
 
 }  // namespace

@@ -96,6 +96,19 @@ TEST_F(LaserlinedCli, CheckConfigValidatesWithoutRunning) {
   EXPECT_NE(r.out.find("configuration is valid"), std::string::npos);
   const CliResult builtin = run("--check-config");
   EXPECT_EQ(builtin.exit_code, 0) << builtin.out;
+
+  // A calibration whose laser sheet lies behind the camera is refused, naming its file.
+  const std::string calib = file("calib.yaml", "laser: {plane: [0, 0.5, 0.866, 0.25]}\n");
+  const CliResult behind =
+      run("--check-config --config " + file("behind.yaml", "calibration: " + calib + "\n"));
+  EXPECT_EQ(behind.exit_code, 2) << behind.out;
+  EXPECT_EQ(lines(behind.out), 1u) << behind.out;
+  EXPECT_EQ(behind.out.rfind("laserlined: " + calib +
+                                 ": laser.plane: the sheet [0, 0.5, 0.866, 0.25] lies behind the "
+                                 "camera at every pixel",
+                             0),
+            0u)
+      << behind.out;
 }
 
 TEST_F(LaserlinedCli, PrintedDefaultConfigIsTheShippedFileAndValid) {

@@ -33,8 +33,10 @@
 
 #include "daemon/config.hpp"
 #include "hal/calibration.hpp"
+#include "hal/laser_channel.hpp"
 #include "pipeline/detector.hpp"
 #include "tools/frame_channel.hpp"
+#include "tools/natural_order.hpp"
 #include "tools/point_cloud.hpp"
 
 namespace {
@@ -43,17 +45,35 @@ namespace fs = std::filesystem;
 using laserline::hal::ConfigError;
 
 constexpr const char* kUsage =
-    "usage: laserline-extract --calib FILE [--config FILE] --detector NAME [--overlay-dir DIR]\n"
-    "                         [--all-candidates] [--output points.csv]\n"
-    "                         [--ply cloud.ply [--poses poses.csv]] INPUT...\n"
+    "usage: laserline-extract --calib FILE [--config FILE] --detector NAME [--threshold VALUE]\n"
+    "                         [--channel NAME|EXPR] [--roi x,y,w,h] [--mask FILE]\n"
+    "                         [--laser-pattern BITS] [--overlay-dir DIR] [--all-candidates]\n"
+    "                         [--output points.csv] [--ply cloud.ply [--poses poses.csv]]\n"
+    "                         INPUT...\n"
     "  --calib FILE       calibration (camera and laser); images must have its size\n"
     "  --config FILE      laserlined configuration whose detector options are used\n"
     "                     (default: the built-in configuration)\n"
     "  --detector NAME    detector to run (see the list below)\n"
+    "  --threshold VALUE  the detector's threshold in its own unit, instead of the\n"
+    "                     configuration's: maxvalue a grey level 1..255 that a line's brightest\n"
+    "                     pixel must reach (built-in 40); fir, background, backprojection an\n"
+    "                     SNR in dB 0..60 (built-in 6)\n"
+    "  --channel NAME|EXPR  the laser's light in colour frames: red, green (default), blue,\n"
+    "                     grey, or a weighted sum such as \"red - (green + blue) / 2\" (also\n"
+    "                     cancels white light); mono frames are taken as they are\n"
+    "  --roi x,y,w,h      keep only points in this rectangle (left column, top row, width,\n"
+    "                     height in pixels); the detector still sees the whole frame\n"
+    "  --mask FILE        keep only points on non-zero pixels of this image (the frames' size)\n"
+    "  --laser-pattern BITS  the laser state of successive frames, 1 on, 0 off, repeated from\n"
+    "                     the start of each sequence (folder, video, log, run of image files):\n"
+    "                     10 for on/off alternation. Laser-off frames still reach the detector\n"
+    "                     (background keeps them as the next frame's background) but give no\n"
+    "                     points. LCM logs' own laser states (their profiles) take precedence\n"
     "  --overlay-dir DIR  write DIR/frame_NNNNNN.png per frame: the grey image the detector saw\n"
     "                     with its points (accepted green, rejected red)\n"
     "  --all-candidates   also write rejected candidates (valid = 0)\n"
-    "  --output FILE      CSV: frame,u,v,snr_db,segment,valid\n"
+    "  --output FILE      CSV: frame,source,u,v,snr_db,segment,valid (source: the image file, or\n"
+    "                     the video's frame or the log's event)\n"
     "  --ply FILE         the valid points of all frames as one point cloud: binary PLY,\n"
     "                     float x y z (metres) and scalar_snr (SNR in dB; CloudCompare shows\n"
     "                     it as the scalar field \"snr\"), for CloudCompare, MeshLab, PCL;\n"
@@ -66,11 +86,15 @@ constexpr const char* kUsage =
     "                     number. The PLY is then in the world frame (float: keep the world\n"
     "                     origin near the scan, e.g. a local frame rather than UTM)\n"
     "  (at least one of --output and --ply)\n"
-    "  INPUT              image files, folders of images (sorted by name), videos (.avi .mp4\n"
-    "                     .mkv .mov ...), LCM logs of laserline.image_t messages\n"
-    "Colour frames: the green channel (the laser's colour) is used; 16-bit frames are scaled\n"
-    "to 8 bit. Exit status: 0 all frames processed, 1 some input or frame failed (the others\n"
-    "are still written), 2 bad arguments, configuration or calibration.\n";
+    "  INPUT              image files (in the order given), folders of images (in natural\n"
+    "                     order: 2 before 10), videos (.avi .mp4 .mkv .mov ...), LCM logs of\n"
+    "                     laserline.image_t messages\n"
+    "Colour frames: the green channel is used unless --channel; 16-bit frames are scaled to\n"
+    "8 bit.\n"
+    "Exit status: 0 all frames processed; 1 some input or frame failed (the others are\n"
+    "still written); 2 bad arguments, configuration or calibration (nothing read); 3 frames\n"
+    "were read but no point was accepted, or more than half of the accepted points had no 3-D\n"
+    "point for --ply (the laser sheet of the calibration misses them); 3 before 1.\n";
 
 constexpr const char* kImageExtensions[] = {
     ".png", ".jpg", ".jpeg", ".jpe",  ".tif", ".tiff", ".bmp", ".dib", ".pgm", ".ppm",
@@ -150,25 +174,72 @@ class Progress {
 
 struct Options {
   std::string calib, config, detector, overlay_dir, output, ply, poses;
+  // As given; checked once the calibration and the detector are known.
+  std::string threshold, roi, mask;
+  laserline::hal::LaserChannel channel;  // the laser's light in colour frames
+  std::string laser_pattern;             // as given, for messages
+  std::vector<bool> laser_on_pattern;    // empty: every frame the input says nothing of is "on"
   bool all_candidates = false;
   std::vector<std::string> inputs;
 };
+
+// Where points are kept: a rectangle, a mask image, or both. Points elsewhere are left out of
+// every output; the pixels are not touched (a zeroed border would be a step edge the band-pass
+// filter answers with candidates).
+class Region {
+ public:
+  void limit_to(const cv::Rect& rect) { rect_ = rect; }
+  void limit_to(const cv::Mat& mask) { mask_ = mask; }  // CV_8UC1, non-zero = kept
+
+  bool contains(const cv::Point2d& at) const {
+    if (!rect_ && mask_.empty()) return true;
+    if (!std::isfinite(at.x) || !std::isfinite(at.y)) return false;
+    const cv::Point pixel(static_cast<int>(std::lround(at.x)), static_cast<int>(std::lround(at.y)));
+    if (rect_ && !rect_->contains(pixel)) return false;
+    if (mask_.empty()) return true;
+    return pixel.x >= 0 && pixel.y >= 0 && pixel.x < mask_.cols && pixel.y < mask_.rows &&
+           mask_.at<std::uint8_t>(pixel) != 0;
+  }
+
+ private:
+  std::optional<cv::Rect> rect_;
+  cv::Mat mask_;
+};
+
+// Where a point lies in the image: x the column, y the row (epipolar lines are columns today).
+cv::Point2d image_position(const laserline::pipeline::ProfilePoint& p) {
+  return {static_cast<double>(p.u), static_cast<double>(p.v)};
+}
+
+// A CSV field as RFC 4180 has it: quoted when it holds a comma, a quote or a line break.
+std::string csv_field(const std::string& text) {
+  if (text.find_first_of(",\"\r\n") == std::string::npos) return text;
+  std::string quoted = "\"";
+  for (char c : text) {
+    quoted += c;
+    if (c == '"') quoted += '"';
+  }
+  return quoted + "\"";
+}
 
 // Runs the detector on frames and writes what it finds; counts what failed.
 class Extractor {
  public:
   // csv, ply and poses may be null (not asked for).
   Extractor(const Options& options, const laserline::hal::Calibration& calibration,
-            std::unique_ptr<laserline::pipeline::Detector> detector, FILE* csv,
-            laserline::tools::PlyWriter* ply, const laserline::tools::PoseLog* poses)
+            std::unique_ptr<laserline::pipeline::Detector> detector, const Region& region,
+            FILE* csv, laserline::tools::PlyWriter* ply, const laserline::tools::PoseLog* poses)
       : options_(options),
         width_(calibration.camera.width),
         height_(calibration.camera.height),
         detector_(std::move(detector)),
         profile_(detector_->max_points(width_, height_)),
+        region_(region),
         csv_(csv),
         ply_(ply),
-        poses_(poses) {}
+        poses_(poses) {
+    reported_.reserve(profile_.capacity());
+  }
 
   Progress& progress() { return progress_; }
 
@@ -182,16 +253,24 @@ class Extractor {
   int height() const { return height_; }
 
   // Frames after this are not a continuation of the frames before (another video, log or
-  // folder): detectors that use earlier frames start afresh.
-  void start_sequence() { detector_->reset(width_, height_); }
+  // folder): detectors that use earlier frames start afresh, and so does the laser pattern.
+  void start_sequence() {
+    detector_->reset(width_, height_);
+    position_ = 0;
+  }
 
-  // One frame, as read (8 or 16 bit; 1 to 4 channels). `where` names it in messages; `utime`
-  // is its exposure time (microseconds since the epoch) where the input has one.
-  void frame(const cv::Mat& raw, const std::string& where, bool laser_on,
+  // One frame, as read (8 or 16 bit; 1 to 4 channels). `where` names it in messages and in the
+  // CSV; `recorded_laser_on` is its laser state where the input records one (else
+  // --laser-pattern says); `utime` is its exposure time (microseconds since the epoch) where the
+  // input has one.
+  void frame(const cv::Mat& raw, const std::string& where,
+             std::optional<bool> recorded_laser_on = std::nullopt,
              std::optional<std::int64_t> utime = std::nullopt) {
     const std::int64_t index = next_frame_++;
+    const bool laser_on = recorded_laser_on ? *recorded_laser_on : pattern_laser_on();
+    ++position_;
     std::string problem;
-    if (!laserline::tools::to_laser_mono8(raw, channel_, mono_, problem)) {
+    if (!laserline::tools::to_laser_mono8(raw, options_.channel, mono_, problem)) {
       fail(where + ": " + problem + "; skipped");
       return;
     }
@@ -203,31 +282,22 @@ class Extractor {
     }
     const laserline::pipeline::ImageView view{mono_.data, mono_.cols, mono_.rows,
                                               static_cast<int>(mono_.step[0])};
+    // Laser-off frames too: a detector that subtracts backgrounds keeps them as the next one's.
     detector_->detect(view, {static_cast<std::uint64_t>(index), laser_on}, profile_);
     if (profile_.overflowed()) ++overflowed_frames_;
-    if (csv_ != nullptr) {
-      for (const auto& p : profile_.points()) {
-        if (!p.valid && !options_.all_candidates) continue;
-        std::fprintf(csv_, "%lld,%d,%.4f,%.2f,%d,%d\n", static_cast<long long>(index), p.u, p.v,
-                     p.snr_db, p.segment, p.valid ? 1 : 0);
-        ++points_written_;
-        valid_written_ += p.valid ? 1 : 0;
-      }
-      if (std::fflush(csv_) != 0 || std::ferror(csv_) != 0) {
-        progress_.message("laserline-extract: " + options_.output +
-                          ": write failed: " + std::strerror(errno));
-        std::exit(1);
-      }
-    }
+    select_reported_points(laser_on);
+    if (csv_ != nullptr) write_csv_points(index, where);
     if (ply_ != nullptr) add_to_cloud(index, where, utime);
     ++processed_;
-    laser_off_frames_ += laser_on ? 0 : 1;
+    if (!laser_on) ++(recorded_laser_on ? laser_off_recorded_ : laser_off_by_pattern_);
     if (!options_.overlay_dir.empty()) write_overlay(index, where);
   }
 
-  // A frame that could not be read at all: it keeps its frame number.
+  // A frame that could not be read at all: it keeps its frame number and its place in the
+  // laser pattern.
   void unreadable_frame(const std::string& message) {
     ++next_frame_;
+    ++position_;
     fail(message);
   }
 
@@ -246,13 +316,53 @@ class Extractor {
 
   std::int64_t frames() const { return next_frame_; }
   std::int64_t processed() const { return processed_; }
-  std::int64_t laser_off_frames() const { return laser_off_frames_; }
+  std::int64_t laser_off_recorded() const { return laser_off_recorded_; }
+  std::int64_t laser_off_by_pattern() const { return laser_off_by_pattern_; }
   std::int64_t failures() const { return failures_; }
   std::int64_t points_written() const { return points_written_; }
   std::int64_t valid_written() const { return valid_written_; }
+  std::int64_t accepted() const { return accepted_; }
+  // Accepted points of frames that had a pose (or of all frames, without --poses), and how many
+  // of them were triangulated into the cloud.
+  std::int64_t cloud_accepted() const { return cloud_accepted_; }
+  std::int64_t cloud_triangulated() const { return cloud_triangulated_; }
   std::int64_t overflowed_frames() const { return overflowed_frames_; }
 
  private:
+  bool pattern_laser_on() const {
+    const auto& pattern = options_.laser_on_pattern;
+    return pattern.empty() || pattern[static_cast<std::size_t>(position_) % pattern.size()];
+  }
+
+  // The points every output takes from this frame: none with the laser off (whatever a detector
+  // makes of such a frame is not the laser); those in the region; rejected ones only when asked.
+  void select_reported_points(bool laser_on) {
+    reported_.clear();
+    if (!laser_on) return;
+    for (const auto& p : profile_.points()) {
+      if (!p.valid && !options_.all_candidates) continue;
+      if (!region_.contains(image_position(p))) continue;
+      reported_.push_back(p);
+      accepted_ += p.valid ? 1 : 0;
+    }
+  }
+
+  // Every CSV row is written here (one place to add columns).
+  void write_csv_points(std::int64_t index, const std::string& where) {
+    const std::string source = csv_field(where);
+    for (const auto& p : reported_) {
+      std::fprintf(csv_, "%lld,%s,%d,%.4f,%.2f,%d,%d\n", static_cast<long long>(index),
+                   source.c_str(), p.u, p.v, p.snr_db, p.segment, p.valid ? 1 : 0);
+      ++points_written_;
+      valid_written_ += p.valid ? 1 : 0;
+    }
+    if (std::fflush(csv_) != 0 || std::ferror(csv_) != 0) {
+      progress_.message("laserline-extract: " + options_.output +
+                        ": write failed: " + std::strerror(errno));
+      std::exit(1);
+    }
+  }
+
   // The frame's triangulated points into the point cloud, moved into the world frame when there
   // are poses. A frame without a pose is reported and left out of the cloud (not of the CSV).
   void add_to_cloud(std::int64_t index, const std::string& where,
@@ -278,10 +388,14 @@ class Extractor {
         return;
       }
     }
-    for (const auto& p : profile_.points()) {
-      if (!p.valid || !std::isfinite(p.xyz[2])) continue;
+    for (const auto& p : reported_) {
+      if (!p.valid) continue;
+      ++cloud_accepted_;
+      // No 3-D point: the ray misses the laser sheet in front of the camera.
+      if (!std::isfinite(p.xyz[2])) continue;
       const std::array<double, 3> camera{p.xyz[0], p.xyz[1], p.xyz[2]};
       ply_->add(poses_ != nullptr ? pose.apply(camera) : camera, p.snr_db);
+      ++cloud_triangulated_;
     }
     if (!ply_->commit()) {
       progress_.message("laserline-extract: " + options_.ply +
@@ -293,10 +407,11 @@ class Extractor {
   void write_overlay(std::int64_t index, const std::string& where) {
     cv::cvtColor(mono_, overlay_, cv::COLOR_GRAY2BGR);
     constexpr int kShift = 4;  // sub-pixel drawing: coordinates in 1/16 px
-    for (const auto& p : profile_.points()) {
-      if (!std::isfinite(p.v)) continue;
-      const cv::Point centre(static_cast<int>(std::lround(p.u * 16.0)),
-                             static_cast<int>(std::lround(p.v * 16.0)));
+    for (const auto& p : reported_) {
+      const cv::Point2d at = image_position(p);
+      if (!std::isfinite(at.x) || !std::isfinite(at.y)) continue;
+      const cv::Point centre(static_cast<int>(std::lround(at.x * 16.0)),
+                             static_cast<int>(std::lround(at.y * 16.0)));
       const cv::Scalar colour = p.valid ? cv::Scalar(0, 255, 0) : cv::Scalar(0, 0, 255);
       // Half a pixel: the point marks the centre and leaves the line's flanks visible.
       cv::circle(overlay_, centre, 1 << (kShift - 1), colour, cv::FILLED, cv::LINE_AA, kShift);
@@ -317,14 +432,18 @@ class Extractor {
   int width_, height_;
   std::unique_ptr<laserline::pipeline::Detector> detector_;
   laserline::pipeline::Profile profile_;
+  std::vector<laserline::pipeline::ProfilePoint> reported_;  // this frame's points in the outputs
+  Region region_;
   FILE* csv_;
   laserline::tools::PlyWriter* ply_;
   const laserline::tools::PoseLog* poses_;
-  laserline::hal::LaserChannel channel_;  // the laser's light in colour frames
   Progress progress_;
   cv::Mat mono_, overlay_;
-  std::int64_t next_frame_ = 0, processed_ = 0, failures_ = 0, laser_off_frames_ = 0;
-  std::int64_t points_written_ = 0, valid_written_ = 0, overflowed_frames_ = 0;
+  std::int64_t next_frame_ = 0, processed_ = 0, failures_ = 0;
+  std::int64_t position_ = 0;  // frames since the sequence started (the laser pattern's place)
+  std::int64_t laser_off_recorded_ = 0, laser_off_by_pattern_ = 0;
+  std::int64_t points_written_ = 0, valid_written_ = 0, accepted_ = 0;
+  std::int64_t cloud_accepted_ = 0, cloud_triangulated_ = 0, overflowed_frames_ = 0;
   static constexpr int kShownPerInput = 10;
   std::string input_;
   int input_failures_ = 0;
@@ -347,7 +466,7 @@ void extract_image(Extractor& x, const std::string& path) {
     }
     return;
   }
-  x.frame(image, path, true);
+  x.frame(image, path);
 }
 
 void extract_video(Extractor& x, const std::string& path, std::size_t input, std::size_t inputs) {
@@ -381,7 +500,7 @@ void extract_video(Extractor& x, const std::string& path, std::size_t input, std
       got = false;
     }
     if (!got) break;
-    x.frame(frame, path + " frame " + std::to_string(n), true);
+    x.frame(frame, path + " frame " + std::to_string(n));
     ++n;
     x.progress().update(input, inputs, name, count > 0 ? static_cast<double>(n) / count : 0.0,
                         x.frames());
@@ -444,7 +563,7 @@ bool image_from_message(const laserline::image_t& m, cv::Mat& out, std::string& 
 
 // An LCM log: every laserline.image_t message (on any channel) is a frame, in log order. The
 // laser state of a frame comes from the profile_t of the same sequence number in the same log
-// (image_t does not carry it); without one the laser is taken as on.
+// (image_t does not carry it); without one, from --laser-pattern (else on).
 void extract_log(Extractor& x, const std::string& path, std::size_t input, std::size_t inputs) {
   std::map<std::int64_t, bool> laser_on_by_sequence;
   std::int64_t images = 0;
@@ -493,7 +612,10 @@ void extract_log(Extractor& x, const std::string& path, std::size_t input, std::
       x.unreadable_frame(where + ": " + problem + "; skipped");
     } else {
       const auto state = laser_on_by_sequence.find(message.sequence);
-      x.frame(image, where, state == laser_on_by_sequence.end() || state->second, message.utime);
+      x.frame(
+          image, where,
+          state != laser_on_by_sequence.end() ? std::optional<bool>(state->second) : std::nullopt,
+          message.utime);
     }
     x.progress().update(input, inputs, name, static_cast<double>(n) / static_cast<double>(images),
                         x.frames());
@@ -544,6 +666,32 @@ Options parse_arguments(int argc, char** argv) {
       o.config = value();
     } else if (arg == "--detector") {
       o.detector = value();
+    } else if (arg == "--threshold") {
+      o.threshold = value();
+    } else if (arg == "--channel") {
+      try {
+        o.channel = laserline::hal::parse_laser_channel(value());
+      } catch (const std::invalid_argument& e) {
+        fatal(std::string("--") + e.what());  // the reason starts: channel "TEXT": ...
+      }
+    } else if (arg == "--roi") {
+      o.roi = value();
+    } else if (arg == "--mask") {
+      o.mask = value();
+    } else if (arg == "--laser-pattern") {
+      o.laser_pattern = value();
+      const std::string& bits = o.laser_pattern;
+      if (bits.empty() || bits.size() > 1024 || bits.find_first_not_of("01") != std::string::npos) {
+        fatal("--laser-pattern '" + bits +
+              "': expected 1 to 1024 characters 0 (laser off) or 1 (laser on), e.g. 10 for "
+              "on/off alternation");
+      }
+      if (bits.find('1') == std::string::npos) {
+        fatal("--laser-pattern '" + bits + "': has no 1, so no frame would have the laser on");
+      }
+      o.laser_on_pattern.clear();
+      for (char bit : bits)
+        o.laser_on_pattern.push_back(bit == '1');
     } else if (arg == "--overlay-dir") {
       o.overlay_dir = value();
     } else if (arg == "--output") {
@@ -571,6 +719,129 @@ Options parse_arguments(int argc, char** argv) {
   return o;
 }
 
+// --threshold into the chosen detector's own option, in its own unit.
+void apply_threshold(const Options& o, laserline::pipeline::DetectorOptions& detector_options) {
+  if (o.threshold.empty()) return;
+  const char* text = o.threshold.c_str();
+  char* end = nullptr;
+  errno = 0;
+  const double value = std::strtod(text, &end);
+  const bool number = errno == 0 && end != text && *end == '\0' && std::isfinite(value);
+  if (o.detector == "maxvalue") {
+    if (!number || value != std::floor(value) || value < 1 || value > 255) {
+      fatal("--threshold " + o.threshold +
+            ": the maxvalue detector's threshold is a grey level, a whole number from 1 to 255");
+    }
+    detector_options.maxvalue_threshold = static_cast<int>(value);
+  } else {
+    if (!number || value < 0 || value > 60) {
+      fatal("--threshold " + o.threshold + ": the " + o.detector +
+            " detector's threshold is an SNR in dB, a number from 0 to 60");
+    }
+    detector_options.frontend.snr_threshold_db = value;
+  }
+}
+
+// --roi and --mask, checked against the frames' size (the calibration's).
+Region region_of(const Options& o, int width, int height) {
+  Region region;
+  const std::string frames = std::to_string(width) + "x" + std::to_string(height) +
+                             " frames of the calibration " + o.calib;
+  if (!o.roi.empty()) {
+    int x = 0, y = 0, w = 0, h = 0;
+    char tail = 0;
+    if (std::sscanf(o.roi.c_str(), "%d,%d,%d,%d%c", &x, &y, &w, &h, &tail) != 4 || x < 0 || y < 0 ||
+        w < 1 || h < 1) {
+      fatal("--roi '" + o.roi +
+            "': expected x,y,w,h: left column, top row (from 0), width and height (from 1) in "
+            "pixels, e.g. 0,100,1280,600");
+    }
+    if (static_cast<long>(x) + w > width || static_cast<long>(y) + h > height) {
+      fatal("--roi " + o.roi + ": reaches beyond the " + frames);
+    }
+    region.limit_to(cv::Rect(x, y, w, h));
+  }
+  if (!o.mask.empty()) {
+    cv::Mat image;
+    try {
+      image = cv::imread(o.mask, cv::IMREAD_UNCHANGED);
+    } catch (const cv::Exception&) {
+      image.release();
+    }
+    if (image.empty()) {
+      fatal("--mask " + o.mask + ": " +
+            (access(o.mask.c_str(), R_OK) != 0
+                 ? std::string("cannot be read: ") + std::strerror(errno)
+                 : std::string("not a readable image")));
+    }
+    if (image.cols != width || image.rows != height) {
+      fatal("--mask " + o.mask + ": is " + std::to_string(image.cols) + "x" +
+            std::to_string(image.rows) + " but must have the size of the " + frames);
+    }
+    // Any colour channel set marks a kept pixel (an alpha channel does not count).
+    std::vector<cv::Mat> planes;
+    cv::split(image, planes);
+    const std::size_t colours = planes.size() >= 3 ? 3 : 1;  // grey or BGR, each maybe + alpha
+    cv::Mat kept = planes[0] != 0;
+    for (std::size_t c = 1; c < colours; ++c)
+      kept |= planes[c] != 0;
+    if (cv::countNonZero(kept) == 0) {
+      fatal("--mask " + o.mask + ": no pixel is set (points are kept on non-zero pixels)");
+    }
+    region.limit_to(kept);
+  }
+  return region;
+}
+
+enum class InputKind : std::uint8_t { kMissing, kFolder, kLog, kVideo, kImage };
+
+InputKind kind_of(const std::string& input) {
+  std::error_code ec;
+  if (!fs::exists(input, ec)) return InputKind::kMissing;
+  if (fs::is_directory(input, ec)) return InputKind::kFolder;
+  if (is_lcm_log(input)) return InputKind::kLog;
+  if (has_extension(input, kVideoExtensions)) return InputKind::kVideo;
+  return InputKind::kImage;
+}
+
+// Image arguments are taken in the order given. When a run of them is not in natural order
+// (a shell glob sorts step_num10.png before step_num2.png), says so once, before it starts.
+void note_unnatural_order(Extractor& x, const std::vector<std::string>& inputs,
+                          const std::vector<InputKind>& kinds, std::size_t first) {
+  std::size_t end = first;
+  while (end < inputs.size() && kinds[end] == InputKind::kImage)
+    ++end;
+  for (std::size_t i = first + 1; i < end; ++i) {
+    if (!laserline::tools::natural_less(inputs[i], inputs[i - 1])) continue;
+    x.progress().message("laserline-extract: note: the " + std::to_string(end - first) +
+                         " image arguments from " + inputs[first] +
+                         " on are not in natural order (" +
+                         fs::path(inputs[i - 1]).filename().string() + " before " +
+                         fs::path(inputs[i]).filename().string() +
+                         "): frames are numbered in the order given; give their folder to read "
+                         "them in natural order");
+    return;
+  }
+}
+
+// The image files of a folder, in natural order (empty with `ec` set when it cannot be listed).
+std::vector<std::string> images_in_folder(const std::string& folder, std::error_code& ec) {
+  std::vector<fs::path> files;
+  for (const auto& entry : fs::directory_iterator(folder, ec)) {
+    if (entry.is_regular_file(ec) && has_extension(entry.path(), kImageExtensions)) {
+      files.push_back(entry.path());
+    }
+  }
+  if (ec) return {};
+  std::sort(files.begin(), files.end(), [](const fs::path& a, const fs::path& b) {
+    return laserline::tools::natural_less(a.filename().string(), b.filename().string());
+  });
+  std::vector<std::string> names;
+  for (const auto& f : files)
+    names.push_back(f.string());
+  return names;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -594,9 +865,17 @@ int main(int argc, char** argv) {
                                : laserline::daemon::load_config_file(options.config);
     detector_options = config.detector_options;
     detector_options.geometry = laserline::daemon::scanner_geometry(calibration);
+    // Before any frame: a sheet the camera cannot see would give no point, or none in 3-D.
+    laserline::daemon::check_laser_sheet_in_view(
+        calibration, {options.calib, "laser"},
+        laserline::daemon::searches_depth_range(options.detector) ? &detector_options.frontend
+                                                                  : nullptr,
+        config.source);
   } catch (const ConfigError& e) {
     fatal(e.what());
   }
+  apply_threshold(options, detector_options);
+  const Region region = region_of(options, calibration.camera.width, calibration.camera.height);
   std::unique_ptr<laserline::pipeline::Detector> detector;
   try {
     detector = laserline::pipeline::make_detector(options.detector, detector_options);
@@ -630,62 +909,62 @@ int main(int argc, char** argv) {
     if (csv == nullptr) {
       fatal("--output " + options.output + ": cannot be written: " + std::strerror(errno));
     }
-    std::fputs("frame,u,v,snr_db,segment,valid\n", csv);
+    std::fputs("frame,source,u,v,snr_db,segment,valid\n", csv);
     std::fflush(csv);
   }
 
-  Extractor x(options, calibration, std::move(detector), csv, ply ? &*ply : nullptr,
+  Extractor x(options, calibration, std::move(detector), region, csv, ply ? &*ply : nullptr,
               poses ? &*poses : nullptr);
-  bool in_image_run = false;  // consecutive image arguments are one sequence (a shell glob)
+  std::vector<InputKind> kinds;
+  for (const auto& input : options.inputs)
+    kinds.push_back(kind_of(input));
   for (std::size_t i = 0; i < options.inputs.size(); ++i) {
     const std::string& input = options.inputs[i];
     const std::size_t number = i + 1, inputs = options.inputs.size();
     const std::string name = fs::path(input).filename().string();
     x.start_input(input);
-    std::error_code ec;
-    if (!fs::exists(input, ec)) {
-      // Not known to be a frame at all: takes no frame number.
-      x.fail(input + ": no such file or folder; skipped");
-      in_image_run = false;
-      continue;
-    }
-    if (fs::is_directory(input, ec)) {
-      std::vector<std::string> files;
-      for (const auto& entry : fs::directory_iterator(input, ec)) {
-        if (entry.is_regular_file(ec) && has_extension(entry.path(), kImageExtensions)) {
-          files.push_back(entry.path().string());
+    switch (kinds[i]) {
+      case InputKind::kMissing:
+        // Not known to be a frame at all: takes no frame number.
+        x.fail(input + ": no such file or folder; skipped");
+        break;
+      case InputKind::kFolder: {
+        std::error_code ec;
+        const std::vector<std::string> files = images_in_folder(input, ec);
+        if (ec) {
+          x.fail(input + ": folder cannot be listed: " + ec.message() + "; skipped");
+          break;
         }
+        if (files.empty()) {
+          x.fail(input + ": folder holds no image file; skipped");
+          break;
+        }
+        x.start_sequence();
+        for (std::size_t k = 0; k < files.size(); ++k) {
+          extract_image(x, files[k]);
+          x.progress().update(number, inputs, name,
+                              static_cast<double>(k + 1) / static_cast<double>(files.size()),
+                              x.frames());
+        }
+        break;
       }
-      if (ec) {
-        x.fail(input + ": folder cannot be listed: " + ec.message() + "; skipped");
-        continue;
-      }
-      if (files.empty()) {
-        x.fail(input + ": folder holds no image file; skipped");
-        continue;
-      }
-      std::sort(files.begin(), files.end());
-      x.start_sequence();
-      for (std::size_t k = 0; k < files.size(); ++k) {
-        extract_image(x, files[k]);
-        x.progress().update(number, inputs, name,
-                            static_cast<double>(k + 1) / static_cast<double>(files.size()),
-                            x.frames());
-      }
-      in_image_run = false;
-    } else if (is_lcm_log(input)) {
-      x.start_sequence();
-      extract_log(x, input, number, inputs);
-      in_image_run = false;
-    } else if (has_extension(input, kVideoExtensions)) {
-      x.start_sequence();
-      extract_video(x, input, number, inputs);
-      in_image_run = false;
-    } else {
-      if (!in_image_run) x.start_sequence();
-      in_image_run = true;
-      extract_image(x, input);
-      x.progress().update(number, inputs, name, 1.0, x.frames());
+      case InputKind::kLog:
+        x.start_sequence();
+        extract_log(x, input, number, inputs);
+        break;
+      case InputKind::kVideo:
+        x.start_sequence();
+        extract_video(x, input, number, inputs);
+        break;
+      case InputKind::kImage:
+        // Consecutive image arguments are one sequence (a shell glob).
+        if (i == 0 || kinds[i - 1] != InputKind::kImage) {
+          x.start_sequence();
+          note_unnatural_order(x, options.inputs, kinds, i);
+        }
+        extract_image(x, input);
+        x.progress().update(number, inputs, name, 1.0, x.frames());
+        break;
     }
   }
   x.progress().clear();
@@ -707,15 +986,45 @@ int main(int argc, char** argv) {
                  static_cast<long long>(ply->count()), options.ply.c_str(),
                  poses ? ("world frame of " + options.poses).c_str() : "camera frame");
   }
-  if (x.laser_off_frames() > 0) {
+  const std::int64_t laser_off = x.laser_off_recorded() + x.laser_off_by_pattern();
+  if (laser_off > 0) {
+    std::string from;
+    if (x.laser_off_recorded() > 0) {
+      from = std::to_string(x.laser_off_recorded()) + " from the log's profiles";
+    }
+    if (x.laser_off_by_pattern() > 0) {
+      from += (from.empty() ? "" : ", ") + std::to_string(x.laser_off_by_pattern()) +
+              " from --laser-pattern " + options.laser_pattern;
+    }
     std::fprintf(stderr,
                  "laserline-extract: %lld of the processed frames were exposed with the laser off "
-                 "(from the log's profiles)\n",
-                 static_cast<long long>(x.laser_off_frames()));
+                 "(%s): no points taken from them\n",
+                 static_cast<long long>(laser_off), from.c_str());
   }
   if (x.overflowed_frames() > 0) {
     std::fprintf(stderr, "laserline-extract: %lld frames had more points than the detector keeps\n",
                  static_cast<long long>(x.overflowed_frames()));
   }
+  // A run that read frames but has nothing to show for them is not a success.
+  bool empty_result = false;
+  if (x.processed() > 0 && x.accepted() == 0) {
+    std::fprintf(stderr,
+                 "laserline-extract: no point accepted in any of the %lld processed frames (see "
+                 "--channel, --threshold, --roi, --mask, --laser-pattern, --detector)\n",
+                 static_cast<long long>(x.processed()));
+    empty_result = true;
+  }
+  const std::int64_t dropped = x.cloud_accepted() - x.cloud_triangulated();
+  if (ply && dropped * 2 > x.cloud_accepted()) {
+    std::fprintf(stderr,
+                 "laserline-extract: %lld of %lld accepted points (%.1f%%) have no 3-D point and "
+                 "are left out of %s: their rays do not meet the laser sheet of %s in front of "
+                 "the camera (is its plane's sign or the laser's side wrong?)\n",
+                 static_cast<long long>(dropped), static_cast<long long>(x.cloud_accepted()),
+                 100.0 * static_cast<double>(dropped) / static_cast<double>(x.cloud_accepted()),
+                 options.ply.c_str(), options.calib.c_str());
+    empty_result = true;
+  }
+  if (empty_result) return 3;
   return x.failures() > 0 ? 1 : 0;
 }
