@@ -42,6 +42,7 @@ using laserline::test_support::run_command;
 struct CsvPoint {
   int u = 0;
   double v = 0;
+  double x = 0, y = 0;  // the frame pixel
   double snr_db = 0;
   int segment = 0;
   int valid = 0;
@@ -81,15 +82,17 @@ Csv read_csv(const std::string& path) {
   std::string line;
   while (std::getline(in, line)) {
     const std::vector<std::string> f = csv_fields(line);
-    EXPECT_EQ(f.size(), 7u) << "bad CSV line: " << line;
-    if (f.size() != 7u) continue;
+    EXPECT_EQ(f.size(), 9u) << "bad CSV line: " << line;
+    if (f.size() != 9u) continue;
     const long frame = std::stol(f[0]);
     CsvPoint p;
     p.u = std::stoi(f[2]);
     p.v = std::stod(f[3]);
-    p.snr_db = std::stod(f[4]);
-    p.segment = std::stoi(f[5]);
-    p.valid = std::stoi(f[6]);
+    p.x = std::stod(f[4]);
+    p.y = std::stod(f[5]);
+    p.snr_db = std::stod(f[6]);
+    p.segment = std::stoi(f[7]);
+    p.valid = std::stoi(f[8]);
     csv.frames[frame].push_back(p);
     const auto [source, added] = csv.sources.emplace(frame, f[1]);
     EXPECT_EQ(source->second, f[1]) << "one source per frame: " << line;
@@ -253,7 +256,7 @@ TEST_F(LaserlineExtract, MonoPngFolderAndFilesInInputOrder) {
   EXPECT_NE(r.out.find("3 frames from 1 inputs, 3 processed with maxvalue"), std::string::npos)
       << r.out;
   Csv csv = read_csv(path("points.csv"));
-  EXPECT_EQ(csv.header, "frame,source,u,v,snr_db,segment,valid");
+  EXPECT_EQ(csv.header, "frame,source,u,v,x,y,snr_db,segment,valid");
   EXPECT_EQ(csv.frames.size(), 3u);
   expect_frames_match(csv, {{0, 0}, {1, 1}, {2, 2}}, scene);
 
@@ -263,6 +266,42 @@ TEST_F(LaserlineExtract, MonoPngFolderAndFilesInInputOrder) {
   csv = read_csv(path("points.csv"));
   EXPECT_EQ(csv.frames.size(), 2u);
   expect_frames_match(csv, {{0, 2}, {1, 0}}, scene);
+}
+
+// A laser beside the camera: the line runs down the image and every detector searches the rows.
+// u is then the row and v the column, x and y the frame pixel; every row's point is the truth's.
+TEST_F(LaserlineExtract, LaserBesideTheCameraSearchesRows) {
+  options_.calibration.laser.side = hal::LaserSide::kRight;
+  options_.tilt_x_deg = 8;
+  options_.tilt_y_deg = 0;
+  hal::SimScene scene(options_);
+  ASSERT_EQ(scene.lines().line_step[1], 1.0) << "the simulator draws the line along rows";
+  ASSERT_TRUE(cv::imwrite(path("beside.png"), render(scene, 0)));
+  const std::string calib = write_calibration(
+      "beside.yaml", "{baseline_m: 0.25, angle_deg: 80, sheet_width_m: 0.003, side: right}");
+  const hal::SimGroundTruth truth = truth_of(scene, 0);
+  std::size_t visible = 0;
+  for (float position : truth.position)
+    visible += std::isfinite(position) ? 1 : 0;
+  ASSERT_GT(visible, static_cast<std::size_t>(kHeight * 0.9));
+  for (const std::string detector : {"maxvalue", "fir"}) {
+    const RunResult r = extract(path("beside.png"), detector, calib);
+    EXPECT_EQ(r.exit_code, 0) << r.out;
+    const Csv csv = read_csv(path("points.csv"));
+    ASSERT_TRUE(csv.frames.count(0)) << r.out;
+    std::size_t found = 0;
+    for (const CsvPoint& p : csv.frames.at(0)) {
+      ASSERT_GE(p.u, 0);
+      ASSERT_LT(p.u, kHeight);
+      EXPECT_DOUBLE_EQ(p.y, p.u) << detector;   // the row
+      EXPECT_NEAR(p.x, p.v, 1e-3) << detector;  // the column
+      const float position = truth.position[static_cast<std::size_t>(p.u)];
+      ASSERT_TRUE(std::isfinite(position)) << detector << ": a point in row " << p.u;
+      EXPECT_NEAR(p.x, position, kTolerancePx) << detector << ", row " << p.u;
+      ++found;
+    }
+    EXPECT_GE(found, visible * 99 / 100) << detector;
+  }
 }
 
 // The laser is green: only the green channel counts. Red and blue carry a bright stripe
@@ -992,8 +1031,8 @@ TEST_F(LaserlineExtract, RoiAndMaskLeaveOutPointsNotPixels) {
   // A rectangle whose top and bottom pass 6 px from the line, within the band-pass's reach.
   float top = kHeight, bottom = 0;
   for (int u = 100; u < 220; ++u) {
-    top = std::min(top, truth.row[static_cast<std::size_t>(u)]);
-    bottom = std::max(bottom, truth.row[static_cast<std::size_t>(u)]);
+    top = std::min(top, truth.position[static_cast<std::size_t>(u)]);
+    bottom = std::max(bottom, truth.position[static_cast<std::size_t>(u)]);
   }
   const int y0 = static_cast<int>(std::floor(top)) - 6;
   const int y1 = static_cast<int>(std::ceil(bottom)) + 6;
@@ -1231,7 +1270,7 @@ TEST_F(LaserlineExtract, HelpNamesTheNewFlagsAndExitStatuses) {
   EXPECT_EQ(r.exit_code, 0);
   for (const char* text :
        {"--threshold VALUE", "--channel NAME|EXPR", "--roi x,y,w,h", "--mask FILE",
-        "--laser-pattern BITS", "frame,source,u,v,snr_db,segment,valid",
+        "--laser-pattern BITS", "frame,source,u,v,x,y,snr_db,segment,valid",
         "folders of images (in natural\n                     order: 2 before 10)",
         "maxvalue a grey level 1..255", "SNR in dB 0..60", "Exit status: 0", "1 some input",
         "2 bad arguments", "3 frames\nwere read but no point was accepted"}) {

@@ -72,8 +72,11 @@ constexpr const char* kUsage =
     "  --overlay-dir DIR  write DIR/frame_NNNNNN.png per frame: the grey image the detector saw\n"
     "                     with its points (accepted green, rejected red)\n"
     "  --all-candidates   also write rejected candidates (valid = 0)\n"
-    "  --output FILE      CSV: frame,source,u,v,snr_db,segment,valid (source: the image file, or\n"
-    "                     the video's frame or the log's event)\n"
+    "  --output FILE      CSV: frame,source,u,v,x,y,snr_db,segment,valid (source: the image\n"
+    "                     file, or the video's frame or the log's event; u the epipolar line and\n"
+    "                     v the position along it, x y the frame pixel: for a laser above or\n"
+    "                     below the camera u = x the column, v = y the row; beside it, u = y\n"
+    "                     the row, v = x the column)\n"
     "  --ply FILE         the valid points of all frames as one point cloud: binary PLY,\n"
     "                     float x y z (metres) and scalar_snr (SNR in dB; CloudCompare shows\n"
     "                     it as the scalar field \"snr\"), for CloudCompare, MeshLab, PCL;\n"
@@ -206,9 +209,11 @@ class Region {
   cv::Mat mask_;
 };
 
-// Where a point lies in the image: x the column, y the row (epipolar lines are columns today).
-cv::Point2d image_position(const laserline::pipeline::ProfilePoint& p) {
-  return {static_cast<double>(p.u), static_cast<double>(p.v)};
+// Where a point lies in the image: x the column, y the row (through the profile's search axes).
+cv::Point2d image_position(const laserline::pipeline::Profile& profile,
+                           const laserline::pipeline::ProfilePoint& p) {
+  const auto [x, y] = profile.image_point(p);
+  return {x, y};
 }
 
 // A CSV field as RFC 4180 has it: quoted when it holds a comma, a quote or a line break.
@@ -341,7 +346,7 @@ class Extractor {
     if (!laser_on) return;
     for (const auto& p : profile_.points()) {
       if (!p.valid && !options_.all_candidates) continue;
-      if (!region_.contains(image_position(p))) continue;
+      if (!region_.contains(image_position(profile_, p))) continue;
       reported_.push_back(p);
       accepted_ += p.valid ? 1 : 0;
     }
@@ -351,8 +356,9 @@ class Extractor {
   void write_csv_points(std::int64_t index, const std::string& where) {
     const std::string source = csv_field(where);
     for (const auto& p : reported_) {
-      std::fprintf(csv_, "%lld,%s,%d,%.4f,%.2f,%d,%d\n", static_cast<long long>(index),
-                   source.c_str(), p.u, p.v, p.snr_db, p.segment, p.valid ? 1 : 0);
+      const cv::Point2d at = image_position(profile_, p);
+      std::fprintf(csv_, "%lld,%s,%d,%.4f,%.4f,%.4f,%.2f,%d,%d\n", static_cast<long long>(index),
+                   source.c_str(), p.u, p.v, at.x, at.y, p.snr_db, p.segment, p.valid ? 1 : 0);
       ++points_written_;
       valid_written_ += p.valid ? 1 : 0;
     }
@@ -408,7 +414,7 @@ class Extractor {
     cv::cvtColor(mono_, overlay_, cv::COLOR_GRAY2BGR);
     constexpr int kShift = 4;  // sub-pixel drawing: coordinates in 1/16 px
     for (const auto& p : reported_) {
-      const cv::Point2d at = image_position(p);
+      const cv::Point2d at = image_position(profile_, p);
       if (!std::isfinite(at.x) || !std::isfinite(at.y)) continue;
       const cv::Point centre(static_cast<int>(std::lround(at.x * 16.0)),
                              static_cast<int>(std::lround(at.y * 16.0)));
@@ -909,7 +915,7 @@ int main(int argc, char** argv) {
     if (csv == nullptr) {
       fatal("--output " + options.output + ": cannot be written: " + std::strerror(errno));
     }
-    std::fputs("frame,source,u,v,snr_db,segment,valid\n", csv);
+    std::fputs("frame,source,u,v,x,y,snr_db,segment,valid\n", csv);
     std::fflush(csv);
   }
 
