@@ -9,13 +9,6 @@
 
 namespace laserline::pipeline {
 
-namespace {
-
-// Points of the last profile kept to measure the motion across the line at (at most).
-constexpr std::size_t kProbes = 32;
-
-}  // namespace
-
 BackgroundDetector::BackgroundDetector(const DetectorOptions& options, bool estimate_camera_motion)
     : frontend_(options.geometry, options.frontend),
       geometry_(options.geometry),
@@ -49,8 +42,6 @@ void BackgroundDetector::reset(int width, int height) {
   for (History& h : history_)
     h.rows.assign(static_cast<std::size_t>(width) * band_rows_, 0);
   newest_ = -1;
-  probes_.assign(kProbes, {0.0f, 0.0f});
-  probe_count_ = 0;
   width_ = width;
   height_ = height;
 }
@@ -66,9 +57,10 @@ BackgroundDetector::Motion BackgroundDetector::motion_across_line(const History&
     least.across = std::min(least.across, std::abs(hv - v) / width);
     least.toward_far = std::min(least.toward_far, far * (hv - v) / width);
   };
-  if (probe_count_ > 0) {
-    for (std::size_t i = 0; i < probe_count_; ++i)
-      probe(probes_[i][0], probes_[i][1]);
+  const auto probes = frontend_.probes();
+  if (!probes.empty()) {
+    for (const auto& [u, v] : probes)
+      probe(u, v);
   } else {
     // Nowhere seen yet: across the rows searched, at both ends and the middle of the image.
     const double top = rows.source_row(0), bottom = rows.source_row(rows.rows() - 1);
@@ -80,50 +72,11 @@ BackgroundDetector::Motion BackgroundDetector::motion_across_line(const History&
   return least;
 }
 
-bool BackgroundDetector::glow_before_line(const ImageView& image) const {
-  if (probe_count_ == 0) return false;
-  // At each point where the line was last seen: the mean brightness of the few widths just in
-  // front of it (the near side) and just behind it, and the line's own peak. The glow is a
-  // brightness that ends at the line on its near side; texture is as bright on either side.
-  const RowNormalisation& rows = frontend_.rows();
-  const int near = rows.near_side();
-  std::array<float, kProbes> excess{}, line{};
-  std::size_t n = 0;
-  for (std::size_t i = 0; i < probe_count_; ++i) {
-    const int u = std::clamp(static_cast<int>(std::lround(probes_[i][0])), 0, image.width - 1);
-    const double v = probes_[i][1];
-    const int w = std::max(1, static_cast<int>(std::lround(rows.width_px(v))));
-    auto mean = [&](int side) {
-      int sum = 0, count = 0;
-      for (int d = w; d <= 4 * w; ++d) {
-        const int r = static_cast<int>(std::lround(v)) + side * d;
-        if (r < 0 || r >= image.height) continue;
-        sum += image.at(u, r);
-        ++count;
-      }
-      return count > 0 ? static_cast<float>(sum) / static_cast<float>(count) : -1.0f;
-    };
-    const float in_front = mean(near), behind = mean(-near);
-    if (in_front < 0 || behind < 0) continue;
-    const int r = std::clamp(static_cast<int>(std::lround(v)), 0, image.height - 1);
-    excess[n] = in_front - behind;
-    line[n] = static_cast<float>(image.at(u, r)) - behind;
-    ++n;
-  }
-  if (n == 0) return false;
-  const auto middle = static_cast<std::ptrdiff_t>(n / 2);
-  std::nth_element(excess.begin(), excess.begin() + middle, excess.begin() + n);
-  std::nth_element(line.begin(), line.begin() + middle, line.begin() + n);
-  // Half the line's contrast in front of it, all along: the water glows (texture would give as
-  // much in front as behind, half the time more, half less).
-  return excess[middle] > 0.5f * std::max(line[middle], 1.0f);
-}
-
 const BackgroundDetector::History* BackgroundDetector::choose_background(
     const ImageView& image) const {
   if (newest_ < 0) return nullptr;
   const int n = static_cast<int>(history_.size());
-  const bool glow = glow_before_line(image);
+  const bool glow = frontend_.water_glows(image);
   // Newest first: a laser-off frame wins outright; else the first laser-on frame the scene moved
   // far enough from (toward the far side of the line where the water glows).
   const History* moved = nullptr;
@@ -140,6 +93,12 @@ const BackgroundDetector::History* BackgroundDetector::choose_background(
 }
 
 void BackgroundDetector::detect(const ImageView& image, const FrameContext& frame, Profile& out) {
+  collect_candidates(image, frame, out);
+  if (frame.laser_on) select_line(out);
+}
+
+void BackgroundDetector::collect_candidates(const ImageView& image, const FrameContext& frame,
+                                            Profile& out) {
   out.clear();
   last_motion_ = motion_.update(image);
   // Chain the kept frames' motion to this frame; without a motion estimate none of them can be
@@ -161,24 +120,9 @@ void BackgroundDetector::detect(const ImageView& image, const FrameContext& fram
     } else {
       frontend_.set_frame(image);
     }
-    frontend_.find_candidates(out);
+    frontend_.collect_candidates(out);
     if (background != nullptr) {
       out.set_background(static_cast<std::int64_t>(background->sequence), !background->laser_on);
-    }
-    // Where the line is now: where the next frames measure the motion across it.
-    std::size_t valid = 0;
-    for (const ProfilePoint& p : out.points())
-      valid += p.valid ? 1 : 0;
-    if (valid > 0) {
-      const std::size_t step = std::max<std::size_t>(1, valid / kProbes);
-      probe_count_ = 0;
-      std::size_t seen = 0;
-      for (const ProfilePoint& p : out.points()) {
-        if (!p.valid) continue;
-        if (seen++ % step == 0 && probe_count_ < kProbes) {
-          probes_[probe_count_++] = {static_cast<float>(p.u), p.v};
-        }
-      }
     }
   }
   // This frame joins the history, in place of the oldest.

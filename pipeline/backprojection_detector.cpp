@@ -17,7 +17,9 @@ void BackprojectionDetector::reset(int width, int height) {
 
 void BackprojectionDetector::detect(const ImageView& image, const FrameContext& frame,
                                     Profile& out) {
-  background_.detect(image, frame, out);
+  // The candidates; the validation takes away those of the static scene (and noise); the line
+  // is chosen among the rest.
+  background_.collect_candidates(image, frame, out);
   const MotionEstimate& estimate = background_.last_motion();
   PairMotion motion;
   motion.valid = estimate.valid && estimate.camera.valid;
@@ -26,6 +28,7 @@ void BackprojectionDetector::detect(const ImageView& image, const FrameContext& 
   motion.relative_scale = estimate.camera.relative_scale;
   validator_.validate(out, motion, image,
                       estimate.valid ? &estimate.previous_to_current.h : nullptr);
+  if (frame.laser_on) background_.select_line(out);
 }
 
 }  // namespace laserline::pipeline

@@ -7,6 +7,7 @@
 
 #include "pipeline/geometry.hpp"
 #include "pipeline/image_view.hpp"
+#include "pipeline/line_selection.hpp"
 #include "pipeline/motion.hpp"
 #include "pipeline/profile.hpp"
 #include "pipeline/validation.hpp"
@@ -29,6 +30,8 @@ struct FrontendOptions {
   double snr_threshold_db = 6.0;  // III-E: paper 3 - 6 dB
   int max_candidates_per_column = 4;
   int saturation_level = 255;  // a run at or above this is a clipped core: its centre is the peak
+  // Which candidate of each epipolar line is the laser point (the others stay, not valid).
+  LineSelectionOptions selection;
 };
 
 // Which earlier frame `background` subtracts (paper III-A). The previous frame only removes the

@@ -144,7 +144,7 @@ float RowNormalisation::to_source_single(float r) const {
 // ---------------------------------------------------------------------------------------------
 
 Frontend::Frontend(const ScannerGeometry& geometry, const FrontendOptions& options)
-    : geometry_(geometry), options_(options) {
+    : geometry_(geometry), options_(options), selector_(options.selection) {
   use_intrinsics(true);
   if (!(options.min_depth_m > 0) || !(options.max_depth_m > options.min_depth_m)) {
     throw std::invalid_argument("detector.frontend: need 0 < min_depth_m < max_depth_m");
@@ -187,6 +187,11 @@ Frontend::Frontend(const ScannerGeometry& geometry, const FrontendOptions& optio
   // noise window (guard band excluded) is the same to within a row there, so these are the
   // maxima of the SNR too.
   reach_ = std::max(1, inner_ / 2 + 1);
+  // A line's band-pass is negative on both sides, most so about an inner box away (the outer box
+  // holds the line, the inner one not), an edge's on one side only: the ridge test looks for the
+  // negative lobe within half an outer box beyond where the band-pass crosses zero (farther out
+  // for a line wider than the model: a clipped or blurred one).
+  ridge_ = outer_ / 2 + 1;
   half_per_normalised_width_ = 0.5 / options.normalised_width_px;
   margin_ = outer_ / 2 + 2;
   rows_ = RowNormalisation(geometry, options, margin_);
@@ -211,7 +216,7 @@ void Frontend::reset(int width, int height) {
   // last row looks at; the normalised ring the rows the band-pass boxes of the block's rows reach.
   // (A row's slot in a ring is looked up once per block of rows, so the rings are no larger than
   // they must be: they stay in the cache.)
-  const int look = std::max(noise_half_, reach_);
+  const int look = std::max({noise_half_, reach_, ridge_});
   band_ring_rows_ = kRowBlock + 2 * look;
   normalised_ring_rows_ = kRowBlock + look + outer_ + 2;
   const int strips = (width + kStripColumns - 1) / kStripColumns;
@@ -244,6 +249,13 @@ void Frontend::reset(int width, int height) {
   peak_bits_.assign((ring + 63) / 64, 0u);
   column_best_.assign(static_cast<std::size_t>(width) * options_.max_candidates_per_column, {});
   column_count_.assign(static_cast<std::size_t>(width), 0);
+  line_candidates_.assign(static_cast<std::size_t>(width) * options_.max_candidates_per_column, {});
+  eligible_.assign(line_candidates_.size(), {});
+  eligible_count_.assign(static_cast<std::size_t>(width), 0);
+  eligible_point_.assign(line_candidates_.size(), 0);
+  chosen_.assign(static_cast<std::size_t>(width), -1);
+  selector_.reset(width, options_.max_candidates_per_column);
+  probe_count_ = 0;
   refine_columns_.assign(static_cast<std::size_t>(width), 0);
   refine_guesses_.assign(static_cast<std::size_t>(width), 0.0f);
   refine_points_.assign(static_cast<std::size_t>(width), 0);
@@ -862,7 +874,10 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
   using Sum = std::make_unsigned_t<Lane>;
   const int rows = rows_.rows();
   const int hi = inner_ / 2, ho = outer_ / 2, nh = noise_half_, gh = guard_;
-  const int look = std::max(nh, reach_);  // band-pass rows needed below the row under test
+  // band-pass rows needed below the row under test
+  const int look = std::max({nh, reach_, ridge_});
+  const bool near_down = rows_.near_side() > 0;  // glow below the line (see water_glows())
+  const int saturation = options_.saturation_level;
   const auto image_stride = static_cast<std::size_t>(stride_);
   const auto ring = static_cast<std::size_t>(ring_stride_);
   const float threshold = std::pow(10.0f, static_cast<float>(options_.snr_threshold_db) / 20.0f);
@@ -998,8 +1013,8 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
           for (int u = c0; u < c1; ++u)
             dst[u] = static_cast<float>(row[u - begin]) * unit / noise_at(u);
         }
-        const bool searched =
-            r >= std::max(margin_, reach_) && r < rows - std::max(margin_, reach_);
+        const int edge = std::max({margin_, reach_, ridge_});
+        const bool searched = r >= edge && r < rows - edge;
         if (!searched || most[band_slots_[r - band_base]] < lane_threshold) continue;
         // Candidates: maxima of the band-pass within `reach` rows at or above the threshold.
         const std::size_t* rows_at = band_rows_.data() + (r - band_base);
@@ -1018,6 +1033,7 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
         }
         const Lane* up = band(r - 1);
         const Lane* down = band(r + 1);
+
         // From set bit to set bit over the strip's own columns [first, end) (a branch per pixel
         // would mispredict).
         const int first = c0 - begin, end = c1 - begin;
@@ -1028,6 +1044,28 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
           for (; word != 0; word &= word - 1) {
             const int i = w * 64 + std::countr_zero(word);
             const Lane lane = row[i];
+            // A ridge, not an edge: the band-pass a quarter of the peak below zero on both
+            // sides (a line gives a half to three quarters; an edge nothing on its bright side).
+            // Each side: out to where the band-pass crosses zero (farther for a line wider than
+            // the model), then the lowest value within half an outer box beyond.
+            auto lowest = [&](int side) LASERLINE_ROW_LAMBDA {
+              int d = reach_ + 1;
+              while (d < look && band(r + side * d)[i] > 0)
+                ++d;
+              int low = 0;
+              for (const int last_row = std::min(d + ridge_, look); d <= last_row; ++d)
+                low = std::min<int>(low, band(r + side * d)[i]);
+              return low;
+            };
+            const int lowest_up = lowest(-1), lowest_down = lowest(+1);
+            const int needed =
+                glowing_ ? (near_down ? lowest_up : lowest_down) : std::max(lowest_up, lowest_down);
+            // (A clipped core much wider than the model is flat: the band-pass sees its two
+            // flanks as edges. Its run is found and centred by the refinement.)
+            if (4 * needed > -static_cast<int>(lane) &&
+                current_.at(begin + i, static_cast<int>(rows_.source_row(r) + 0.5f)) < saturation) {
+              continue;
+            }
             const int u = begin + i;
             const float value = static_cast<float>(lane) * unit;
             const float snr = value / noise_at(u);
@@ -1475,44 +1513,125 @@ float Frontend::refine_row(int u, float v_guess) const {
   return static_cast<float>(best) + static_cast<float>(spacing) * gaussian_offset(a, b, c);
 }
 
+bool Frontend::water_glows(const ImageView& frame) const {
+  if (probe_count_ == 0 || frame.data == nullptr) return false;
+  // At each point where the line was last found: the mean brightness of the few widths just in
+  // front of it (the near side) and just behind it, and the line's own brightness.
+  const int near = rows_.near_side();
+  std::array<float, kProbes> excess{}, line{};
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < probe_count_; ++i) {
+    const int u = std::clamp(static_cast<int>(std::lround(probes_[i][0])), 0, frame.width - 1);
+    const double v = probes_[i][1];
+    const int w = std::max(1, static_cast<int>(std::lround(rows_.width_px(v))));
+    const int centre = static_cast<int>(std::lround(v));
+    auto mean = [&](int side) {
+      int sum = 0, count = 0;
+      for (int d = w; d <= 4 * w; ++d) {
+        const int r = centre + side * d;
+        if (r < 0 || r >= frame.height) continue;
+        sum += frame.at(u, r);
+        ++count;
+      }
+      return count > 0 ? static_cast<float>(sum) / static_cast<float>(count) : -1.0f;
+    };
+    const float in_front = mean(near), behind = mean(-near);
+    if (in_front < 0 || behind < 0 || centre < 0 || centre >= frame.height) continue;
+    excess[n] = in_front - behind;
+    line[n] = static_cast<float>(frame.at(u, centre)) - behind;
+    ++n;
+  }
+  if (n == 0) return false;
+  const auto middle = static_cast<std::ptrdiff_t>(n / 2);
+  std::nth_element(excess.begin(), excess.begin() + middle, excess.begin() + n);
+  std::nth_element(line.begin(), line.begin() + middle, line.begin() + n);
+  return excess[middle] > 0.5f * std::max(line[middle], 1.0f);
+}
+
 void Frontend::find_candidates(Profile& out) {
+  collect_candidates(out);
+  select_line(out);
+}
+
+void Frontend::collect_candidates(Profile& out) {
   out.clear();
+  glowing_ = water_glows(current_);
   roll(nullptr);
   const int per_column = options_.max_candidates_per_column;
-  std::size_t waiting = 0;  // valid points waiting for their sub-pixel row
-  bool full = false;
-  for (int u = 0; u < width_ && !full; ++u) {
+  for (int u = 0; u < width_; ++u) {
     Peak* best = column_best_.data() + static_cast<std::size_t>(u) * per_column;
+    LineCandidate* line = line_candidates_.data() + static_cast<std::size_t>(u) * per_column;
     const int n = column_count_[u];
     // By row (normalised rows grow with the original rows).
     std::sort(best, best + n, [](const Peak& a, const Peak& b) { return a.r < b.r; });
-    // One laser point per epipolar line: the strongest candidate is the front-end's choice; the
-    // others stay in the profile, not valid, for validation (Section IV) to reconsider.
-    int strongest = 0;
-    for (int i = 1; i < n; ++i)
-      if (best[i].band > best[strongest].band) strongest = i;
     for (int i = 0; i < n; ++i) {
+      // The band-pass peak's row, good to about half a laser width: only the chosen point gets
+      // the sub-pixel fit (the costly part of this stage, done for all columns at the end).
+      line[i].position = rows_.to_source_single(best[i].r);
+      line[i].snr_db = kDecibelsPerNeper * std::log(best[i].snr);  // 20 log10 (cheaper)
+      line[i].amplitude_db = kDecibelsPerNeper * std::log(std::max(best[i].band, 1e-3f));
       ProfilePoint point;
       point.u = u;
-      // Only the chosen point gets the sub-pixel fit (the costly part of this stage, done for
-      // all columns at the end); the others keep the band-pass peak's row, good to about half a
-      // laser width.
-      point.v = rows_.to_source_single(best[i].r);
-      point.snr_db = kDecibelsPerNeper * std::log(best[i].snr);  // 20 log10 (cheaper)
-      point.valid = i == strongest;
-      if (point.valid) {
-        refine_columns_[waiting] = u;
-        refine_guesses_[waiting] = point.v;
-        refine_points_[waiting] = out.size();
-      }
-      if (!out.add(point)) {
-        full = true;
-        break;
-      }
-      if (point.valid) ++waiting;
+      point.v = line[i].position;
+      point.snr_db = line[i].snr_db;
+      point.valid = true;  // eligible, until validation or the line selection says otherwise
+      if (!out.add(point)) break;
     }
   }
-  refine(out.mutable_points(), waiting);
+  collected_ = out.size();
+}
+
+void Frontend::select_line(Profile& out) {
+  // The eligible candidates of each column, in the order collect_candidates() added them.
+  const int per_column = options_.max_candidates_per_column;
+  std::fill(eligible_count_.begin(), eligible_count_.end(), 0);
+  const std::span<ProfilePoint> points = out.mutable_points();
+  const std::size_t collected = std::min(collected_, points.size());
+  for (std::size_t k = 0; k < collected; ++k) {
+    ProfilePoint& p = points[k];
+    if (!p.valid || p.u < 0 || p.u >= width_) continue;
+    const auto u = static_cast<std::size_t>(p.u);
+    const std::size_t slot = u * static_cast<std::size_t>(per_column) + eligible_count_[u];
+    if (eligible_count_[u] == per_column) continue;  // (never: one column gives at most that)
+    const LineCandidate* line = line_candidates_.data() + u * static_cast<std::size_t>(per_column);
+    // The candidate itself: its column's candidates were added in order, by position.
+    for (int i = 0; i < column_count_[u]; ++i) {
+      if (line[i].position == p.v) {
+        eligible_[slot] = line[i];
+        break;
+      }
+    }
+    eligible_point_[slot] = k;
+    ++eligible_count_[u];
+    p.valid = false;
+  }
+  // One laser point per epipolar line; the others stay in the profile, not valid.
+  selector_.select(eligible_, eligible_count_, static_cast<float>(options_.snr_threshold_db),
+                   chosen_);
+  std::size_t waiting = 0;  // valid points waiting for their sub-pixel row
+  for (int u = 0; u < width_; ++u) {
+    const int i = chosen_[static_cast<std::size_t>(u)];
+    if (i < 0) continue;
+    const std::size_t k =
+        eligible_point_[static_cast<std::size_t>(u) * static_cast<std::size_t>(per_column) +
+                        static_cast<std::size_t>(i)];
+    points[k].valid = true;
+    refine_columns_[waiting] = u;
+    refine_guesses_[waiting] = points[k].v;
+    refine_points_[waiting] = k;
+    ++waiting;
+  }
+  refine(points, waiting);
+  // Where the line is now: where the next frame looks for the glow (and the background detector
+  // measures the motion across the line).
+  if (waiting > 0) {
+    const std::size_t step = std::max<std::size_t>(1, waiting / kProbes);
+    probe_count_ = 0;
+    for (std::size_t k = 0; k < waiting && probe_count_ < kProbes; k += step) {
+      const ProfilePoint& p = points[refine_points_[k]];
+      probes_[probe_count_++] = {static_cast<float>(p.u), p.v};
+    }
+  }
 }
 
 void Frontend::refine(std::span<ProfilePoint> points, std::size_t count) const {

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <span>
 #include <type_traits>
@@ -8,6 +9,7 @@
 #include "pipeline/detector.hpp"
 #include "pipeline/geometry.hpp"
 #include "pipeline/image_view.hpp"
+#include "pipeline/line_selection.hpp"
 #include "pipeline/motion.hpp"
 #include "pipeline/profile.hpp"
 
@@ -64,7 +66,9 @@ class RowNormalisation {
 //   noise of row r         III-D: mean |band-pass| around the pixel, a guard band left out
 //                          (summed from the band-pass ring at candidates only)
 //   candidates of row r    III-E: band-pass peaks whose SNR passes the threshold (only pixels
-//                          whose band-pass reaches it can: the noise is at least 1)
+//                          whose band-pass reaches it can: the noise is at least 1) and that are
+//                          ridges (the band-pass negative on both sides: a line, not an edge;
+//                          where the water glows, on the far side: the line ends the glow)
 // The band-pass of row r needs the normalised rows up to r + outer/2 and the noise of row r the
 // band-pass rows up to r + noise_rows/2, so the pass runs that far ahead. stage_images() runs the
 // same pass and keeps every row of the three intermediate images, for tests and pictures.
@@ -96,11 +100,33 @@ class Frontend {
                                   const Homography& current_to_background);
 
   // Local maxima of the band-pass along each column whose SNR passes the threshold, at most
-  // max_candidates_per_column (the strongest). The strongest is the valid point, refined to a
-  // sub-pixel row in the original image (Gaussian 3-point fit on the background-free column; the
-  // centre of the run where the core is clipped); the others are not valid and keep the row of
-  // their band-pass peak, good to half a laser width.
+  // max_candidates_per_column (the strongest). At most one per column is the valid point, chosen
+  // by the line selection (pipeline/line_selection.hpp: SNR, continuity along the line and with
+  // the previous frame's choice), refined to a sub-pixel row in the original image (Gaussian
+  // 3-point fit on the background-free column; the centre of the run where the core is clipped);
+  // the others are not valid and keep the row of their band-pass peak, good to half a laser width.
   void find_candidates(Profile& out);
+  // find_candidates() in two steps, for a validation in between (paper IV): every candidate into
+  // `out` at its band-pass peak's row, all marked valid (eligible); then the line selection among
+  // those still valid, the chosen ones refined. `out` must be the profile collect_candidates()
+  // filled, its points in the same order.
+  void collect_candidates(Profile& out);
+  void select_line(Profile& out);
+  // Forgets the previous frame's candidates, which the line selection favours, and where its
+  // line was (for tests that run the same frame twice).
+  void forget_previous_frame() {
+    selector_.forget();
+    probe_count_ = 0;
+  }
+
+  // Whether the water in front of the surface glows (backscatter) in `frame` (the original
+  // frame), next to where the line was last found: a brightness that ends at the line on its near
+  // side (the side where the sheet is nearer the camera) for at least half the line's contrast.
+  // Texture is as bright on either side. Then the line is the end of a step rather than a ridge.
+  bool water_glows(const ImageView& frame) const;
+  // Where the line was last found (search coordinates: column, row), at most kProbes points.
+  static constexpr std::size_t kProbes = 32;
+  std::span<const std::array<float, 2>> probes() const { return {probes_.data(), probe_count_}; }
 
   // The intermediate images of the frame set last, rows() x stride() floats each (any may be
   // empty, then it is not kept): normalised image (grey levels), band-pass (III-C), SNR (III-D:
@@ -177,7 +203,11 @@ class Frontend {
   RowNormalisation rows_;
   int inner_ = 3, outer_ = 9;  // band-pass boxes, normalised rows (odd)
   int guard_ = 5, noise_half_ = 15, noise_pad_ = 4;
-  int reach_ = 2;   // a candidate is the maximum within this many rows up and down
+  int reach_ = 2;         // a candidate is the maximum within this many rows up and down
+  int ridge_ = 5;         // ... and the band-pass goes negative within this many rows of its zero
+  bool glowing_ = false;  // the frame's water glows in front of the line (water_glows())
+  std::array<std::array<float, 2>, kProbes> probes_{};
+  std::size_t probe_count_ = 0;
   int margin_ = 6;  // normalised rows beyond the depth range on each side (for the filters)
   float noise_norm_ = 1;
   double half_per_normalised_width_ = 0.5;  // 0.5 / normalised_width_px (refine_row())
@@ -237,6 +267,16 @@ class Frontend {
   };
   std::vector<Peak> column_best_;  // max_candidates_per_column per column
   std::vector<std::uint8_t> column_count_;
+  // The candidates as the line selection sees them (by row within each column), its choice.
+  std::vector<LineCandidate> line_candidates_;
+  // The eligible ones (still valid in the profile when select_line() runs) by column, and where
+  // each is in the profile.
+  std::vector<LineCandidate> eligible_;
+  std::vector<std::uint8_t> eligible_count_;
+  std::vector<std::size_t> eligible_point_;
+  std::size_t collected_ = 0;  // points collect_candidates() put in the profile
+  std::vector<int> chosen_;
+  LineSelector selector_;
   // The valid points waiting for refine_row(): column, guess, index in the profile.
   std::vector<int> refine_columns_;
   std::vector<float> refine_guesses_;

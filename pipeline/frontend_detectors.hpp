@@ -48,6 +48,11 @@ class BackgroundDetector final : public Detector {
   std::size_t max_points(int width, int height) const override;
   void reset(int width, int height) override;
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override;
+  // detect() in two steps, for a validation in between (BackprojectionDetector): the frame's
+  // candidates, all eligible (Frontend::collect_candidates()); then the line among those still
+  // eligible (Frontend::select_line()).
+  void collect_candidates(const ImageView& image, const FrameContext& frame, Profile& out);
+  void select_line(Profile& out) { frontend_.select_line(out); }
 
   const Frontend& frontend() const { return frontend_; }
   const MotionEstimator& motion() const { return motion_; }
@@ -71,9 +76,6 @@ class BackgroundDetector final : public Detector {
     double across = 0, toward_far = 0;
   };
   Motion motion_across_line(const History& h) const;
-  // Whether the water in front of the surface glows (backscatter) in `image`, next to where the
-  // line was last seen.
-  bool glow_before_line(const ImageView& image) const;
 
   Frontend frontend_;
   ScannerGeometry geometry_;
@@ -82,10 +84,8 @@ class BackgroundDetector final : public Detector {
   MotionEstimator motion_;
   MotionEstimate last_motion_;
   std::vector<History> history_;
-  int newest_ = -1;                           // index in history_ of the last frame kept
-  int band_first_ = 0, band_rows_ = 0;        // which rows of a frame are kept
-  std::vector<std::array<float, 2>> probes_;  // where the line was last seen (u, v)
-  std::size_t probe_count_ = 0;
+  int newest_ = -1;                     // index in history_ of the last frame kept
+  int band_first_ = 0, band_rows_ = 0;  // which rows of a frame are kept
   int width_ = 0, height_ = 0;
 };
 

@@ -298,7 +298,7 @@ void LineValidator::reset(int width, int height, std::size_t max_points) {
   scratch_.reset(max_points);
   residuals_.assign(max_points, 0.0f);
   image_motion_.assign(max_points, 0.0f);
-  front_end_valid_.assign(max_points, 0);
+  eligible_.assign(max_points, 0);
   if (options_.association == SegmentAssociation::image_features) {
     previous_image_.assign(static_cast<std::size_t>(width) * height, 0);
   }
@@ -318,8 +318,8 @@ void LineValidator::validate(Profile& profile, const PairMotion& motion, const I
   motions_[current_] = motion;
   segment_candidates(profile, options_, frame, scratch_);
   const std::vector<ProfilePoint>& candidates = profile.points();
-  for (std::size_t i = 0; i < candidates.size() && i < front_end_valid_.size(); ++i)
-    front_end_valid_[i] = candidates[i].valid ? 1 : 0;
+  for (std::size_t i = 0; i < candidates.size() && i < eligible_.size(); ++i)
+    eligible_[i] = candidates[i].valid ? 1 : 0;
 
   // Tracks run over frames with candidates linked by a motion estimate (a frame without candidates,
   // e.g. a laser-off one, breaks them).
@@ -345,13 +345,13 @@ void LineValidator::validate(Profile& profile, const PairMotion& motion, const I
   }
 
   // The verdict: candidates outside any segment are noise, those of background segments are not
-  // laser. Every other candidate keeps the front-end's verdict.
+  // laser. Every other candidate stays eligible (valid) for the line selection that follows.
   const std::span<ProfilePoint> points = profile.mutable_points();
   for (ProfilePoint& p : points) {
     p.segment = -1;
     p.valid = false;
   }
-  // Validation only takes points away: the front-end's verdict of the others stands.
+  // Validation only takes points away: the front-end's eligibility of the others stands.
   for (std::size_t s = 0; s < frame.segments.size(); ++s) {
     const LineSegment& seg = frame.segments[s];
     for (int i = seg.first; i < seg.first + seg.count; ++i) {
@@ -365,7 +365,7 @@ void LineValidator::validate(Profile& profile, const PairMotion& motion, const I
     for (int i = seg.first; i < seg.first + seg.count; ++i) {
       const SegmentPoint& sp = frame.points[i];
       points[static_cast<std::size_t>(sp.profile_index)].valid =
-          front_end_valid_[static_cast<std::size_t>(sp.profile_index)] != 0;
+          eligible_[static_cast<std::size_t>(sp.profile_index)] != 0;
     }
   }
 

@@ -157,12 +157,12 @@ bool back_project(const ScannerGeometry& camera, const PairMotion& first, const 
 // three frames, back-projects it into frame n and marks the points of segments consistent with the
 // static scene as not valid (background). Points of short segments (noise) are not valid either,
 // nor (chain_code with require_track) those of segments not tracked over the frames seen so far or
-// moving across the line more than the laser can. Without a camera motion (and relative scale)
-// segments keep the front-end's verdict. Every candidate gets its segment id (-1: none), its index
-// in segments() of that frame. The verdict for frame n is
-// given when frame n is processed, from n-2, n-1 and n: a fixed latency of zero frames, with two
-// frames of history. reset() allocates; validate() does not.
-// Thread context: one thread at a time per instance.
+// moving across the line more than the laser can. The others keep their validity (eligible for
+// the line selection that follows in BackprojectionDetector). Without a camera motion (and relative
+// scale) segments keep the front-end's verdict. Every candidate gets its segment id (-1: none), its
+// index in segments() of that frame. The verdict for frame n is given when frame n is processed,
+// from n-2, n-1 and n: a fixed latency of zero frames, with two frames of history. reset()
+// allocates; validate() does not. Thread context: one thread at a time per instance.
 class LineValidator {
  public:
   LineValidator(const ScannerGeometry& geometry, const ValidationOptions& options);
@@ -207,9 +207,9 @@ class LineValidator {
   int current_ = 0;
   int history_ = 0;  // consecutive frames with motion, up to 3
   SegmentationScratch scratch_;
-  std::vector<float> residuals_;               // per point of a segment: back-projection error
-  std::vector<float> image_motion_;            // and its image motion over the three frames
-  std::vector<std::uint8_t> front_end_valid_;  // per candidate, as the front-end gave it
+  std::vector<float> residuals_;        // per point of a segment: back-projection error
+  std::vector<float> image_motion_;     // and its image motion over the three frames
+  std::vector<std::uint8_t> eligible_;  // per candidate, as it came in
   // image_features: the previous original frame.
   std::vector<std::uint8_t> previous_image_;
   int width_ = 0, height_ = 0;

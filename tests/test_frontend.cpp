@@ -295,7 +295,7 @@ TEST(Frontend, IntrinsicsAndPortableKernelsFindTheSameCandidates) {
     background.pixels[i] = static_cast<std::uint8_t>(40 + (state >> 28) * 3);
   }
   auto line = [](int u) { return 90.0 + 0.2 * u; };
-  current.add_line(line, 120.0, 2.0);
+  current.add_line(line, 120.0, 1.0);  // about as wide as the model (f l_w / Z ~ 1 px)
   // Over the right half a brighter line whose core clips: the refinement's other path.
   auto clipped = [](int u) { return u < 160 ? -1000.0 : 40.0 + 0.1 * u; };
   current.add_line(clipped, 600.0, 2.5);
@@ -312,6 +312,7 @@ TEST(Frontend, IntrinsicsAndPortableKernelsFindTheSameCandidates) {
     frontend.set_frame_minus_background(current.view(), background.view(), h);
     frontend.find_candidates(with_intrinsics);
     frontend.use_intrinsics(false);
+    frontend.forget_previous_frame();  // the same frame again, not its successor
     frontend.find_candidates(portable);
     ASSERT_EQ(with_intrinsics.size(), portable.size());
     EXPECT_GT(portable.size(), static_cast<std::size_t>(g.width));  // many, some not valid
@@ -464,21 +465,30 @@ TEST(Accuracy, BackgroundSubtractionWinsUnderStrongAmbientLight) {
     EXPECT_GE(background.recall(), 0.98) << scenario;
     EXPECT_GE(background.precision(), 0.99) << scenario;
   }
-  // Where the maximum-value assumption fails, the simple detectors visibly do.
+  // Where the maximum-value assumption fails, the brightest pixel visibly does, and the band-pass
+  // on the frame itself (texture as bright as the laser, no background taken away) falls short.
   EXPECT_LT(score("ambient", "maxvalue").recall(), 0.6);
-  EXPECT_LT(score("ambient", "fir").recall(), 0.6);
+  EXPECT_LT(score("ambient", "fir").recall(), 0.9);
 }
 
-TEST(Accuracy, ParallaxOnThePierLeavesBackgroundFalsePositives) {
+TEST(Accuracy, ParallaxOnThePierLeavesFewFalsePointsAndValidationRemovesSome) {
   // On bumps and piles seen from a moving vehicle no homography aligns the previous frame:
-  // `background` keeps finding the line but also keeps texture edges on the relief, which is what
-  // the validation stage is there to remove. (Should the scene drift, that test loses its point.)
+  // `background` keeps texture edges on the relief among its candidates, and the line selection
+  // keeps most of them out; validating the candidates first (Section IV, before the selection)
+  // removes about half of the rest: the texture it tracks as static scene, not the points a few
+  // pixels off the line at the relief's edges.
   const tools::Score background = score("pier", "background");
-  EXPECT_GE(background.recall(), 0.85);
-  EXPECT_LE(background.precision(), 0.95);
-  EXPECT_GE(background.points - background.correct_points, 1000);
+  const tools::Score validated = score("pier", "backprojection");
+  const long kept = background.points - background.correct_points;
+  const long left = validated.points - validated.correct_points;
+  std::printf("pier: background keeps %ld false points, backprojection %ld (%.1f %% removed)\n",
+              kept, left, 100.0 * static_cast<double>(kept - left) / static_cast<double>(kept));
+  EXPECT_GE(background.recall(), 0.965);
+  EXPECT_GE(background.precision(), 0.985);
+  EXPECT_LE(static_cast<double>(left), 0.6 * static_cast<double>(kept));
+  EXPECT_GE(validated.recall(), background.recall() - 0.01);
+  EXPECT_GE(validated.precision(), 0.99);
   EXPECT_LT(score("pier", "maxvalue").recall(), 0.6);
-  EXPECT_LT(score("pier", "fir").recall(), 0.6);
 }
 
 TEST(Accuracy, BandPassFindsTheLineInBackscatterAtTheLowestThreshold) {

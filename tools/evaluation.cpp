@@ -104,8 +104,9 @@ std::vector<Scenario> standard_scenarios(int width, int height) {
   }
   {
     Scenario s{"hover",
-               "daylight on a textured wall, the vehicle holding station: the camera moves by "
-               "millimetres and hundredths of a degree between frames",
+               "daylight on a textured wall, the vehicle holding station without scanning: it "
+               "sways by a centimetre and a few tenths of a degree over seconds, under a pixel "
+               "between frames",
                base};
     s.scene.ambient = 150;
     s.scene.texture_contrast = 0.6;
@@ -113,9 +114,6 @@ std::vector<Scenario> standard_scenarios(int width, int height) {
     s.scene.noise_sigma = 2.0;
     s.scene.seed = 19;
     s.scene.scan_rate_deg_s = 0;
-    s.scene.sway_m = 0.003;
-    s.scene.sway_deg = 0.05;
-    s.scene.sway_period_s = 6.0;
     out.push_back(s);
   }
   {

@@ -166,6 +166,7 @@ void find_laser(BoardView& bv, const PlaneCalibrationOptions& o, const hal::Came
   image.setTo(0, outside);
   const pipeline::ImageView iv{image.data, image.cols, image.rows, static_cast<int>(image.step)};
   profile.clear();
+  detector.reset(image.cols, image.rows);  // each view on its own: no previous frame to follow
   detector.detect(iv, pipeline::FrameContext{0, true}, profile);
 
   std::vector<cv::Point2d> raw;

@@ -1,0 +1,73 @@
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace laserline::pipeline {
+
+// How the one point of each epipolar line is chosen among its candidates (paper II: one true match
+// per epipolar line). Every candidate passed the SNR threshold (paper III-E); among them the laser
+// is the one that adds the most light within its width (band-pass amplitude, not SNR: an edge on
+// a flat surface has a high SNR from little light), it forms one curve across the lines,
+// continuous except where the depth jumps, and it stays where it was in the previous frame while
+// texture moves with the scene. So the choice maximises, over all ways of picking at most one
+// candidate per line,
+//   sum of (amplitude in dB - threshold, + previous_bonus_db where the previous frame had a
+//           candidate within previous_tolerance_px on that line)
+//   - (jump beyond jump_free_px per line step) * jump_cost_db_per_px - skipped lines * gap_cost_db
+//   - restart_cost_db for every new piece of curve,
+// by dynamic programming along the lines (as industrial profile sensors trace their line). A piece
+// of curve apart from the rest is kept only when its points earn twice restart_cost_db.
+struct LineSelectionOptions {
+  bool enabled = true;  // false: the strongest candidate of each line
+  // The laser line is one curve; a new piece (after a jump of the depth, or elsewhere) must earn
+  // this much (about five strong points' worth) to be kept: isolated texture and glints rarely do.
+  double restart_cost_db = 100.0;
+  double jump_free_px = 2.0;
+  double jump_cost_db_per_px = 2.0;
+  double gap_cost_db = 1.0;
+  int max_gap = 16;  // lines a piece of curve can skip (a dark patch, an occlusion)
+  double previous_bonus_db = 6.0;
+  double previous_tolerance_px = 2.5;
+};
+
+// A candidate of one epipolar line: its position along the line (original pixels), SNR and
+// amplitude (20 log10 of the band-pass, grey levels).
+struct LineCandidate {
+  float position = 0;
+  float snr_db = 0;
+  float amplitude_db = 0;
+};
+
+// The dynamic programming of LineSelectionOptions. reset() allocates; select() does not.
+// Thread context: one thread at a time per instance.
+class LineSelector {
+ public:
+  explicit LineSelector(const LineSelectionOptions& options = {});
+
+  const LineSelectionOptions& options() const { return options_; }
+  // `lines` epipolar lines of at most `per_line` candidates each; forgets the previous frame.
+  void reset(int lines, int per_line);
+  // candidates[line * per_line + i] for i < counts[line], each line's sorted by position; writes
+  // chosen[line] = the index of its chosen candidate, or -1. threshold_db: the SNR a candidate
+  // needed (its amplitude is at least that, in grey levels: the noise is at least 1). Remembers
+  // the candidates as the previous frame's.
+  void select(std::span<const LineCandidate> candidates, std::span<const std::uint8_t> counts,
+              float threshold_db, std::span<int> chosen);
+  // Forgets the previous frame (e.g. after a frame without points of its own).
+  void forget();
+
+ private:
+  LineSelectionOptions options_;
+  int lines_ = 0, per_line_ = 0;
+  std::vector<float> score_;             // per candidate: the best total of a path ending there
+  std::vector<std::int32_t> from_;       // per candidate: its predecessor on that path, -1 none
+  std::vector<float> prefix_best_;       // per line: the best total of any path before it (>= 0)
+  std::vector<std::int32_t> prefix_at_;  // ... and the candidate it ends at, -1 the empty path
+  std::vector<float> previous_;          // per line: the previous frame's candidates' positions
+  std::vector<std::uint8_t> previous_count_;
+  bool has_previous_ = false;
+};
+
+}  // namespace laserline::pipeline
