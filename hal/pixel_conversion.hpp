@@ -69,8 +69,8 @@ class PixelConverter {
   // Bytes of one packed source row (a buffer's rows may be longer: src_stride).
   std::size_t row_bytes() const;
 
-  // `src`: height rows of src_stride bytes each (2-byte aligned for 16-bit samples); `dst`: height
-  // rows of dst_stride bytes, width of them written.
+  // `src`: height rows of src_stride bytes each; `dst`: height rows of dst_stride bytes, width of
+  // them written.
   void convert(const std::uint8_t* src, std::size_t src_stride, std::uint8_t* dst,
                std::size_t dst_stride) const noexcept;
 
