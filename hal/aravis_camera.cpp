@@ -71,6 +71,15 @@ const std::vector<std::string>& aravis_pixel_formats() {
   return names;
 }
 
+std::string aravis_pixel_format_problem(const AravisCameraOptions& options) {
+  for (const auto& f : kPixelFormats) {
+    if (options.pixel_format == f.name) {
+      return conversion_problem(f.source, options.width, options.height);
+    }
+  }
+  return "not a format this backend takes";
+}
+
 AravisCamera::AravisCamera(AravisCameraOptions options) : options_(std::move(options)) {
   format_.width = options_.width;
   format_.height = options_.height;
@@ -91,17 +100,11 @@ void AravisCamera::on_control_lost(_ArvDevice* /*device*/, void* self) {
 
 bool AravisCamera::open(std::string* error) {
   disconnect();
-  const std::string format_key = "pixel_format '" + options_.pixel_format + "': ";
-  if (pixel_format_index_ < 0) {
-    if (error != nullptr) *error = format_key + "not a format this backend takes";
+  if (const std::string problem = aravis_pixel_format_problem(options_); !problem.empty()) {
+    if (error != nullptr) *error = "pixel_format '" + options_.pixel_format + "': " + problem;
     return false;
   }
   const SourceFormat& source = kPixelFormats[pixel_format_index_].source;
-  if (const std::string problem = conversion_problem(source, options_.width, options_.height);
-      !problem.empty()) {
-    if (error != nullptr) *error = format_key + problem;
-    return false;
-  }
   converter_ = PixelConverter(source, options_.width, options_.height, options_.channel);
   payload_bytes_ = converter_.row_bytes() * static_cast<std::size_t>(options_.height);
   memory_.assign(static_cast<std::size_t>(options_.buffers),

@@ -49,6 +49,9 @@ struct AravisCameraOptions {
 
 // The pixel formats the aravis backend takes, by their GenICam (SFNC) names.
 const std::vector<std::string>& aravis_pixel_formats();
+// Empty when the backend takes `options.pixel_format` at the options' size; otherwise why not, one
+// line (a mosaic needs 2x2 pixels, YUYV an even width). open() checks it too.
+std::string aravis_pixel_format_problem(const AravisCameraOptions& options);
 
 // A GigE Vision (or USB3 Vision) camera through Aravis 0.8.
 //

@@ -68,6 +68,9 @@ std::unique_ptr<Camera> create_aravis_camera(const CameraRequest& request) {
       o.features.emplace_back(f.first.as<std::string>(), f.second.Scalar());
     }
   }
+  if (const std::string problem = aravis_pixel_format_problem(o); !problem.empty()) {
+    c.fail("pixel_format", problem);
+  }
   o.channel = request.channel;
   o.lost_after_ms = static_cast<int>(c.integer("lost_after_ms", o.lost_after_ms, 100, 60000));
   o.reconnect_min_ms =
@@ -87,6 +90,9 @@ std::unique_ptr<Camera> create_v4l2_camera(const CameraRequest& request) {
   o.height = static_cast<int>(c.integer("height", request.calibration->camera.height, 1, 65535));
   o.frame_rate_hz = c.number("frame_rate_hz", 30.0, 0.1, 1000.0);
   o.buffers = static_cast<int>(c.integer("buffers", o.buffers, 2, 32));
+  if (const std::string problem = v4l2_pixel_format_problem(o); !problem.empty()) {
+    c.fail("pixel_format", problem);
+  }
   o.channel = request.channel;
   o.reconnect_min_ms =
       static_cast<int>(c.integer("reconnect_min_ms", o.reconnect_min_ms, 10, 60000));

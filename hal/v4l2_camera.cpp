@@ -107,6 +107,15 @@ const std::vector<std::string>& v4l2_pixel_formats() {
   return names;
 }
 
+std::string v4l2_pixel_format_problem(const V4l2CameraOptions& options) {
+  for (const auto& f : kPixelFormats) {
+    if (options.pixel_format == f.name) {
+      return conversion_problem(f.source, options.width, options.height);
+    }
+  }
+  return "not a format this backend takes";
+}
+
 V4l2Camera::V4l2Camera(V4l2CameraOptions options) : options_(std::move(options)) {
   format_.width = options_.width;
   format_.height = options_.height;
@@ -142,15 +151,11 @@ bool V4l2Camera::connect(std::string* error) {
     return fail(what + ": " + std::strerror(errno));
   };
 
-  if (pixel_format_index_ < 0) {
-    return fail("pixel_format '" + options_.pixel_format + "': not a format this backend takes");
+  if (const std::string problem = v4l2_pixel_format_problem(options_); !problem.empty()) {
+    return fail("pixel_format '" + options_.pixel_format + "': " + problem);
   }
   const V4l2PixelFormat& wanted = kPixelFormats[pixel_format_index_];
   SourceFormat source = wanted.source;
-  if (const std::string problem = conversion_problem(source, options_.width, options_.height);
-      !problem.empty()) {
-    return fail("pixel_format '" + options_.pixel_format + "': " + problem);
-  }
 
   fd_ = ::open(path.c_str(), O_RDWR | O_NONBLOCK | O_CLOEXEC);
   if (fd_ < 0) return fail_errno("cannot open");

@@ -28,6 +28,9 @@ struct V4l2CameraOptions {
 
 // The pixel formats the v4l2 backend takes (names of the V4L2_PIX_FMT_ macros).
 const std::vector<std::string>& v4l2_pixel_formats();
+// Empty when the backend takes `options.pixel_format` at the options' size; otherwise why not, one
+// line (a mosaic needs 2x2 pixels, YUYV an even width). open() checks it too.
+std::string v4l2_pixel_format_problem(const V4l2CameraOptions& options);
 
 // A V4L2 capture device with mmap streaming (REQBUFS / QBUF / poll / DQBUF).
 //

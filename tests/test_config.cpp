@@ -351,6 +351,13 @@ TEST(Config, HardwareBackendOptionsAreValidatedWithoutHardware) {
               "")
         << format;
   }
+  EXPECT_EQ(error_of(size + "camera: {backend: aravis, pixel_format: BayerGB8, width: 1}\n"),
+            "test.yaml:2: camera.pixel_format: a Bayer mosaic needs at least 2x2 pixels, got "
+            "1x480");
+  EXPECT_EQ(error_of("calibration: {camera: {width: 641, height: 480}}\n"
+                     "camera: {backend: v4l2, device: /dev/video2, pixel_format: YUYV}\n"),
+            "test.yaml:2: camera.pixel_format: YUYV needs an even width (pixels come in pairs), "
+            "got 641x480");
   EXPECT_EQ(error_of(size + "camera:\n  backend: v4l2\n  width: 320\n"),
             "test.yaml: calibration.camera: size 640x480 differs from the camera's 320x480");
   EXPECT_EQ(error_of("laser:\n  mode: pattern\n"),
