@@ -1,6 +1,5 @@
 #include "hal/pixel_conversion.hpp"
 
-#include <algorithm>
 #include <bit>
 #include <cstring>
 #include <stdexcept>

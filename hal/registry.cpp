@@ -27,6 +27,8 @@ struct LaserEntry {
   LaserFactory create;
 };
 
+// The simulator renders mono frames for now: it takes no channel (request.channel is there for
+// when it renders colour).
 std::unique_ptr<Camera> create_sim_camera(const CameraRequest& request) {
   const double rate = request.options->number("frame_rate_hz", 30.0, 0.1, 1000.0);
   YamlMap sim = request.options->map("sim");

@@ -25,32 +25,7 @@ inline PatternColour pattern_colour(std::uint32_t x, std::uint32_t y, std::uint3
           static_cast<std::uint8_t>((3 * x + 3 * y + 7 * sequence + 170) & 0xff)};
 }
 
-// The formats the stand-in serves, and their sizes.
-inline bool pattern_format_known(std::uint32_t fourcc) {
-  switch (fourcc) {
-    case V4L2_PIX_FMT_GREY:
-    case V4L2_PIX_FMT_Y16:
-    case V4L2_PIX_FMT_YUYV:
-    case V4L2_PIX_FMT_RGB24:
-    case V4L2_PIX_FMT_BGR24:
-    case V4L2_PIX_FMT_SRGGB8:
-    case V4L2_PIX_FMT_SGRBG8:
-    case V4L2_PIX_FMT_SGBRG8:
-    case V4L2_PIX_FMT_SBGGR8:
-    case V4L2_PIX_FMT_SRGGB12:
-    case V4L2_PIX_FMT_SGRBG12:
-    case V4L2_PIX_FMT_SGBRG12:
-    case V4L2_PIX_FMT_SBGGR12:
-    case V4L2_PIX_FMT_SRGGB16:
-    case V4L2_PIX_FMT_SGRBG16:
-    case V4L2_PIX_FMT_SGBRG16:
-    case V4L2_PIX_FMT_SBGGR16:
-      return true;
-    default:
-      return false;
-  }
-}
-
+// Bytes per pixel of a packed row.
 inline std::uint32_t pattern_bytes_per_pixel(std::uint32_t fourcc) {
   switch (fourcc) {
     case V4L2_PIX_FMT_GREY:
