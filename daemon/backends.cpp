@@ -26,7 +26,8 @@ Backends create_backends(DaemonConfig& config) {
   }
   config.laser_options.finish();
 
-  hal::CameraRequest request{&config.camera_options, &config.calibration, b.laser.get()};
+  hal::CameraRequest request{&config.camera_options, &config.calibration, b.laser.get(),
+                             config.laser_channel};
   b.camera = hal::make_camera(config.camera_backend, request);
   if (!b.camera) {
     config.camera_options.fail("backend", "unknown camera backend '" + config.camera_backend +

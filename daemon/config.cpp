@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <stdexcept>
 
 namespace laserline::daemon {
 
@@ -205,6 +206,11 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
   c.camera_backend = camera.string("backend", c.camera_backend);
   c.frame_rate_hz = camera.number("frame_rate_hz", c.frame_rate_hz, 0.1, 1000.0);
   c.grab_timeout_ms = static_cast<int>(camera.integer("timeout_ms", c.grab_timeout_ms, 10, 60000));
+  try {
+    c.laser_channel = hal::parse_laser_channel(camera.string("channel", c.laser_channel.text));
+  } catch (const std::invalid_argument& e) {
+    camera.fail("channel", e.what());
+  }
   // The backend reads the rest of the section (and rejects unknown keys) when it is created.
   c.camera_options = camera;
 

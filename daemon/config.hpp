@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "hal/calibration.hpp"
+#include "hal/laser_channel.hpp"
 #include "hal/yaml_reader.hpp"
 #include "pipeline/detector.hpp"
 
@@ -42,6 +43,9 @@ struct DaemonConfig {
   std::string camera_backend = "sim";
   double frame_rate_hz = 30.0;
   int grab_timeout_ms = 1000;
+  // camera.channel: the laser's light in colour frames (weights of red, green, blue), handed to
+  // the camera backend, which converts its frames with it.
+  hal::LaserChannel laser_channel;
   // The `camera:` section with the keys above read; the backend reads the rest when created.
   hal::YamlMap camera_options;
 

@@ -4,7 +4,6 @@
 #include <time.h>
 
 #include <algorithm>
-#include <cstring>
 
 #include "hal/clock.hpp"
 
@@ -27,6 +26,34 @@ std::string take_error(GError*& error) {
   return message;
 }
 
+// A pixel format as the user names it, the GenICam names to ask the camera for (the SFNC name,
+// then the older one some cameras still use), and its layout.
+struct AravisPixelFormat {
+  const char* name;
+  const char* genicam_names[2];
+  SourceFormat source;
+};
+
+constexpr AravisPixelFormat kPixelFormats[] = {
+    {"Mono8", {"Mono8", nullptr}, {PixelLayout::kMono, 8}},
+    {"Mono12", {"Mono12", nullptr}, {PixelLayout::kMono, 12}},
+    {"Mono16", {"Mono16", nullptr}, {PixelLayout::kMono, 16}},
+    {"BayerRG8", {"BayerRG8", nullptr}, {PixelLayout::kBayerRggb, 8}},
+    {"BayerGR8", {"BayerGR8", nullptr}, {PixelLayout::kBayerGrbg, 8}},
+    {"BayerGB8", {"BayerGB8", nullptr}, {PixelLayout::kBayerGbrg, 8}},
+    {"BayerBG8", {"BayerBG8", nullptr}, {PixelLayout::kBayerBggr, 8}},
+    {"BayerRG12", {"BayerRG12", nullptr}, {PixelLayout::kBayerRggb, 12}},
+    {"BayerGR12", {"BayerGR12", nullptr}, {PixelLayout::kBayerGrbg, 12}},
+    {"BayerGB12", {"BayerGB12", nullptr}, {PixelLayout::kBayerGbrg, 12}},
+    {"BayerBG12", {"BayerBG12", nullptr}, {PixelLayout::kBayerBggr, 12}},
+    {"BayerRG16", {"BayerRG16", nullptr}, {PixelLayout::kBayerRggb, 16}},
+    {"BayerGR16", {"BayerGR16", nullptr}, {PixelLayout::kBayerGrbg, 16}},
+    {"BayerGB16", {"BayerGB16", nullptr}, {PixelLayout::kBayerGbrg, 16}},
+    {"BayerBG16", {"BayerBG16", nullptr}, {PixelLayout::kBayerBggr, 16}},
+    {"RGB8", {"RGB8", "RGB8Packed"}, {PixelLayout::kRgb, 8}},
+    {"BGR8", {"BGR8", "BGR8Packed"}, {PixelLayout::kBgr, 8}},
+};
+
 void sleep_ns(std::int64_t ns) {
   const timespec ts{static_cast<time_t>(ns / 1'000'000'000), static_cast<long>(ns % 1'000'000'000)};
   nanosleep(&ts, nullptr);
@@ -34,12 +61,33 @@ void sleep_ns(std::int64_t ns) {
 
 }  // namespace
 
+const std::vector<std::string>& aravis_pixel_formats() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> list;
+    for (const auto& f : kPixelFormats)
+      list.emplace_back(f.name);
+    return list;
+  }();
+  return names;
+}
+
+std::string aravis_pixel_format_problem(const AravisCameraOptions& options) {
+  for (const auto& f : kPixelFormats) {
+    if (options.pixel_format == f.name) {
+      return conversion_problem(f.source, options.width, options.height);
+    }
+  }
+  return "not a format this backend takes";
+}
+
 AravisCamera::AravisCamera(AravisCameraOptions options) : options_(std::move(options)) {
   format_.width = options_.width;
   format_.height = options_.height;
   format_.stride = options_.width;
   format_.pixel_format = PixelFormat::kMono8;
-  bytes_per_pixel_ = options_.pixel_format == "Mono8" ? 1 : 2;
+  for (std::size_t i = 0; i < std::size(kPixelFormats); ++i) {
+    if (options_.pixel_format == kPixelFormats[i].name) pixel_format_index_ = static_cast<int>(i);
+  }
 }
 
 AravisCamera::~AravisCamera() {
@@ -52,9 +100,13 @@ void AravisCamera::on_control_lost(_ArvDevice* /*device*/, void* self) {
 
 bool AravisCamera::open(std::string* error) {
   disconnect();
-  payload_bytes_ = static_cast<std::size_t>(options_.width) *
-                   static_cast<std::size_t>(options_.height) *
-                   static_cast<std::size_t>(bytes_per_pixel_);
+  if (const std::string problem = aravis_pixel_format_problem(options_); !problem.empty()) {
+    if (error != nullptr) *error = "pixel_format '" + options_.pixel_format + "': " + problem;
+    return false;
+  }
+  const SourceFormat& source = kPixelFormats[pixel_format_index_].source;
+  converter_ = PixelConverter(source, options_.width, options_.height, options_.channel);
+  payload_bytes_ = converter_.row_bytes() * static_cast<std::size_t>(options_.height);
   memory_.assign(static_cast<std::size_t>(options_.buffers),
                  std::vector<std::uint8_t>(payload_bytes_, 0));
   stopped_.store(false, std::memory_order_release);
@@ -79,8 +131,22 @@ bool AravisCamera::configure(std::string* error) {
   // trigger, timing, then the user's own features.
   arv_camera_stop_acquisition(camera, &e);
   g_clear_error(&e);
-  arv_camera_set_pixel_format_from_string(camera, options_.pixel_format.c_str(), &e);
-  if (failed("pixel_format '" + options_.pixel_format + "'")) return false;
+  // The first of the format's GenICam names the camera takes; the first refusal is reported.
+  std::string refusal;
+  for (const char* name : kPixelFormats[pixel_format_index_].genicam_names) {
+    if (name == nullptr) break;
+    arv_camera_set_pixel_format_from_string(camera, name, &e);
+    if (e == nullptr) {
+      refusal.clear();
+      break;
+    }
+    const std::string message = take_error(e);
+    if (refusal.empty()) refusal = message;
+  }
+  if (!refusal.empty()) {
+    if (error != nullptr) *error = "pixel_format '" + options_.pixel_format + "': " + refusal;
+    return false;
+  }
   arv_camera_set_region(camera, 0, 0, options_.width, options_.height, &e);
   if (failed("width/height " + std::to_string(options_.width) + "x" +
              std::to_string(options_.height))) {
@@ -327,17 +393,8 @@ GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
       continue;
     }
 
-    if (bytes_per_pixel_ == 1) {
-      std::memcpy(dst.data(), data, payload_bytes_);
-    } else {
-      // 16-bit little-endian samples, MSB-aligned for Mono16 and right-aligned for Mono12.
-      const int shift = options_.pixel_format == "Mono12" ? 4 : 8;
-      const std::size_t pixels = payload_bytes_ / 2;
-      for (std::size_t i = 0; i < pixels; ++i) {
-        const auto v = static_cast<unsigned>(data[2 * i] | (data[2 * i + 1] << 8));
-        dst[i] = static_cast<std::uint8_t>(std::min(v >> shift, 255u));
-      }
-    }
+    converter_.convert(data, converter_.row_bytes(), dst.data(),
+                       static_cast<std::size_t>(format_.stride));
     const auto camera_ns = static_cast<std::int64_t>(arv_buffer_get_timestamp(buffer));
     const std::uint64_t frame_id = arv_buffer_get_frame_id(buffer);
     arv_stream_push_buffer(stream_, buffer);

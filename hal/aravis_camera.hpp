@@ -7,6 +7,8 @@
 #include <vector>
 
 #include "hal/camera.hpp"
+#include "hal/laser_channel.hpp"
+#include "hal/pixel_conversion.hpp"
 
 struct _ArvCamera;
 struct _ArvStream;
@@ -22,8 +24,11 @@ enum class AravisTrigger : std::uint8_t {
 
 struct AravisCameraOptions {
   std::string device;  // device id, serial number or IP address; "" = the first found
-  std::string pixel_format = "Mono8";  // Mono8, or Mono12 / Mono16 (delivered as their top 8 bits)
-  int width = 0;                       // region of interest; width/height = the calibrated size
+  // One of aravis_pixel_formats(): Mono8, Mono12 / Mono16 (their top 8 bits), the Bayer mosaics
+  // BayerRG8, BayerGR8, BayerGB8, BayerBG8 (and their 12 and 16-bit forms), RGB8, BGR8.
+  std::string pixel_format = "Mono8";
+  LaserChannel channel;  // the laser's light in colour frames (hal/pixel_conversion.hpp)
+  int width = 0;         // region of interest; width/height = the calibrated size
   int height = 0;
   int offset_x = 0;
   int offset_y = 0;
@@ -42,7 +47,17 @@ struct AravisCameraOptions {
   int reconnect_max_ms = 2000;
 };
 
+// The pixel formats the aravis backend takes, by their GenICam (SFNC) names.
+const std::vector<std::string>& aravis_pixel_formats();
+// Empty when the backend takes `options.pixel_format` at the options' size; otherwise why not, one
+// line (a mosaic needs 2x2 pixels, YUYV an even width). open() checks it too.
+std::string aravis_pixel_format_problem(const AravisCameraOptions& options);
+
 // A GigE Vision (or USB3 Vision) camera through Aravis 0.8.
+//
+// Pixels: grab() converts each buffer into the mono8 frame, colour formats by the laser's
+// channel (PixelConverter: a Bayer mosaic read on its sites, no demosaic), while the buffer is
+// held; the conversion allocates nothing.
 //
 // Buffers: the pixel memory of `buffers` frames is allocated in open() and handed to Aravis
 // (arv_buffer_new over our memory) each time the stream is created; every buffer popped is
@@ -90,7 +105,8 @@ class AravisCamera final : public Camera {
   AravisCameraOptions options_;
   FrameFormat format_;
   std::size_t payload_bytes_ = 0;
-  int bytes_per_pixel_ = 1;
+  int pixel_format_index_ = -1;  // in the table of aravis_camera.cpp; -1: unknown name
+  PixelConverter converter_;
   std::vector<std::vector<std::uint8_t>> memory_;  // the pixel memory of every buffer
 
   _ArvCamera* camera_ = nullptr;

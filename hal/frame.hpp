@@ -5,7 +5,8 @@
 
 namespace laserline::hal {
 
-// Pixel layouts a camera can deliver. Only 8-bit mono is processed by the pipeline today.
+// Pixel layouts a camera can deliver. Only 8-bit mono is processed by the pipeline: cameras
+// convert what their sensors send into it (hal/pixel_conversion.hpp).
 enum class PixelFormat : std::uint8_t { kMono8 };
 
 // Geometry of the frames a camera delivers; fixed once the camera is opened.

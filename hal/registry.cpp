@@ -27,6 +27,8 @@ struct LaserEntry {
   LaserFactory create;
 };
 
+// The simulator renders mono frames for now: it takes no channel (request.channel is there for
+// when it renders colour).
 std::unique_ptr<Camera> create_sim_camera(const CameraRequest& request) {
   const double rate = request.options->number("frame_rate_hz", 30.0, 0.1, 1000.0);
   YamlMap sim = request.options->map("sim");
@@ -42,7 +44,7 @@ std::unique_ptr<Camera> create_aravis_camera(const CameraRequest& request) {
   YamlMap& c = *request.options;
   AravisCameraOptions o;
   o.device = c.string("device", o.device);
-  o.pixel_format = c.choice("pixel_format", o.pixel_format, {"Mono8", "Mono12", "Mono16"});
+  o.pixel_format = c.choice("pixel_format", o.pixel_format, aravis_pixel_formats());
   o.width = static_cast<int>(c.integer("width", request.calibration->camera.width, 1, 65535));
   o.height = static_cast<int>(c.integer("height", request.calibration->camera.height, 1, 65535));
   o.offset_x = static_cast<int>(c.integer("offset_x", 0, 0, 65535));
@@ -68,6 +70,10 @@ std::unique_ptr<Camera> create_aravis_camera(const CameraRequest& request) {
       o.features.emplace_back(f.first.as<std::string>(), f.second.Scalar());
     }
   }
+  if (const std::string problem = aravis_pixel_format_problem(o); !problem.empty()) {
+    c.fail("pixel_format", problem);
+  }
+  o.channel = request.channel;
   o.lost_after_ms = static_cast<int>(c.integer("lost_after_ms", o.lost_after_ms, 100, 60000));
   o.reconnect_min_ms =
       static_cast<int>(c.integer("reconnect_min_ms", o.reconnect_min_ms, 10, 60000));
@@ -81,11 +87,15 @@ std::unique_ptr<Camera> create_v4l2_camera(const CameraRequest& request) {
   V4l2CameraOptions o;
   o.device = c.string("device", o.device);
   if (o.device.empty()) c.fail("device", "must name the video device, e.g. /dev/video0");
-  o.pixel_format = c.choice("pixel_format", o.pixel_format, {"GREY", "Y16", "YUYV"});
+  o.pixel_format = c.choice("pixel_format", o.pixel_format, v4l2_pixel_formats());
   o.width = static_cast<int>(c.integer("width", request.calibration->camera.width, 1, 65535));
   o.height = static_cast<int>(c.integer("height", request.calibration->camera.height, 1, 65535));
   o.frame_rate_hz = c.number("frame_rate_hz", 30.0, 0.1, 1000.0);
   o.buffers = static_cast<int>(c.integer("buffers", o.buffers, 2, 32));
+  if (const std::string problem = v4l2_pixel_format_problem(o); !problem.empty()) {
+    c.fail("pixel_format", problem);
+  }
+  o.channel = request.channel;
   o.reconnect_min_ms =
       static_cast<int>(c.integer("reconnect_min_ms", o.reconnect_min_ms, 10, 60000));
   o.reconnect_max_ms = static_cast<int>(

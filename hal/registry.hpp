@@ -8,6 +8,7 @@
 #include "hal/calibration.hpp"
 #include "hal/camera.hpp"
 #include "hal/laser.hpp"
+#include "hal/laser_channel.hpp"
 #include "hal/sim/sim_scene.hpp"
 #include "hal/yaml_reader.hpp"
 
@@ -21,6 +22,10 @@ struct CameraRequest {
   YamlMap* options = nullptr;  // the `camera:` section
   const Calibration* calibration = nullptr;
   const Laser* laser = nullptr;  // the laser the camera sees (the simulator renders it)
+  // The laser's light in colour frames (`camera.channel`): backends whose frames can be colour
+  // convert them to the mono8 frame with it; mono sources (the simulator, a replayed log) take
+  // their frames as they are.
+  LaserChannel channel;
 };
 
 using CameraFactory = std::function<std::unique_ptr<Camera>(const CameraRequest&)>;

@@ -30,23 +30,100 @@ int xioctl(int fd, unsigned long request, void* arg) {
   return r;
 }
 
+struct V4l2PixelFormat {
+  const char* name;
+  std::uint32_t fourcc;
+  SourceFormat source;
+};
+
+// 12-bit Bayer: unpacked, right-aligned in 16 bits.
+const V4l2PixelFormat kPixelFormats[] = {
+    {"GREY", V4L2_PIX_FMT_GREY, {PixelLayout::kMono, 8}},
+    {"Y16", V4L2_PIX_FMT_Y16, {PixelLayout::kMono, 16}},
+    {"YUYV", V4L2_PIX_FMT_YUYV, {PixelLayout::kYuyv, 8}},
+    {"SRGGB8", V4L2_PIX_FMT_SRGGB8, {PixelLayout::kBayerRggb, 8}},
+    {"SGRBG8", V4L2_PIX_FMT_SGRBG8, {PixelLayout::kBayerGrbg, 8}},
+    {"SGBRG8", V4L2_PIX_FMT_SGBRG8, {PixelLayout::kBayerGbrg, 8}},
+    {"SBGGR8", V4L2_PIX_FMT_SBGGR8, {PixelLayout::kBayerBggr, 8}},
+    {"SRGGB12", V4L2_PIX_FMT_SRGGB12, {PixelLayout::kBayerRggb, 12}},
+    {"SGRBG12", V4L2_PIX_FMT_SGRBG12, {PixelLayout::kBayerGrbg, 12}},
+    {"SGBRG12", V4L2_PIX_FMT_SGBRG12, {PixelLayout::kBayerGbrg, 12}},
+    {"SBGGR12", V4L2_PIX_FMT_SBGGR12, {PixelLayout::kBayerBggr, 12}},
+    {"SRGGB16", V4L2_PIX_FMT_SRGGB16, {PixelLayout::kBayerRggb, 16}},
+    {"SGRBG16", V4L2_PIX_FMT_SGRBG16, {PixelLayout::kBayerGrbg, 16}},
+    {"SGBRG16", V4L2_PIX_FMT_SGBRG16, {PixelLayout::kBayerGbrg, 16}},
+    {"SBGGR16", V4L2_PIX_FMT_SBGGR16, {PixelLayout::kBayerBggr, 16}},
+    {"RGB24", V4L2_PIX_FMT_RGB24, {PixelLayout::kRgb, 8}},
+    {"BGR24", V4L2_PIX_FMT_BGR24, {PixelLayout::kBgr, 8}},
+};
+
+// Our name of a fourcc, or its four characters ("MJPG") when we do not take it.
 std::string fourcc_name(std::uint32_t fourcc) {
+  for (const auto& f : kPixelFormats) {
+    if (f.fourcc == fourcc) return f.name;
+  }
   std::string s(4, ' ');
   for (int i = 0; i < 4; ++i)
     s[static_cast<std::size_t>(i)] = static_cast<char>((fourcc >> (8 * i)) & 0xff);
+  while (!s.empty() && s.back() == ' ')
+    s.pop_back();
   return s;
 }
 
+// The Y'CbCr encoding of a YUYV format as the driver states it (its defaults resolved the way
+// V4L2 defines them), or false for one we do not convert.
+bool read_yuv_encoding(const v4l2_pix_format& pix, SourceFormat& source, std::string& problem) {
+  const std::uint32_t encoding =
+      pix.ycbcr_enc != V4L2_YCBCR_ENC_DEFAULT
+          ? pix.ycbcr_enc
+          : static_cast<std::uint32_t>(V4L2_MAP_YCBCR_ENC_DEFAULT(pix.colorspace));
+  const std::uint32_t quantization = pix.quantization != V4L2_QUANTIZATION_DEFAULT
+                                         ? pix.quantization
+                                         : static_cast<std::uint32_t>(V4L2_MAP_QUANTIZATION_DEFAULT(
+                                               false, pix.colorspace, encoding));
+  if (encoding == V4L2_YCBCR_ENC_601 || encoding == V4L2_YCBCR_ENC_XV601) {
+    source.yuv_matrix = YuvMatrix::kBt601;
+  } else if (encoding == V4L2_YCBCR_ENC_709 || encoding == V4L2_YCBCR_ENC_XV709) {
+    source.yuv_matrix = YuvMatrix::kBt709;
+  } else {
+    problem = "the driver's Y'CbCr encoding " + std::to_string(encoding) +
+              " is not converted (BT.601 and BT.709 are)";
+    return false;
+  }
+  source.yuv_range =
+      quantization == V4L2_QUANTIZATION_FULL_RANGE ? YuvRange::kFull : YuvRange::kLimited;
+  return true;
+}
+
 }  // namespace
+
+const std::vector<std::string>& v4l2_pixel_formats() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> list;
+    for (const auto& f : kPixelFormats)
+      list.emplace_back(f.name);
+    return list;
+  }();
+  return names;
+}
+
+std::string v4l2_pixel_format_problem(const V4l2CameraOptions& options) {
+  for (const auto& f : kPixelFormats) {
+    if (options.pixel_format == f.name) {
+      return conversion_problem(f.source, options.width, options.height);
+    }
+  }
+  return "not a format this backend takes";
+}
 
 V4l2Camera::V4l2Camera(V4l2CameraOptions options) : options_(std::move(options)) {
   format_.width = options_.width;
   format_.height = options_.height;
   format_.stride = options_.width;
   format_.pixel_format = PixelFormat::kMono8;
-  fourcc_ = options_.pixel_format == "GREY"  ? V4L2_PIX_FMT_GREY
-            : options_.pixel_format == "Y16" ? V4L2_PIX_FMT_Y16
-                                             : V4L2_PIX_FMT_YUYV;
+  for (std::size_t i = 0; i < std::size(kPixelFormats); ++i) {
+    if (options_.pixel_format == kPixelFormats[i].name) pixel_format_index_ = static_cast<int>(i);
+  }
 }
 
 V4l2Camera::~V4l2Camera() {
@@ -74,6 +151,12 @@ bool V4l2Camera::connect(std::string* error) {
     return fail(what + ": " + std::strerror(errno));
   };
 
+  if (const std::string problem = v4l2_pixel_format_problem(options_); !problem.empty()) {
+    return fail("pixel_format '" + options_.pixel_format + "': " + problem);
+  }
+  const V4l2PixelFormat& wanted = kPixelFormats[pixel_format_index_];
+  SourceFormat source = wanted.source;
+
   fd_ = ::open(path.c_str(), O_RDWR | O_NONBLOCK | O_CLOEXEC);
   if (fd_ < 0) return fail_errno("cannot open");
   v4l2_capability cap{};
@@ -87,11 +170,11 @@ bool V4l2Camera::connect(std::string* error) {
   fmt.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
   fmt.fmt.pix.width = static_cast<std::uint32_t>(options_.width);
   fmt.fmt.pix.height = static_cast<std::uint32_t>(options_.height);
-  fmt.fmt.pix.pixelformat = fourcc_;
+  fmt.fmt.pix.pixelformat = wanted.fourcc;
   fmt.fmt.pix.field = V4L2_FIELD_NONE;
   if (xioctl(fd_, VIDIOC_S_FMT, &fmt) != 0) return fail_errno("cannot set the format (S_FMT)");
   // Drivers adjust what they cannot do instead of failing: compare.
-  if (fmt.fmt.pix.pixelformat != fourcc_ ||
+  if (fmt.fmt.pix.pixelformat != wanted.fourcc ||
       fmt.fmt.pix.width != static_cast<std::uint32_t>(options_.width) ||
       fmt.fmt.pix.height != static_cast<std::uint32_t>(options_.height)) {
     return fail("asked for " + options_.pixel_format + " " + std::to_string(options_.width) + "x" +
@@ -99,9 +182,13 @@ bool V4l2Camera::connect(std::string* error) {
                 fourcc_name(fmt.fmt.pix.pixelformat) + " " + std::to_string(fmt.fmt.pix.width) +
                 "x" + std::to_string(fmt.fmt.pix.height));
   }
-  const std::uint32_t bytes_per_pixel = fourcc_ == V4L2_PIX_FMT_GREY ? 1 : 2;
-  bytes_per_line_ = std::max(fmt.fmt.pix.bytesperline,
-                             static_cast<std::uint32_t>(options_.width) * bytes_per_pixel);
+  if (source.layout == PixelLayout::kYuyv) {
+    std::string problem;
+    if (!read_yuv_encoding(fmt.fmt.pix, source, problem)) return fail(problem);
+  }
+  converter_ = PixelConverter(source, options_.width, options_.height, options_.channel);
+  bytes_per_line_ =
+      std::max(fmt.fmt.pix.bytesperline, static_cast<std::uint32_t>(converter_.row_bytes()));
 
   v4l2_streamparm parm{};
   parm.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
@@ -232,20 +319,8 @@ GrabStatus V4l2Camera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
       continue;
     }
 
-    const auto* src = static_cast<const std::uint8_t*>(mappings_[buf.index].address);
-    const auto width = static_cast<std::size_t>(options_.width);
-    for (int y = 0; y < options_.height; ++y) {
-      const std::uint8_t* row = src + static_cast<std::size_t>(y) * bytes_per_line_;
-      std::uint8_t* out = dst.data() + static_cast<std::size_t>(y) * width;
-      if (fourcc_ == V4L2_PIX_FMT_GREY) {
-        std::memcpy(out, row, width);
-      } else {
-        // Y16: little-endian, keep the top byte. YUYV: Y0 U Y1 V, keep the lumas.
-        const std::size_t pick = fourcc_ == V4L2_PIX_FMT_Y16 ? 1 : 0;
-        for (std::size_t x = 0; x < width; ++x)
-          out[x] = row[2 * x + pick];
-      }
-    }
+    converter_.convert(static_cast<const std::uint8_t*>(mappings_[buf.index].address),
+                       bytes_per_line_, dst.data(), static_cast<std::size_t>(format_.stride));
     const std::int64_t stamp = static_cast<std::int64_t>(buf.timestamp.tv_sec) * 1'000'000'000 +
                                static_cast<std::int64_t>(buf.timestamp.tv_usec) * 1000;
     const bool monotonic =

@@ -6,12 +6,18 @@
 #include <vector>
 
 #include "hal/camera.hpp"
+#include "hal/laser_channel.hpp"
+#include "hal/pixel_conversion.hpp"
 
 namespace laserline::hal {
 
 struct V4l2CameraOptions {
   std::string device = "/dev/video0";
-  std::string pixel_format = "GREY";  // GREY, Y16 (top 8 bits kept) or YUYV (luma kept)
+  // One of v4l2_pixel_formats(), named as the V4L2_PIX_FMT_ macros: GREY, Y16 (top 8 bits kept),
+  // YUYV, the Bayer mosaics SRGGB8, SGRBG8, SGBRG8, SBGGR8 (and their 12 and 16-bit forms),
+  // RGB24, BGR24.
+  std::string pixel_format = "GREY";
+  LaserChannel channel;  // the laser's light in colour frames (hal/pixel_conversion.hpp)
   int width = 0;
   int height = 0;
   double frame_rate_hz = 30;
@@ -20,11 +26,18 @@ struct V4l2CameraOptions {
   int reconnect_max_ms = 2000;
 };
 
+// The pixel formats the v4l2 backend takes (names of the V4L2_PIX_FMT_ macros).
+const std::vector<std::string>& v4l2_pixel_formats();
+// Empty when the backend takes `options.pixel_format` at the options' size; otherwise why not, one
+// line (a mosaic needs 2x2 pixels, YUYV an even width). open() checks it too.
+std::string v4l2_pixel_format_problem(const V4l2CameraOptions& options);
+
 // A V4L2 capture device with mmap streaming (REQBUFS / QBUF / poll / DQBUF).
 //
 // Buffers: the driver's buffers are mapped once per open and every one dequeued is queued again
-// after its pixels were copied (and converted to 8-bit luma) into the frame slot; nothing is
-// allocated per frame.
+// after its pixels were converted into the mono8 frame slot (PixelConverter: colour formats by
+// the laser's channel, a Bayer mosaic on its sites, YUYV from its luma and chroma by the
+// Y'CbCr encoding and range the driver states); nothing is allocated per frame.
 //
 // Time: the driver's timestamp is CLOCK_MONOTONIC when it says so (V4L2_BUF_FLAG_TIMESTAMP_
 // MONOTONIC; every modern driver): it is then taken as is for exposure_mono_ns. Drivers stamp the
@@ -64,8 +77,9 @@ class V4l2Camera final : public Camera {
 
   V4l2CameraOptions options_;
   FrameFormat format_;
-  std::uint32_t fourcc_ = 0;
+  int pixel_format_index_ = -1;       // in the table of v4l2_camera.cpp; -1: unknown name
   std::uint32_t bytes_per_line_ = 0;  // as the driver set it
+  PixelConverter converter_;
   int fd_ = -1;
   std::vector<Mapping> mappings_;
   std::atomic<bool> stopped_{false};

@@ -14,12 +14,14 @@
 #include <lcm/lcm-cpp.hpp>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -27,6 +29,8 @@
 
 #include "hal/aravis_camera.hpp"
 #include "hal/clock.hpp"
+#include "hal/laser_channel.hpp"
+#include "pixel_reference.hpp"
 #include "private_network.hpp"
 #include "thread_allocations.hpp"
 
@@ -304,6 +308,218 @@ TEST_F(AravisTest, PacketLossIsCountedAndSurvived) {
   EXPECT_EQ(whole, 20);
   EXPECT_GT(health.missing_packets + health.timeouts, 0) << "no loss was counted";
   EXPECT_EQ(health.reconnects, 0);
+}
+
+// ---- colour ----------------------------------------------------------------------------------
+//
+// The fake camera's fill pattern (arv_fake_camera_diagonal_ramp in Aravis 0.8.26's
+// arvfakecamera.c, at its default gain and exposure): pixel (x, y) of the frame with id f has the
+// colour map's entry (x + y + f) % 255; Mono8 sends that index, RGB8 the entry's red, green and
+// blue, and the Bayer formats one of them per site. The colour map (a "jet" ramp) is not public:
+// it is read from one RGB8 frame taken with plain Aravis, and the whole model is checked against
+// raw frames before our backend's output is checked against the model.
+
+struct Rgb {
+  std::uint8_t r = 0, g = 0, b = 0;
+};
+using ColourMap = std::array<Rgb, 255>;
+
+// One frame taken with plain Aravis (none of our code).
+struct RawFrame {
+  std::vector<std::uint8_t> pixels;
+  std::uint64_t frame_id = 0;
+};
+
+std::string grab_raw(const char* pixel_format, int width, int height, RawFrame& out) {
+  GError* e = nullptr;
+  ArvCamera* camera = arv_camera_new("127.0.0.1", &e);
+  auto failed = [&](const char* what) {
+    if (e == nullptr) return std::string();
+    const std::string message = std::string(what) + ": " + e->message;
+    g_clear_error(&e);
+    return message;
+  };
+  if (camera == nullptr) return failed("arv_camera_new");
+  std::string problem;
+  arv_camera_set_pixel_format_from_string(camera, pixel_format, &e);
+  problem = failed("pixel format");
+  if (problem.empty()) {
+    arv_camera_set_region(camera, 0, 0, width, height, &e);
+    problem = failed("region");
+  }
+  if (problem.empty()) {
+    ArvBuffer* buffer = arv_camera_acquisition(camera, 2'000'000, &e);
+    problem = failed("acquisition");
+    if (problem.empty() &&
+        (buffer == nullptr || arv_buffer_get_status(buffer) != ARV_BUFFER_STATUS_SUCCESS)) {
+      problem = "acquisition: no whole frame";
+    }
+    if (problem.empty()) {
+      std::size_t size = 0;
+      const auto* data = static_cast<const std::uint8_t*>(arv_buffer_get_data(buffer, &size));
+      out.pixels.assign(data, data + size);
+      out.frame_id = arv_buffer_get_frame_id(buffer);
+    }
+    if (buffer != nullptr) g_object_unref(buffer);
+  }
+  g_object_unref(camera);
+  return problem;
+}
+
+// The colours of the mosaic's sites the fake camera draws for a Bayer format, its top-left 2x2
+// cell row by row. BayerGR8 and BayerGB8 are drawn as named; BayerRG8 and BayerBG8 are drawn the
+// other way round (arvfakecamera.c puts blue at (0, 0) for BayerRG8 and red for BayerBG8, against
+// its own comments and the GenICam names). A camera that draws them as named gives the same
+// checks; our backend reads every format by its GenICam name.
+const char* fake_camera_mosaic(const std::string& format) {
+  if (format == "BayerRG8") return "BGGR";
+  if (format == "BayerBG8") return "RGGB";
+  if (format == "BayerGR8") return "GRBG";
+  if (format == "BayerGB8") return "GBRG";
+  return nullptr;
+}
+
+// The buffer the fake camera sends for frame id f.
+std::vector<std::uint8_t> fake_camera_frame(const std::string& format, const ColourMap& map,
+                                            int width, int height, std::uint64_t f) {
+  std::vector<std::uint8_t> frame;
+  const char* mosaic = fake_camera_mosaic(format);
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      const auto index = static_cast<std::size_t>((static_cast<std::uint64_t>(x + y) + f) % 255);
+      const Rgb& c = map[index];
+      if (format == "Mono8") {
+        frame.push_back(static_cast<std::uint8_t>(index));
+      } else if (format == "RGB8") {
+        frame.insert(frame.end(), {c.r, c.g, c.b});
+      } else {
+        const char site = mosaic[2 * (y % 2) + (x % 2)];
+        frame.push_back(site == 'R' ? c.r : site == 'G' ? c.g : c.b);
+      }
+    }
+  }
+  return frame;
+}
+
+// Reads the colour map from an RGB8 frame 255 pixels wide or more.
+std::string learn_colour_map(ColourMap& map) {
+  RawFrame raw;
+  if (std::string problem = grab_raw("RGB8", 256, 2, raw); !problem.empty()) return problem;
+  if (raw.pixels.size() != 256 * 2 * 3) return "RGB8 frame of the wrong size";
+  for (int x = 0; x < 255; ++x) {
+    const std::uint8_t* p = &raw.pixels[static_cast<std::size_t>(3 * x)];
+    map[(static_cast<std::uint64_t>(x) + raw.frame_id) % 255] = {p[0], p[1], p[2]};
+  }
+  return "";
+}
+
+class AravisColourTest : public AravisTest {
+ protected:
+  void SetUp() override {
+    AravisTest::SetUp();
+    if (IsSkipped()) return;
+    fake_ = std::make_unique<FakeCamera>();
+    ASSERT_TRUE(fake_->wait_ready());
+    ASSERT_EQ(learn_colour_map(map_), "");
+  }
+
+  std::unique_ptr<FakeCamera> fake_;
+  ColourMap map_;
+};
+
+// The model above is the fake camera's pattern: raw frames of every format it serves, taken with
+// plain Aravis, are exactly the model's frames for their ids.
+TEST_F(AravisColourTest, FakeCameraFillPatternIsKnown) {
+  std::set<int> colours;
+  for (const Rgb& c : map_)
+    colours.insert(c.r << 16 | c.g << 8 | c.b);
+  EXPECT_GT(colours.size(), 200u) << "the colour map is not a colour ramp";
+  for (const char* format : {"Mono8", "RGB8", "BayerRG8", "BayerGR8", "BayerGB8", "BayerBG8"}) {
+    RawFrame raw;
+    ASSERT_EQ(grab_raw(format, 64, 48, raw), "") << format;
+    EXPECT_EQ(raw.pixels, fake_camera_frame(format, map_, 64, 48, raw.frame_id)) << format;
+  }
+}
+
+// Every pixel our backend delivers is the per-pixel reference conversion (pixel_reference.hpp)
+// of the frame the fake camera sent: the Bayer formats, RGB8, and Mono8 (taken as it is, whatever
+// the channel), over the real GigE path.
+TEST_F(AravisColourTest, ColourFormatsAreConvertedByTheLasersChannel) {
+  // x + y spans 0..254: every frame shows the whole colour map once, so that only its own id
+  // explains it.
+  constexpr int kWidth = 128, kHeight = 127;
+  const std::pair<const char*, laserline::hal::SourceFormat> formats[] = {
+      {"Mono8", {laserline::hal::PixelLayout::kMono, 8}},
+      {"RGB8", {laserline::hal::PixelLayout::kRgb, 8}},
+      {"BayerRG8", {laserline::hal::PixelLayout::kBayerRggb, 8}},
+      {"BayerGR8", {laserline::hal::PixelLayout::kBayerGrbg, 8}},
+      {"BayerGB8", {laserline::hal::PixelLayout::kBayerGbrg, 8}},
+      {"BayerBG8", {laserline::hal::PixelLayout::kBayerBggr, 8}},
+  };
+  for (const auto& [format, source] : formats) {
+    for (const char* channel_text : {"red", "red - (green + blue) / 2"}) {
+      SCOPED_TRACE(std::string(format) + ", channel " + channel_text);
+      AravisCameraOptions o = options(kWidth, kHeight, 50);
+      o.pixel_format = format;
+      o.channel = laserline::hal::parse_laser_channel(channel_text);
+      AravisCamera camera(o);
+      std::string error;
+      ASSERT_TRUE(camera.open(&error)) << error;
+      std::vector<std::uint8_t> pixels(camera.format().bytes());
+      FrameInfo info;
+      // The frame id is not delivered: the first frame's is found among the 255 the pattern
+      // repeats over, the next ones' follow from their sequence numbers.
+      std::uint64_t first_id = 0, first_sequence = 0;
+      for (int i = 0; i < 3; ++i) {
+        ASSERT_EQ(camera.grab(pixels, info, std::chrono::milliseconds(1000)), GrabStatus::kOk);
+        auto check = [&](std::uint64_t id) {
+          const auto sent = fake_camera_frame(format, map_, kWidth, kHeight, id);
+          return laserline::test::compare_with_reference(
+              pixels,
+              laserline::test::reference_values(sent.data(), sent.size() / kHeight, kWidth, kHeight,
+                                                source, o.channel),
+              kWidth, o.channel);
+        };
+        if (i == 0) {
+          int matches = 0;
+          for (std::uint64_t id = 0; id < 255; ++id) {
+            if (check(id).empty()) {
+              first_id = id;
+              ++matches;
+            }
+          }
+          ASSERT_EQ(matches, 1) << "frame ids whose frame the output is";
+          first_sequence = info.sequence;
+        } else {
+          EXPECT_EQ(check(first_id + (info.sequence - first_sequence)), "") << "frame " << i;
+        }
+      }
+      const std::set<std::uint8_t> values(pixels.begin(), pixels.end());
+      EXPECT_GT(values.size(), 20u) << "a flat frame would prove little";
+    }
+  }
+}
+
+TEST_F(AravisColourTest, FormatsTheFakeCameraLacksAreClearErrors) {
+  // BGR8: "BGR8" and the older "BGR8Packed" are both refused; the first refusal is reported.
+  for (const char* format : {"BGR8", "BayerRG16", "BayerGB12"}) {
+    AravisCameraOptions o = options(64, 48, 30);
+    o.pixel_format = format;
+    AravisCamera camera(o);
+    std::string error;
+    EXPECT_FALSE(camera.open(&error));
+    EXPECT_EQ(error.rfind("device '127.0.0.1': pixel_format '" + std::string(format) + "': ", 0),
+              0u)
+        << error;
+    EXPECT_EQ(error.find('\n'), std::string::npos) << error;
+  }
+  // A mosaic needs 2x2 pixels: said before the camera is touched.
+  AravisCameraOptions o = options(1, 48, 30);
+  o.pixel_format = "BayerRG8";
+  AravisCamera camera(o);
+  std::string error;
+  EXPECT_FALSE(camera.open(&error));
+  EXPECT_EQ(error, "pixel_format 'BayerRG8': a Bayer mosaic needs at least 2x2 pixels, got 1x48");
 }
 
 // ---- laserlined ------------------------------------------------------------------------------

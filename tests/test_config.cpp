@@ -54,7 +54,7 @@ TEST(Config, ShippedConfigFileEqualsTheBuiltIn) {
 
 TEST(Config, UnknownKeyNamesFileLineAndKey) {
   EXPECT_EQ(error_of("camera:\n  backend: sim\n  frame_rte_hz: 30\n"),
-            "test.yaml:3: camera.frame_rte_hz: unknown key (expected one of: backend, "
+            "test.yaml:3: camera.frame_rte_hz: unknown key (expected one of: backend, channel, "
             "frame_rate_hz, sim, timeout_ms)");
   EXPECT_EQ(error_of("lcm: {}\nbogus: 1\n").rfind("test.yaml:2: bogus: unknown key", 0), 0u);
 }
@@ -292,21 +292,72 @@ TEST(Config, ErrorsAreOneLine) {
 namespace laserline::daemon {
 namespace {
 
+// camera.channel: read once here, for every backend; colour backends convert with it.
+TEST(Config, CameraChannelIsTheLasersColour) {
+  const hal::LaserChannel standard = builtin_config().laser_channel;
+  EXPECT_EQ(standard.text, "green") << "the default is the 535 nm laser's green";
+  EXPECT_TRUE(standard.single());
+  EXPECT_EQ(standard.green, 1.0f);
+  const DaemonConfig red = parse_config(
+      hal::load_yaml_text("camera:\n  channel: red - (green + blue) / 2\n", "test.yaml"),
+      "test.yaml");
+  EXPECT_EQ(red.laser_channel.red, 1.0f);
+  EXPECT_EQ(red.laser_channel.green, -0.5f);
+  EXPECT_EQ(red.laser_channel.blue, -0.5f);
+  EXPECT_EQ(red.laser_channel.text, "red - (green + blue) / 2");
+  // Errors: the parser's one line after the file, the line and the key.
+  EXPECT_EQ(error_of("camera:\n  backend: sim\n  channel: purple\n"),
+            "test.yaml:3: camera.channel: channel \"purple\": unknown name 'purple' (red, green, "
+            "blue, grey) at character 1");
+  EXPECT_EQ(error_of("camera:\n  channel: \"red * green\"\n"),
+            "test.yaml:2: camera.channel: channel \"red * green\": a product of two channels is "
+            "not a weighted sum at character 12");
+  EXPECT_EQ(error_of("camera:\n  channel: [red]\n"),
+            "test.yaml:2: camera.channel: must be a single value, not a list or mapping");
+}
+
 // The hardware backends validate their own keys when created, before any device is opened.
 TEST(Config, HardwareBackendOptionsAreValidatedWithoutHardware) {
   const std::string size = "calibration: {camera: {width: 640, height: 480}}\n";
   EXPECT_EQ(error_of(size + "camera: {backend: aravis, device: GV01, trigger: software,"
                             " features: {Gamma: 1.0}, packet_size: -1}\n"),
             "");
-  EXPECT_EQ(error_of(size + "camera:\n  backend: aravis\n  pixel_format: RGB8\n"),
-            "test.yaml:4: camera.pixel_format: must be one of Mono8, Mono12, Mono16, got 'RGB8'");
+  EXPECT_EQ(error_of(size + "camera:\n  backend: aravis\n  pixel_format: RGB16\n"),
+            "test.yaml:4: camera.pixel_format: must be one of Mono8, Mono12, Mono16, BayerRG8, "
+            "BayerGR8, BayerGB8, BayerBG8, BayerRG12, BayerGR12, BayerGB12, BayerBG12, BayerRG16, "
+            "BayerGR16, BayerGB16, BayerBG16, RGB8, BGR8, got 'RGB16'");
+  for (const char* format : {"BayerRG8", "BayerGR8", "BayerGB8", "BayerBG8", "BayerRG12",
+                             "BayerBG16", "RGB8", "BGR8", "Mono12"}) {
+    EXPECT_EQ(
+        error_of(size + "camera: {backend: aravis, channel: red, pixel_format: " + format + "}\n"),
+        "")
+        << format;
+  }
   EXPECT_EQ(error_of(size + "camera:\n  backend: aravis\n  features: [Gamma]\n"),
             "test.yaml:4: camera.features: must be a mapping of GenICam feature: value");
   EXPECT_EQ(error_of(size + "camera:\n  backend: aravis\n  trigger: sometimes\n"),
             "test.yaml:4: camera.trigger: must be one of free, software, line, got 'sometimes'");
   EXPECT_EQ(
       error_of(size + "camera:\n  backend: v4l2\n  device: /dev/video3\n  pixel_format: MJPG\n"),
-      "test.yaml:5: camera.pixel_format: must be one of GREY, Y16, YUYV, got 'MJPG'");
+      "test.yaml:5: camera.pixel_format: must be one of GREY, Y16, YUYV, SRGGB8, SGRBG8, SGBRG8, "
+      "SBGGR8, SRGGB12, SGRBG12, SGBRG12, SBGGR12, SRGGB16, SGRBG16, SGBRG16, SBGGR16, RGB24, "
+      "BGR24, got 'MJPG'");
+  for (const char* format :
+       {"SRGGB8", "SGRBG8", "SGBRG8", "SBGGR8", "SGBRG12", "SRGGB16", "RGB24", "BGR24", "YUYV"}) {
+    EXPECT_EQ(error_of(size +
+                       "camera: {backend: v4l2, channel: 'red - (green + blue) / 2', "
+                       "pixel_format: " +
+                       format + "}\n"),
+              "")
+        << format;
+  }
+  EXPECT_EQ(error_of(size + "camera: {backend: aravis, pixel_format: BayerGB8, width: 1}\n"),
+            "test.yaml:2: camera.pixel_format: a Bayer mosaic needs at least 2x2 pixels, got "
+            "1x480");
+  EXPECT_EQ(error_of("calibration: {camera: {width: 641, height: 480}}\n"
+                     "camera: {backend: v4l2, device: /dev/video2, pixel_format: YUYV}\n"),
+            "test.yaml:2: camera.pixel_format: YUYV needs an even width (pixels come in pairs), "
+            "got 641x480");
   EXPECT_EQ(error_of(size + "camera:\n  backend: v4l2\n  width: 320\n"),
             "test.yaml: calibration.camera: size 640x480 differs from the camera's 320x480");
   EXPECT_EQ(error_of("laser:\n  mode: pattern\n"),

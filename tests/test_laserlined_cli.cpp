@@ -53,13 +53,16 @@ TEST_F(LaserlinedCli, BadConfigFailsWithOneLineNamingFileLineAndKey) {
   EXPECT_EQ(lines(r.out), 1u) << r.out;
   EXPECT_EQ(r.out, "laserlined: " + path +
                        ":3: camera.frame_rte_hz: unknown key (expected one of: backend, "
-                       "frame_rate_hz, sim, timeout_ms)\n");
+                       "channel, frame_rate_hz, sim, timeout_ms)\n");
 }
 
 TEST_F(LaserlinedCli, OutOfRangeAndWrongTypeFailBeforeAnythingStarts) {
   for (const char* text :
        {"camera: {frame_rate_hz: -5}\n", "laser: {mode: 3}\n",
         "calibration: {camera: {width: many}}\n", "lcm: {url: ''}\n", "camera: {sim: {seed: -1}}\n",
+        "camera: {channel: 'red * green'}\n",
+        "camera: {backend: v4l2, device: /dev/video9, pixel_format: YUYV}\n"
+        "calibration: {camera: {width: 641, height: 480}}\n",
         // A depth range no row of the image sees: the detector cannot work.
         "detector: {name: fir, frontend: {min_depth_m: 0.1, max_depth_m: 0.2}}\n",
         "detector: {name: background, motion: {detect_level: 5}}\n"}) {

@@ -1,8 +1,9 @@
 // The v4l2 camera backend against the stand-in device of tests/v4l2_fuse_device.cpp: a FUSE file
 // answering the V4L2 ioctls and serving frames through mmap, run as a separate process. Checks
-// the content of every frame (the stand-in draws a known pattern per sequence number), the
-// timestamps, the three pixel formats, clear errors, and reconnection when the device goes away
-// and comes back.
+// the content of every frame (the stand-in draws a known pattern per sequence number: every pixel
+// is compared with the per-pixel reference conversion of it, pixel_reference.hpp), the
+// timestamps, every pixel format with a laser channel, clear errors, and reconnection when the
+// device goes away and comes back.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/prctl.h>
@@ -15,13 +16,17 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <ostream>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "hal/clock.hpp"
+#include "hal/laser_channel.hpp"
 #include "hal/v4l2_camera.hpp"
+#include "pixel_reference.hpp"
 #include "thread_allocations.hpp"
+#include "v4l2_test_pattern.hpp"
 
 namespace {
 
@@ -35,7 +40,8 @@ std::filesystem::path g_dir;
 // The stand-in device, mounted on its own directory until destroyed.
 class StandIn {
  public:
-  StandIn(const std::string& format, int width, int height, int fps) {
+  StandIn(const std::string& format, int width, int height, int fps,
+          const std::vector<std::string>& more = {}) {
     mountpoint_ = g_dir / "dev";
     std::filesystem::create_directories(mountpoint_);
     static int count = 0;
@@ -45,11 +51,22 @@ class StandIn {
       prctl(PR_SET_PDEATHSIG, SIGTERM);
       if (freopen(output_.c_str(), "w", stdout) == nullptr) _exit(126);
       dup2(fileno(stdout), 2);
-      const std::string w = std::to_string(width), h = std::to_string(height),
-                        f = std::to_string(fps);
-      execl(V4L2_FUSE_DEVICE_PATH, V4L2_FUSE_DEVICE_PATH, mountpoint_.c_str(), "--format",
-            format.c_str(), "--width", w.c_str(), "--height", h.c_str(), "--fps", f.c_str(),
-            static_cast<char*>(nullptr));
+      std::vector<std::string> args = {V4L2_FUSE_DEVICE_PATH,
+                                       mountpoint_.string(),
+                                       "--format",
+                                       format,
+                                       "--width",
+                                       std::to_string(width),
+                                       "--height",
+                                       std::to_string(height),
+                                       "--fps",
+                                       std::to_string(fps)};
+      args.insert(args.end(), more.begin(), more.end());
+      std::vector<char*> argv;
+      for (auto& a : args)
+        argv.push_back(a.data());
+      argv.push_back(nullptr);
+      execv(V4L2_FUSE_DEVICE_PATH, argv.data());
       _exit(127);
     }
   }
@@ -109,43 +126,162 @@ int check_pattern(const std::vector<std::uint8_t>& pixels, int width, int height
   return first;
 }
 
-class V4l2Test : public ::testing::TestWithParam<const char*> {};
+// A pixel format served by the stand-in, how the backend must read it, and the laser channel the
+// backend is given (mono formats ignore it).
+struct FormatCase {
+  const char* name;  // the backend's pixel_format and the stand-in's --format
+  std::uint32_t fourcc;
+  laserline::hal::SourceFormat source;
+  const char* channel;
+  std::vector<std::string> stand_in_options;  // --yuv, --padding
+};
+
+using laserline::hal::PixelLayout;
+using laserline::hal::YuvMatrix;
+using laserline::hal::YuvRange;
+
+const FormatCase kFormatCases[] = {
+    {"GREY", V4L2_PIX_FMT_GREY, {PixelLayout::kMono, 8}, "green", {}},
+    {"Y16", V4L2_PIX_FMT_Y16, {PixelLayout::kMono, 16}, "red", {}},
+    // YUYV as most webcams state it (SMPTE170M, defaults: BT.601 limited range) and stated as
+    // BT.709 full range.
+    {"YUYV",
+     V4L2_PIX_FMT_YUYV,
+     {PixelLayout::kYuyv, 8, YuvMatrix::kBt601, YuvRange::kLimited},
+     "red - (green + blue) / 2",
+     {}},
+    {"YUYV",
+     V4L2_PIX_FMT_YUYV,
+     {PixelLayout::kYuyv, 8, YuvMatrix::kBt709, YuvRange::kFull},
+     "green",
+     {"--yuv", "709-full"}},
+    {"RGB24", V4L2_PIX_FMT_RGB24, {PixelLayout::kRgb, 8}, "red - (green + blue) / 2", {}},
+    {"BGR24", V4L2_PIX_FMT_BGR24, {PixelLayout::kBgr, 8}, "red", {"--padding", "16"}},
+    {"SRGGB8", V4L2_PIX_FMT_SRGGB8, {PixelLayout::kBayerRggb, 8}, "red", {}},
+    {"SGRBG8", V4L2_PIX_FMT_SGRBG8, {PixelLayout::kBayerGrbg, 8}, "red - (green + blue) / 2", {}},
+    {"SGBRG8", V4L2_PIX_FMT_SGBRG8, {PixelLayout::kBayerGbrg, 8}, "green", {"--padding", "8"}},
+    {"SBGGR8", V4L2_PIX_FMT_SBGGR8, {PixelLayout::kBayerBggr, 8}, "grey", {}},
+    {"SRGGB12",
+     V4L2_PIX_FMT_SRGGB12,
+     {PixelLayout::kBayerRggb, 12},
+     "red - (green + blue) / 2",
+     {}},
+    {"SGRBG12", V4L2_PIX_FMT_SGRBG12, {PixelLayout::kBayerGrbg, 12}, "green", {}},
+    {"SGBRG12", V4L2_PIX_FMT_SGBRG12, {PixelLayout::kBayerGbrg, 12}, "red", {}},
+    {"SBGGR12", V4L2_PIX_FMT_SBGGR12, {PixelLayout::kBayerBggr, 12}, "blue", {}},
+    {"SRGGB16", V4L2_PIX_FMT_SRGGB16, {PixelLayout::kBayerRggb, 16}, "red", {}},
+    {"SGRBG16",
+     V4L2_PIX_FMT_SGRBG16,
+     {PixelLayout::kBayerGrbg, 16},
+     "red - (green + blue) / 2",
+     {"--padding", "4"}},
+    {"SGBRG16", V4L2_PIX_FMT_SGBRG16, {PixelLayout::kBayerGbrg, 16}, "1.5*blue - 0.25*red", {}},
+    {"SBGGR16", V4L2_PIX_FMT_SBGGR16, {PixelLayout::kBayerBggr, 16}, "green", {}},
+};
+
+// For gtest's messages.
+void PrintTo(const FormatCase& c, std::ostream* out) {
+  *out << c.name << ", channel " << c.channel;
+  for (const auto& option : c.stand_in_options)
+    *out << " " << option;
+}
+
+std::uint32_t padding_of(const FormatCase& c) {
+  for (std::size_t i = 0; i + 1 < c.stand_in_options.size(); ++i) {
+    if (c.stand_in_options[i] == "--padding") {
+      return static_cast<std::uint32_t>(std::stoul(c.stand_in_options[i + 1]));
+    }
+  }
+  return 0;
+}
+
+// "" when `pixels` is the reference conversion of the stand-in's frame at driver sequence
+// `sequence`; otherwise the first pixel that is not.
+std::string frame_mismatch(const FormatCase& c, const laserline::hal::LaserChannel& channel,
+                           const std::vector<std::uint8_t>& pixels, int width, int height,
+                           std::uint32_t sequence) {
+  const std::uint32_t padding = padding_of(c);
+  const std::size_t stride =
+      static_cast<std::size_t>(width) * laserline::test::pattern_bytes_per_pixel(c.fourcc) +
+      padding;
+  std::vector<std::uint8_t> sent(stride * static_cast<std::size_t>(height));
+  laserline::test::fill_pattern(c.fourcc, static_cast<std::uint32_t>(width),
+                                static_cast<std::uint32_t>(height), sequence, sent.data(), padding);
+  return laserline::test::compare_with_reference(
+      pixels,
+      laserline::test::reference_values(sent.data(), stride, width, height, c.source, channel),
+      width, channel);
+}
+
+// The driver sequence (modulo 256, after which the pattern repeats) whose frame `pixels` is, or
+// -1. Candidates are screened on a small window inside the frame (its reference computed alone)
+// before the whole frame is compared.
+int identify_frame(const FormatCase& c, const laserline::hal::LaserChannel& channel,
+                   const std::vector<std::uint8_t>& pixels, int width, int height) {
+  constexpr int kWindow = 6, kX0 = 40, kY0 = 20;  // even: the window keeps the mosaic's phase
+  const std::size_t stride = kWindow * laserline::test::pattern_bytes_per_pixel(c.fourcc);
+  std::vector<std::uint8_t> window(stride * kWindow);
+  for (std::uint32_t sequence = 0; sequence < 256; ++sequence) {
+    laserline::test::fill_pattern(c.fourcc, kWindow, kWindow, sequence, window.data(), 0, kX0, kY0);
+    const auto reference = laserline::test::reference_values(window.data(), stride, kWindow,
+                                                             kWindow, c.source, channel);
+    bool close = true;  // the window's inner pixels within one of their reference values
+    for (int y = 1; y < kWindow - 1 && close; ++y) {
+      for (int x = 1; x < kWindow - 1 && close; ++x) {
+        const double v = reference[static_cast<std::size_t>(y * kWindow + x)].value;
+        const double expected = std::min(255.0, std::max(0.0, std::floor(v + 0.5)));
+        close =
+            std::abs(pixels[static_cast<std::size_t>((kY0 + y) * width + kX0 + x)] - expected) <= 1;
+      }
+    }
+    if (close && frame_mismatch(c, channel, pixels, width, height, sequence).empty()) {
+      return static_cast<int>(sequence);
+    }
+  }
+  return -1;
+}
+
+class V4l2Test : public ::testing::TestWithParam<FormatCase> {};
 
 TEST_P(V4l2Test, CapturesVerifiedFramesWithMonotonicTimestamps) {
-  const std::string format = GetParam();
+  const FormatCase& c = GetParam();
   constexpr int kWidth = 320, kHeight = 240;
-  StandIn device(format, kWidth, kHeight, 50);
+  StandIn device(c.name, kWidth, kHeight, 50, c.stand_in_options);
   if (const std::string problem = device.wait_ready(); !problem.empty()) GTEST_SKIP() << problem;
-  V4l2Camera camera(options(device.device(), format, kWidth, kHeight));
+  V4l2CameraOptions o = options(device.device(), c.name, kWidth, kHeight);
+  o.channel = laserline::hal::parse_laser_channel(c.channel);
+  V4l2Camera camera(o);
   std::string error;
   ASSERT_TRUE(camera.open(&error)) << error;
   ASSERT_EQ(camera.format().bytes(), static_cast<std::size_t>(kWidth * kHeight));
   std::vector<std::uint8_t> pixels(camera.format().bytes());
-  FrameInfo info, last;
-  int last_first = -1;
+  FrameInfo info, first;
+  int first_sequence = -1;
   for (int i = 0; i < 25; ++i) {
     const std::int64_t before = laserline::hal::monotonic_ns();
     ASSERT_EQ(camera.grab(pixels, info, std::chrono::milliseconds(1000)), GrabStatus::kOk);
-    const int first = check_pattern(pixels, kWidth, kHeight);
-    ASSERT_GE(first, 0) << "frame " << i << " is not whole or not the stand-in's pattern";
     EXPECT_LE(info.exposure_mono_ns, info.arrival_mono_ns);
     EXPECT_LE(info.arrival_mono_ns, laserline::hal::monotonic_ns());
-    if (i > 0) {
-      ASSERT_GT(info.sequence, last.sequence);
+    if (i == 0) {
+      first_sequence = identify_frame(c, o.channel, pixels, kWidth, kHeight);
+      ASSERT_GE(first_sequence, 0) << "frame 0 is not whole or not the stand-in's pattern";
+      first = info;
+    } else {
+      ASSERT_GT(info.sequence, first.sequence);
       // The content belongs to the sequence number the frame carries.
-      const auto step = static_cast<int>((info.sequence - last.sequence) * 3);
-      EXPECT_EQ(first, (last_first + step) & 0xff) << "frame " << i;
-      EXPECT_GT(info.exposure_mono_ns, last.exposure_mono_ns);
+      const auto sequence =
+          static_cast<std::uint32_t>(first_sequence + (info.sequence - first.sequence)) & 0xff;
+      ASSERT_EQ(frame_mismatch(c, o.channel, pixels, kWidth, kHeight, sequence), "")
+          << "frame " << i;
+      EXPECT_GT(info.exposure_mono_ns, first.exposure_mono_ns);
       // Stamped at exposure start by the stand-in, after the previous frame arrived or not,
       // but never before the previous exposure.
       EXPECT_GE(info.exposure_mono_ns, before - 1'000'000'000);
     }
-    last = info;
-    last_first = first;
   }
   EXPECT_EQ(camera.health().reconnects, 0);
 
-  // Steady state: poll, DQBUF, copy, QBUF allocate nothing.
+  // Steady state: poll, DQBUF, convert, QBUF allocate nothing.
   {
     laserline::test::ThreadAllocationCount probe_count;
     void* volatile probe = std::malloc(64);
@@ -158,7 +294,10 @@ TEST_P(V4l2Test, CapturesVerifiedFramesWithMonotonicTimestamps) {
   EXPECT_EQ(allocations.count(), 0);
 }
 
-INSTANTIATE_TEST_SUITE_P(Formats, V4l2Test, ::testing::Values("GREY", "Y16", "YUYV"));
+INSTANTIATE_TEST_SUITE_P(Formats, V4l2Test, ::testing::ValuesIn(kFormatCases),
+                         [](const ::testing::TestParamInfo<FormatCase>& param) {
+                           return std::string(param.param.name) + "_" + std::to_string(param.index);
+                         });
 
 TEST(V4l2, MissingDeviceOrUnsupportedFormatIsAClearError) {
   {
@@ -173,6 +312,20 @@ TEST(V4l2, MissingDeviceOrUnsupportedFormatIsAClearError) {
   std::string error;
   EXPECT_FALSE(camera.open(&error));
   EXPECT_EQ(error, device.device() + ": asked for YUYV 320x240, the driver offers GREY 320x240");
+
+  // Formats are named as the backend takes them, fourccs of others as they are.
+  StandIn bayer("SBGGR8", 320, 240, 30);
+  if (const std::string problem = bayer.wait_ready(); !problem.empty()) GTEST_SKIP() << problem;
+  V4l2Camera rggb(options(bayer.device(), "SRGGB8", 320, 240));
+  EXPECT_FALSE(rggb.open(&error));
+  EXPECT_EQ(error, bayer.device() + ": asked for SRGGB8 320x240, the driver offers SBGGR8 320x240");
+
+  // A size the format cannot take: said before the device is opened.
+  V4l2Camera odd(options(device.device(), "YUYV", 321, 240));
+  EXPECT_FALSE(odd.open(&error));
+  EXPECT_EQ(error, device.device() +
+                       ": pixel_format 'YUYV': YUYV needs an even width (pixels come in pairs), "
+                       "got 321x240");
 }
 
 TEST(V4l2, ReconnectsWhenTheDeviceDisappearsAndReturns) {

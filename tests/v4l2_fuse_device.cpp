@@ -5,10 +5,17 @@
 // argument size is encoded in the command number, which holds for every V4L2 ioctl used here.
 // Test-only: never installed.
 //
-//   v4l2_fuse_device MOUNTPOINT [--format GREY|Y16|YUYV] [--width W] [--height H] [--fps F]
+//   v4l2_fuse_device MOUNTPOINT [--format NAME] [--width W] [--height H] [--fps F]
+//                    [--padding BYTES] [--yuv 601-limited|709-full]
+//
+// NAME: GREY, Y16, YUYV, RGB24, BGR24, or a Bayer mosaic SRGGB8, SGRBG8, SGBRG8, SBGGR8 (also 12
+// and 16 bit: SRGGB12, SRGGB16, ...), as the V4L2_PIX_FMT_ macros. --padding: bytes after each
+// row (bytesperline says so, as drivers that align rows do). --yuv: the Y'CbCr encoding YUYV is
+// stated in: 601-limited (the default: colorspace SMPTE170M, encoding and quantization left at
+// their defaults, as most webcams) or 709-full (stated explicitly).
 //
 // MOUNTPOINT/video0 is the device until SIGTERM/SIGINT (then it disappears, as when a USB
-// camera is unplugged). Frame n carries the pattern of pattern_value() below at sequence n, a
+// camera is unplugged). Frame n carries the pattern of v4l2_test_pattern.hpp at sequence n, a
 // CLOCK_MONOTONIC timestamp taken when its exposure "starts" (just before it is written), and
 // V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC | V4L2_BUF_FLAG_TSTAMP_SRC_SOE.
 //
@@ -34,6 +41,7 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "v4l2_test_pattern.hpp"
@@ -58,6 +66,8 @@ struct Device {
   std::uint32_t width = 640;
   std::uint32_t height = 480;
   std::uint32_t fps = 30;
+  std::uint32_t padding = 0;
+  bool yuv_709_full = false;
   std::vector<Buffer> buffers;
   std::deque<unsigned> queued;  // in QBUF order
   std::deque<unsigned> done;    // filled, in DQBUF order
@@ -68,7 +78,9 @@ struct Device {
   fuse* fs = nullptr;
   std::atomic<bool> running{true};
 
-  std::uint32_t bytes_per_line() const { return fourcc == V4L2_PIX_FMT_GREY ? width : width * 2; }
+  std::uint32_t bytes_per_line() const {
+    return width * laserline::test::pattern_bytes_per_pixel(fourcc) + padding;
+  }
   std::uint32_t image_bytes() const { return bytes_per_line() * height; }
 };
 
@@ -90,6 +102,15 @@ void fill_format(v4l2_format* f) {
   f->fmt.pix.bytesperline = g_device.bytes_per_line();
   f->fmt.pix.sizeimage = g_device.image_bytes();
   f->fmt.pix.colorspace = V4L2_COLORSPACE_RAW;
+  if (g_device.fourcc == V4L2_PIX_FMT_RGB24 || g_device.fourcc == V4L2_PIX_FMT_BGR24) {
+    f->fmt.pix.colorspace = V4L2_COLORSPACE_SRGB;
+  } else if (g_device.fourcc == V4L2_PIX_FMT_YUYV && g_device.yuv_709_full) {
+    f->fmt.pix.colorspace = V4L2_COLORSPACE_REC709;
+    f->fmt.pix.ycbcr_enc = V4L2_YCBCR_ENC_709;
+    f->fmt.pix.quantization = V4L2_QUANTIZATION_FULL_RANGE;
+  } else if (g_device.fourcc == V4L2_PIX_FMT_YUYV) {
+    f->fmt.pix.colorspace = V4L2_COLORSPACE_SMPTE170M;
+  }
 }
 
 int do_ioctl(const char* path, unsigned int cmd, void* /*arg*/, fuse_file_info* fi,
@@ -302,7 +323,8 @@ void produce_frames() {
       d.queued.pop_front();
       Buffer& b = d.buffers[index];
       const std::int64_t exposure = monotonic_ns();
-      laserline::test::fill_pattern(d.fourcc, d.width, d.height, sequence, b.memory.data());
+      laserline::test::fill_pattern(d.fourcc, d.width, d.height, sequence, b.memory.data(),
+                                    d.padding);
       b.info.bytesused = d.image_bytes();
       b.info.sequence = sequence;
       b.info.timestamp.tv_sec = static_cast<time_t>(exposure / 1'000'000'000);
@@ -324,11 +346,21 @@ void produce_frames() {
 }
 
 std::uint32_t parse_format(const std::string& name) {
-  if (name == "GREY") return V4L2_PIX_FMT_GREY;
-  if (name == "Y16") return V4L2_PIX_FMT_Y16;
-  if (name == "YUYV") return V4L2_PIX_FMT_YUYV;
-  std::fprintf(stderr, "v4l2_fuse_device: --format: expected GREY, Y16 or YUYV, got '%s'\n",
-               name.c_str());
+  static const std::pair<const char*, std::uint32_t> kFormats[] = {
+      {"GREY", V4L2_PIX_FMT_GREY},       {"Y16", V4L2_PIX_FMT_Y16},
+      {"YUYV", V4L2_PIX_FMT_YUYV},       {"RGB24", V4L2_PIX_FMT_RGB24},
+      {"BGR24", V4L2_PIX_FMT_BGR24},     {"SRGGB8", V4L2_PIX_FMT_SRGGB8},
+      {"SGRBG8", V4L2_PIX_FMT_SGRBG8},   {"SGBRG8", V4L2_PIX_FMT_SGBRG8},
+      {"SBGGR8", V4L2_PIX_FMT_SBGGR8},   {"SRGGB12", V4L2_PIX_FMT_SRGGB12},
+      {"SGRBG12", V4L2_PIX_FMT_SGRBG12}, {"SGBRG12", V4L2_PIX_FMT_SGBRG12},
+      {"SBGGR12", V4L2_PIX_FMT_SBGGR12}, {"SRGGB16", V4L2_PIX_FMT_SRGGB16},
+      {"SGRBG16", V4L2_PIX_FMT_SGRBG16}, {"SGBRG16", V4L2_PIX_FMT_SGBRG16},
+      {"SBGGR16", V4L2_PIX_FMT_SBGGR16},
+  };
+  for (const auto& [known, fourcc] : kFormats) {
+    if (name == known) return fourcc;
+  }
+  std::fprintf(stderr, "v4l2_fuse_device: --format: unknown format '%s'\n", name.c_str());
   std::exit(2);
 }
 
@@ -337,8 +369,8 @@ std::uint32_t parse_format(const std::string& name) {
 int main(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr,
-                 "usage: v4l2_fuse_device MOUNTPOINT [--format GREY|Y16|YUYV] [--width W] "
-                 "[--height H] [--fps F]\n");
+                 "usage: v4l2_fuse_device MOUNTPOINT [--format NAME] [--width W] [--height H] "
+                 "[--fps F] [--padding BYTES] [--yuv 601-limited|709-full]\n");
     return 2;
   }
   const std::string mountpoint = argv[1];
@@ -353,6 +385,10 @@ int main(int argc, char** argv) {
       g_device.height = static_cast<std::uint32_t>(std::stoul(value));
     } else if (key == "--fps") {
       g_device.fps = static_cast<std::uint32_t>(std::stoul(value));
+    } else if (key == "--padding") {
+      g_device.padding = static_cast<std::uint32_t>(std::stoul(value));
+    } else if (key == "--yuv" && (value == "601-limited" || value == "709-full")) {
+      g_device.yuv_709_full = value == "709-full";
     } else {
       std::fprintf(stderr, "v4l2_fuse_device: unknown argument '%s'\n", key.c_str());
       return 2;
