@@ -27,8 +27,7 @@ struct LaserEntry {
   LaserFactory create;
 };
 
-// The simulator renders mono frames for now: it takes no channel (request.channel is there for
-// when it renders colour).
+// Colour scenes (camera.sim.colour) reach the pipeline as request.channel of them.
 std::unique_ptr<Camera> create_sim_camera(const CameraRequest& request) {
   const double rate = request.options->number("frame_rate_hz", 30.0, 0.1, 1000.0);
   YamlMap sim = request.options->map("sim");
@@ -37,7 +36,7 @@ std::unique_ptr<Camera> create_sim_camera(const CameraRequest& request) {
   stall.after_s = sim.number("stall_after_s", 0.0, 0.0, 1e6);
   stall.for_s = sim.number("stall_for_s", 0.0, 0.0, 1e6);
   sim.finish();
-  return std::make_unique<SimCamera>(options, request.laser, stall);
+  return std::make_unique<SimCamera>(options, request.laser, stall, request.channel);
 }
 
 std::unique_ptr<Camera> create_aravis_camera(const CameraRequest& request) {
@@ -220,6 +219,36 @@ SimSceneOptions read_sim_options(YamlMap& sim, const Calibration& calibration,
                                      " (features must fit the 5.12 m relief tile)");
   }
   o.vehicle_speed_m_s = sim.number("vehicle_speed_m_s", o.vehicle_speed_m_s, -10.0, 10.0);
+  o.object_speed_m_s = sim.number("object_speed_m_s", o.object_speed_m_s, -10.0, 10.0);
+  o.scan_pan = sim.boolean("scan_pan", o.scan_pan);
+  o.forward_scatter = sim.number("forward_scatter", o.forward_scatter, 0.0, 1.0);
+  o.scatter_halo_px = sim.number("scatter_halo_px", o.scatter_halo_px, 0.0, 1000.0);
+  o.veiling = sim.number("veiling", o.veiling, 0.0, 1.0);
+  o.caustic_peak = sim.number("caustic_peak", o.caustic_peak, 1.0, 100.0);
+  o.caustic_scale_m = sim.number("caustic_scale_m", o.caustic_scale_m, 0.01, 100.0);
+  o.caustic_speed_m_s = sim.number("caustic_speed_m_s", o.caustic_speed_m_s, -100.0, 100.0);
+  o.snow_per_frame = static_cast<int>(sim.integer("snow_per_frame", o.snow_per_frame, 0, 100000));
+  o.snow_size_px = sim.number("snow_size_px", o.snow_size_px, 0.1, 50.0);
+  o.snow_brightness = sim.number("snow_brightness", o.snow_brightness, 0.0, 100.0);
+  o.snow_min_depth_m = sim.number("snow_min_depth_m", o.snow_min_depth_m, 0.01, 100.0);
+  o.marks_per_m2 = sim.number("marks_per_m2", o.marks_per_m2, 0.0, 10000.0);
+  o.marks_albedo = sim.number("marks_albedo", o.marks_albedo, 0.0, 100.0);
+  const std::string colour = sim.choice(
+      "colour", "mono", {"mono", "rgb", "bayer_rggb", "bayer_grbg", "bayer_gbrg", "bayer_bggr"});
+  o.colour = colour == "rgb"          ? SimColour::kRgb
+             : colour == "bayer_rggb" ? SimColour::kBayerRggb
+             : colour == "bayer_grbg" ? SimColour::kBayerGrbg
+             : colour == "bayer_gbrg" ? SimColour::kBayerGbrg
+             : colour == "bayer_bggr" ? SimColour::kBayerBggr
+                                      : SimColour::kMono;
+  for (const auto& [key, rgb] :
+       {std::pair{"laser_rgb", &o.laser_rgb}, std::pair{"ambient_rgb", &o.ambient_rgb}}) {
+    const std::vector<double> values = sim.numbers(key, {3});
+    for (std::size_t c = 0; c < values.size(); ++c) {
+      if (!(values[c] >= 0 && values[c] <= 10)) sim.fail(key, "each value must be within 0..10");
+      (*rgb)[c] = values[c];
+    }
+  }
   return o;
 }
 

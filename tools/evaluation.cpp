@@ -203,6 +203,22 @@ std::vector<Scenario> standard_scenarios(int width, int height) {
     s.scene.checkerboard.dark_albedo = 0.08;
     out.push_back(s);
   }
+  for (const bool mosaic : {false, true}) {
+    Scenario s{mosaic ? "red-bayer" : "red-colour",
+               std::string("a red laser on a colour camera") +
+                   (mosaic ? " delivering a Bayer mosaic (RGGB)" : " (RGB)") +
+                   " in daylight as bright as the laser; channel red - (green + blue) / 2",
+               base};
+    s.scene.ambient = 150;
+    s.scene.texture_contrast = 0.6;
+    s.scene.laser_peak = 110;
+    s.scene.noise_sigma = 2.0;
+    s.scene.seed = 47;
+    s.scene.colour = mosaic ? hal::SimColour::kBayerRggb : hal::SimColour::kRgb;
+    s.scene.laser_rgb = {1.0, 0.08, 0.03};
+    s.channel = hal::parse_laser_channel("red - (green + blue) / 2");
+    out.push_back(s);
+  }
   {
     Scenario s{"beside",
                "as clean, the laser beside the camera (to its left): the line runs down the image",
@@ -255,13 +271,27 @@ Score evaluate(const Scenario& scenario, const std::string& detector_name,
   pipeline::Profile profile(detector->max_points(format.width, format.height));
   std::vector<std::uint8_t> pixels(format.bytes());
   hal::SimGroundTruth truth;
+  // A colour scene is rendered as the camera's buffer and delivered as the laser's channel, as a
+  // colour camera backend does.
+  const bool colour = scenario.scene.colour != hal::SimColour::kMono;
+  std::vector<std::uint8_t> raw(colour ? scene.raw_bytes() : 0);
+  const hal::PixelConverter converter =
+      colour
+          ? hal::PixelConverter(scene.raw_format(), format.width, format.height, scenario.channel)
+          : hal::PixelConverter();
 
   Score score;
   std::vector<double> best;
   for (int i = 0; i < scenario.frames; ++i) {
     const auto sequence = static_cast<std::uint64_t>(scenario.first_frame + i);
     const bool laser_on = !scenario.alternate || sequence % 2 == 0;
-    scene.render(sequence, laser_on, pixels);
+    if (colour) {
+      scene.render(sequence, laser_on, raw);
+      converter.convert(raw.data(), raw.size() / static_cast<std::size_t>(format.height),
+                        pixels.data(), static_cast<std::size_t>(format.stride));
+    } else {
+      scene.render(sequence, laser_on, pixels);
+    }
     const pipeline::ImageView view{pixels.data(), format.width, format.height, format.stride};
     detector->detect(view, {sequence, laser_on}, profile);
     if (i == 0) continue;  // warm-up

@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "hal/laser_channel.hpp"
 #include "hal/sim/sim_scene.hpp"
 #include "pipeline/detector.hpp"
 
@@ -16,6 +17,8 @@ struct Scenario {
   std::string description;
   hal::SimSceneOptions scene;
   bool alternate = false;  // laser on for even frames, off for odd (the classic on/off method)
+  // Colour scenes: the laser's light the camera delivers (camera.channel).
+  hal::LaserChannel channel{};
   int first_frame = 0;
   int frames = 16;  // the first is warm-up for detectors that need a previous frame; not scored
 };

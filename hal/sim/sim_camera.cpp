@@ -27,11 +27,18 @@ bool sleep_until(std::int64_t deadline_ns, const std::atomic<bool>& stopped) {
 
 }  // namespace
 
-SimCamera::SimCamera(const SimSceneOptions& options, const Laser* laser, SimCameraStall stall)
+SimCamera::SimCamera(const SimSceneOptions& options, const Laser* laser, SimCameraStall stall,
+                     const LaserChannel& channel)
     : scene_(options),
       laser_(laser),
       stall_(stall),
-      period_ns_(static_cast<std::int64_t>(std::llround(1e9 / options.frame_rate_hz))) {}
+      period_ns_(static_cast<std::int64_t>(std::llround(1e9 / options.frame_rate_hz))) {
+  if (options.colour != SimColour::kMono) {
+    const FrameFormat f = scene_.format();
+    converter_ = PixelConverter(scene_.raw_format(), f.width, f.height, channel);
+    raw_.assign(scene_.raw_bytes(), 0);
+  }
+}
 
 bool SimCamera::open(std::string* /*error*/) {
   start_mono_ns_ = monotonic_ns();
@@ -72,7 +79,14 @@ GrabStatus SimCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
   if (!sleep_until(exposure, stopped_)) return GrabStatus::kStopped;
 
   const bool laser_on = laser_ != nullptr && laser_->is_on();
-  scene_.render(next_sequence_, laser_on, dst);
+  if (raw_.empty()) {
+    scene_.render(next_sequence_, laser_on, dst);
+  } else {
+    scene_.render(next_sequence_, laser_on, raw_);
+    const FrameFormat f = scene_.format();
+    converter_.convert(raw_.data(), raw_.size() / static_cast<std::size_t>(f.height), dst.data(),
+                       static_cast<std::size_t>(f.stride));
+  }
   info.sequence = next_sequence_;
   info.camera_ns = exposure - start_mono_ns_;
   info.exposure_mono_ns = exposure;

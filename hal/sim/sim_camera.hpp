@@ -2,6 +2,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <vector>
 
 #include "hal/camera.hpp"
 #include "hal/laser.hpp"
@@ -21,7 +22,10 @@ struct SimCameraStall {
 
 class SimCamera final : public Camera {
  public:
-  SimCamera(const SimSceneOptions& options, const Laser* laser, SimCameraStall stall = {});
+  // Colour scenes are delivered as `channel` of them (the conversion a colour camera backend
+  // makes, hal/pixel_conversion.hpp).
+  SimCamera(const SimSceneOptions& options, const Laser* laser, SimCameraStall stall = {},
+            const LaserChannel& channel = {});
 
   bool open(std::string* error) override;
   FrameFormat format() const override { return scene_.format(); }
@@ -31,6 +35,8 @@ class SimCamera final : public Camera {
 
  private:
   SimScene scene_;
+  PixelConverter converter_;       // colour scenes: raw_ -> the frame
+  std::vector<std::uint8_t> raw_;  // colour scenes: the frame as rendered
   const Laser* laser_;
   SimCameraStall stall_;
   std::int64_t period_ns_;

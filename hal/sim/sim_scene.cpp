@@ -270,6 +270,11 @@ void validate(const SimSceneOptions& o) {
           "forward_scatter and veiling must be within [0, 1]");
   require(std::isfinite(o.caustic_peak) && o.caustic_peak >= 1 && o.caustic_peak <= 100,
           "caustic_peak must be within [1, 100]");
+  for (std::size_t c = 0; c < 3; ++c) {
+    require(finite_nonneg(o.laser_rgb[c]) && o.laser_rgb[c] <= 10 &&
+                finite_nonneg(o.ambient_rgb[c]) && o.ambient_rgb[c] <= 10,
+            "laser_rgb and ambient_rgb must be within [0, 10]");
+  }
   require(finite_nonneg(o.scatter_halo_px) && o.scatter_halo_px <= 1000,
           "scatter_halo_px must be within [0, 1000]");
   require(std::isfinite(o.caustic_scale_m) && o.caustic_scale_m >= 0.01 &&
@@ -353,7 +358,8 @@ SimScene::SimScene(const SimSceneOptions& options) : options_(options) {
   // One image row, then the glow floor of each of its pixels, each padded to whole kernel blocks;
   // the padding never glows.
   const std::size_t padded = (width + kBlock - 1) / kBlock * kBlock;
-  row_buffer_.assign(2 * padded, kNoGlow);
+  row_buffer_.assign(4 * padded, kNoGlow);
+  if (options_.colour != SimColour::kMono) channel_rows_.assign(3 * padded, 0);
   scratch_truth_.lines = lines_;
   scratch_truth_.position.assign(lines, kNaN);
   scratch_truth_.depth_m.assign(lines, kNaN);
@@ -367,6 +373,81 @@ SimScene::SimScene(const SimSceneOptions& options) : options_(options) {
 FrameFormat SimScene::format() const {
   const CameraIntrinsics& cam = options_.calibration.camera;
   return FrameFormat{cam.width, cam.height, cam.width, PixelFormat::kMono8};
+}
+
+SourceFormat SimScene::raw_format() const {
+  SourceFormat f;
+  switch (options_.colour) {
+    case SimColour::kMono:
+      f.layout = PixelLayout::kMono;
+      break;
+    case SimColour::kRgb:
+      f.layout = PixelLayout::kRgb;
+      break;
+    case SimColour::kBayerRggb:
+      f.layout = PixelLayout::kBayerRggb;
+      break;
+    case SimColour::kBayerGrbg:
+      f.layout = PixelLayout::kBayerGrbg;
+      break;
+    case SimColour::kBayerGbrg:
+      f.layout = PixelLayout::kBayerGbrg;
+      break;
+    case SimColour::kBayerBggr:
+      f.layout = PixelLayout::kBayerBggr;
+      break;
+  }
+  return f;
+}
+
+std::size_t SimScene::raw_bytes() const {
+  const CameraIntrinsics& cam = options_.calibration.camera;
+  return static_cast<std::size_t>(cam.width) * static_cast<std::size_t>(cam.height) *
+         static_cast<std::size_t>(raw_format().bytes_per_pixel());
+}
+
+void SimScene::colour_row(int v, const float* ambient, const float* light,
+                          std::uint64_t noise_offset, std::uint8_t* out) {
+  const int width = options_.calibration.camera.width;
+  const int padded = (width + kBlock - 1) / kBlock * kBlock;
+  const float noise_scale = static_cast<float>(options_.noise_sigma) / kNoiseTableScale;
+  float* channel = row_buffer_.data() + 3 * padded;
+  const std::uint64_t offsets = kNoiseTableSize - static_cast<std::size_t>(width) + 1;
+  for (int c = 0; c < 3; ++c) {
+    const auto a = static_cast<float>(options_.ambient_rgb[static_cast<std::size_t>(c)]);
+    const auto l = static_cast<float>(options_.laser_rgb[static_cast<std::size_t>(c)]);
+    for (int u = 0; u < padded; ++u)
+      channel[u] = a * ambient[u] + l * light[u];
+    // Each channel its own noise: the row's offset moved on by a hash of the channel.
+    const std::uint64_t offset =
+        (noise_offset + mix64(static_cast<std::uint64_t>(c) + 1)) % offsets;
+    quantise_row(channel, noise_.data() + offset, noise_scale, width,
+                 channel_rows_.data() + static_cast<std::size_t>(c) * padded);
+  }
+  const std::uint8_t* r = channel_rows_.data();
+  const std::uint8_t* g = r + padded;
+  const std::uint8_t* b = g + padded;
+  if (options_.colour == SimColour::kRgb) {
+    for (int u = 0; u < width; ++u) {
+      out[3 * u] = r[u];
+      out[3 * u + 1] = g[u];
+      out[3 * u + 2] = b[u];
+    }
+    return;
+  }
+  // A mosaic: each pixel its own colour's sample, the 2x2 cell read row by row.
+  static constexpr std::array<std::array<int, 4>, 4> kCells{{
+      {0, 1, 1, 2},  // RGGB
+      {1, 0, 2, 1},  // GRBG
+      {1, 2, 0, 1},  // GBRG
+      {2, 1, 1, 0},  // BGGR
+  }};
+  const auto& cell = kCells[static_cast<std::size_t>(options_.colour) -
+                            static_cast<std::size_t>(SimColour::kBayerRggb)];
+  const std::uint8_t* rows[3] = {r, g, b};
+  const int phase = (v & 1) * 2;
+  for (int u = 0; u < width; ++u)
+    out[u] = rows[cell[static_cast<std::size_t>(phase + (u & 1))]][u];
 }
 
 SimScene::Pose SimScene::pose_at(std::uint64_t sequence) const {
@@ -535,8 +616,10 @@ void SimScene::add_laser_row(int v, float* light) const {
 
 void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint8_t> dst) {
   const FrameFormat fmt = format();
-  if (dst.size() < fmt.bytes()) throw std::invalid_argument("SimScene::render: buffer too small");
+  if (dst.size() < raw_bytes()) throw std::invalid_argument("SimScene::render: buffer too small");
   const int width = fmt.width, height = fmt.height;
+  const bool colour = options_.colour != SimColour::kMono;
+  const std::size_t raw_stride = raw_bytes() / static_cast<std::size_t>(height);
   const double time = static_cast<double>(sequence) / options_.frame_rate_hz;
   const Pose pose = pose_at(sequence);
   const FrameGeometry g = make_geometry(options_, pose.r, pose.t, options_.object_speed_m_s * time);
@@ -547,6 +630,9 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
   const int padded = (width + kBlock - 1) / kBlock * kBlock;
   float* row = row_buffer_.data();
   float* pixel_floor = row_buffer_.data() + padded;
+  // The laser's light: in the row itself for mono frames (the same sums, in the same order, as
+  // ever), apart from the ambient light for colour ones (the two are coloured differently).
+  float* light = colour ? row_buffer_.data() + 2 * padded : row;
   float* centre = scratch_truth_.position.data();
   float* sigma = scratch_truth_.width_px.data();
   float* depth = scratch_truth_.depth_m.data();
@@ -665,6 +751,7 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
     } else {
       std::fill(row, row + padded, 0.0f);
     }
+    if (colour) std::fill(light, light + padded, 0.0f);
     if (veil > 0) {
       // Ambient light scattered by the water into a uniform glare, taken from the image's
       // contrast.
@@ -687,17 +774,21 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
         floor = pixel_floor;
       }
       glow_row(static_cast<float>(p_row), static_cast<float>(-la / g.fx / le), attenuation,
-               backscatter, floor, padded, row);
+               backscatter, floor, padded, light);
     }
 
     // The laser line (and marine snow).
     const float fv = static_cast<float>(v);
-    if (laser && ((fv >= band_lo && fv <= band_hi) || !snow_.empty())) add_laser_row(v, row);
+    if (laser && ((fv >= band_lo && fv <= band_hi) || !snow_.empty())) add_laser_row(v, light);
 
     // Sensor noise from the table at a hashed offset per row.
     const std::uint64_t offset = mix64(frame_hash + static_cast<std::uint64_t>(v)) % offsets;
-    quantise_row(row, noise_.data() + offset, noise_scale, width,
-                 dst.data() + static_cast<std::size_t>(v) * fmt.stride);
+    std::uint8_t* out = dst.data() + static_cast<std::size_t>(v) * raw_stride;
+    if (colour) {
+      colour_row(v, row, light, offset, out);
+    } else {
+      quantise_row(row, noise_.data() + offset, noise_scale, width, out);
+    }
   }
 }
 

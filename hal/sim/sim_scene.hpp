@@ -7,8 +7,13 @@
 
 #include "hal/calibration.hpp"
 #include "hal/frame.hpp"
+#include "hal/pixel_conversion.hpp"
 
 namespace laserline::hal {
+
+// What the simulated camera delivers: mono frames, or colour ones (interleaved RGB, or a Bayer
+// mosaic named by its top-left 2x2 cell) that the camera turns into the laser's channel.
+enum class SimColour : std::uint8_t { kMono, kRgb, kBayerRggb, kBayerGrbg, kBayerGbrg, kBayerBggr };
 
 // Everything that defines a simulated scan. Same options + same seed => same frames, bit for bit.
 struct SimSceneOptions {
@@ -40,6 +45,14 @@ struct SimSceneOptions {
     double offset_x_m = 0.0;
     double offset_y_m = 0.0;
   } checkerboard;
+
+  // Colour frames: the camera's red, green and blue response to the laser's light (a 535 nm
+  // laser is green; a red one gives about {1, 0.08, 0.03}) and to the ambient light (white: 1, 1,
+  // 1), as factors of laser_peak, backscatter and ambient. Mono frames see laser and ambient as
+  // they are.
+  SimColour colour = SimColour::kMono;
+  std::array<double, 3> laser_rgb{0.08, 1.0, 0.12};
+  std::array<double, 3> ambient_rgb{1.0, 1.0, 1.0};
 
   // Light, in grey levels of the 8-bit image.
   double ambient = 40.0;  // ambient light on a surface of albedo 1
@@ -160,9 +173,14 @@ class SimScene {
   explicit SimScene(const SimSceneOptions& options);
 
   const SimSceneOptions& options() const { return options_; }
+  // The frame the camera delivers to the pipeline: mono8.
   FrameFormat format() const;
+  // What render() writes: mono8, or the colour frame (3 bytes a pixel, or a Bayer mosaic of one),
+  // rows of raw_bytes() / height bytes.
+  SourceFormat raw_format() const;
+  std::size_t raw_bytes() const;
 
-  // Writes frame `sequence` as mono8 into dst (format().bytes() bytes).
+  // Writes frame `sequence` as raw_format() into dst (raw_bytes() bytes).
   void render(std::uint64_t sequence, bool laser_on, std::span<std::uint8_t> dst);
 
   // The lines the renderer draws the laser along (epipolar_lines() of the calibration).
@@ -191,6 +209,9 @@ class SimScene {
 
   // Draws the laser's light (the line, forward scatter, marine snow) into image row v.
   void add_laser_row(int v, float* light) const;
+  // Image row v of a colour frame from its ambient and laser light (noise from `noise_offset`).
+  void colour_row(int v, const float* ambient, const float* light, std::uint64_t noise_offset,
+                  std::uint8_t* out);
   // Places this frame's marine snow (snow_).
   void place_snow(std::uint64_t sequence);
 
@@ -200,11 +221,13 @@ class SimScene {
   std::vector<float> caustics_;     // tile of the caustic pattern (empty without caustics)
   float caustic_mean_ = 1.0f;       // its mean
   std::vector<std::int8_t> noise_;  // table of Gaussian sensor noise samples (scaled)
-  std::vector<float> row_buffer_;   // scratch: one image row, the glow floor per pixel
-  SimGroundTruth scratch_truth_;    // per-line truth of the frame being rendered
-  std::vector<float> line_gain_;    // per line: peak grey level of the line
-  std::vector<float> glow_floor_;   // per line: inverse depth of the lit point (see render())
-  std::vector<float> relief_;       // wrapping tile of relief heights (m), empty without relief
+  // Scratch: one image row, the glow floor per pixel, the laser's light (colour), one channel.
+  std::vector<float> row_buffer_;
+  std::vector<std::uint8_t> channel_rows_;  // colour: one row of each channel, quantised
+  SimGroundTruth scratch_truth_;            // per-line truth of the frame being rendered
+  std::vector<float> line_gain_;            // per line: peak grey level of the line
+  std::vector<float> glow_floor_;  // per line: inverse depth of the lit point (see render())
+  std::vector<float> relief_;      // wrapping tile of relief heights (m), empty without relief
   struct Particle {
     float x, y, sigma, peak;
   };
