@@ -79,7 +79,27 @@ void read_detector_options(hal::YamlMap& detector, pipeline::DetectorOptions& op
       frontend.integer("max_candidates_per_column", f.max_candidates_per_column, 1, 64));
   f.saturation_level =
       static_cast<int>(frontend.integer("saturation_level", f.saturation_level, 1, 255));
+  pipeline::LineSelectionOptions& l = f.selection;
+  hal::YamlMap selection = frontend.map("selection");
+  l.enabled = selection.boolean("enabled", l.enabled);
+  l.restart_cost_db = selection.number("restart_cost_db", l.restart_cost_db, 0.0, 10000.0);
+  l.jump_free_px = selection.number("jump_free_px", l.jump_free_px, 0.0, 1000.0);
+  l.jump_cost_db_per_px =
+      selection.number("jump_cost_db_per_px", l.jump_cost_db_per_px, 0.0, 1000.0);
+  l.gap_cost_db = selection.number("gap_cost_db", l.gap_cost_db, 0.0, 1000.0);
+  l.max_gap = static_cast<int>(selection.integer("max_gap", l.max_gap, 0, 64));
+  l.previous_bonus_db = selection.number("previous_bonus_db", l.previous_bonus_db, 0.0, 1000.0);
+  l.previous_tolerance_px =
+      selection.number("previous_tolerance_px", l.previous_tolerance_px, 0.0, 1000.0);
+  selection.finish();
   frontend.finish();
+
+  pipeline::BackgroundOptions& b = options.background;
+  hal::YamlMap background = detector.map("background");
+  b.history_frames =
+      static_cast<int>(background.integer("history_frames", b.history_frames, 1, 64));
+  b.min_motion_widths = background.number("min_motion_widths", b.min_motion_widths, 0.0, 100.0);
+  background.finish();
 
   pipeline::MotionOptions& m = options.motion;
   hal::YamlMap motion = detector.map("motion");

@@ -57,6 +57,8 @@ bool LcmPublisher::publish_profile(const ProfileSlot& slot) {
   profile_.laser_on = slot.info.laser_on;
   profile_.width = slot.width;
   profile_.height = slot.height;
+  profile_.background_sequence = slot.profile.background_sequence();
+  profile_.background_laser_off = slot.profile.background_laser_off();
   const pipeline::SearchAxes& axes = slot.profile.axes();
   profile_.search_axis = static_cast<std::int8_t>(axes.axis);
   std::copy(axes.origin.begin(), axes.origin.end(), profile_.search_origin);

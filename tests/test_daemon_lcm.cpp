@@ -310,9 +310,18 @@ TEST_F(DaemonOverLcm, BackgroundDetectorFindsTheLineUnderStrongAmbientLight) {
   laserline::hal::SimScene scene = scene_of(config_text);
   laserline::hal::SimGroundTruth truth;
   std::int64_t valid = 0, correct = 0, truth_columns = 0;
+  int subtracted = 0;
   for (const auto& p : rx.profiles) {
     EXPECT_EQ(p.detector, "background");
-    if (p.num_points == 0) continue;  // the first frame has no previous one to subtract
+    EXPECT_EQ(p.search_axis, static_cast<int>(laserline::profile_t::SEARCH_COLUMNS));
+    // The frame subtracted: an earlier laser-on one the scan moved away from (none at first).
+    if (p.background_sequence >= 0) {
+      EXPECT_LT(p.background_sequence, p.sequence);
+      EXPECT_GE(p.background_sequence, p.sequence - 8);
+      EXPECT_FALSE(p.background_laser_off);
+      ++subtracted;
+    }
+    if (p.num_points == 0) continue;
     scene.ground_truth(static_cast<std::uint64_t>(p.sequence), true, truth);
     for (float row : truth.position)
       truth_columns += std::isfinite(row) ? 1 : 0;
@@ -325,6 +334,7 @@ TEST_F(DaemonOverLcm, BackgroundDetectorFindsTheLineUnderStrongAmbientLight) {
   }
   EXPECT_GE(static_cast<double>(correct), 0.95 * static_cast<double>(truth_columns));
   EXPECT_GE(static_cast<double>(correct), 0.98 * static_cast<double>(valid));
+  EXPECT_GE(subtracted, static_cast<int>(rx.profiles.size()) - 3);
 }
 
 TEST_F(DaemonOverLcm, AlternatingLaserSwitchesPerFrameAndSigintStops) {
