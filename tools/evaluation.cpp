@@ -102,19 +102,27 @@ std::vector<Scenario> standard_scenarios(int width, int height) {
     s.scene.seed = 17;
     out.push_back(s);
   }
-  {
-    Scenario s{"hover",
-               "daylight on a textured wall, the vehicle holding station without scanning: it "
-               "sways by a centimetre and a few tenths of a degree over seconds, under a pixel "
-               "between frames",
+  for (const char* light : {"", "-daylight"}) {
+    const bool daylight = light[0] != 0;
+    Scenario s{std::string("hover") + light,
+               std::string(daylight ? "daylight as bright as the laser on a textured wall"
+                                    : "moderate light on a textured wall") +
+                   ", the vehicle holding station without scanning: it sways by a centimetre "
+                   "and a few tenths of a degree over seconds, under a pixel between frames",
                base};
-    s.scene.ambient = 150;
-    s.scene.texture_contrast = 0.6;
-    s.scene.laser_peak = 100;
+    s.scene.ambient = daylight ? 150 : 40;
+    s.scene.texture_contrast = daylight ? 0.6 : 0.5;
+    s.scene.laser_peak = daylight ? 100 : 160;
     s.scene.noise_sigma = 2.0;
     s.scene.seed = 19;
     s.scene.scan_rate_deg_s = 0;
     out.push_back(s);
+    if (daylight) {
+      s.name = "hover-daylight-alternate";
+      s.description = "as hover-daylight, the laser on and off every other frame";
+      s.alternate = true;
+      out.push_back(s);
+    }
   }
   {
     Scenario s{"static-rig",

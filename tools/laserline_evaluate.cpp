@@ -90,7 +90,7 @@ int main(int argc, char** argv) {
   if (detectors.empty()) detectors = pipeline::detector_names();
   if (!overlay_dir.empty()) std::filesystem::create_directories(overlay_dir);
 
-  std::printf("%-18s %-14s %7s %9s %9s %8s %8s %8s\n", "scenario", "detector", "frames", "recall",
+  std::printf("%-24s %-14s %7s %9s %9s %8s %8s %8s\n", "scenario", "detector", "frames", "recall",
               "precision", "rms_px", "bias_px", "max_px");
   for (tools::Scenario scenario : tools::standard_scenarios(width, height)) {
     if (!scenarios.empty() &&
@@ -115,7 +115,7 @@ int main(int argc, char** argv) {
                      scenario.name.c_str(), e.what());
         return 1;
       }
-      std::printf("%-18s %-14s %7d %8.2f%% %8.2f%% %8.3f %8.3f %8.3f\n", scenario.name.c_str(),
+      std::printf("%-24s %-14s %7d %8.2f%% %8.2f%% %8.3f %8.3f %8.3f\n", scenario.name.c_str(),
                   name.c_str(), score.frames, 100.0 * score.recall(), 100.0 * score.precision(),
                   score.rms(), score.bias(), score.max_error);
     }
