@@ -281,19 +281,29 @@ TEST_F(Calibrate, BadViewsGiveOneLineErrors) {
   EXPECT_NE(error_of(central, o).find("the estimated distortion folds the image over"),
             std::string::npos);
 
-  // A board of another size than asked for: named.
+  // A board of another size than asked for: no view gives it.
   tools::PlaneCalibrationOptions wrong = o;
+  std::vector<std::string> skipped;
   wrong.board_columns = 8;
-  EXPECT_NE(error_of(*views_, wrong).find("view0: no 8x6 checkerboard found"), std::string::npos);
+  wrong.on_skip = [&](const std::string& line) { skipped.push_back(line); };
+  const std::vector<tools::CalibrationView> three(views_->begin(), views_->begin() + 3);
+  EXPECT_NE(error_of(three, wrong).find("the 8x6 checkerboard was found in 0 of 3 views"),
+            std::string::npos);
+  ASSERT_EQ(skipped.size(), three.size());
+  EXPECT_EQ(skipped[0], "view0: no 8x6 checkerboard found in its laser-off image");
 
-  // A view without a board.
+  // A view without a board is left out, named; with one view left, that is too few.
   hal::SimSceneOptions plain = view_options(kPoses[0]);
   plain.checkerboard.columns = 0;
   hal::SimScene plain_scene(plain);
   std::vector<tools::CalibrationView> with_plain = {(*views_)[0],
                                                     {"plain.png", render(plain_scene, true), {}}};
-  EXPECT_NE(error_of(with_plain, o).find("plain.png: no 9x6 checkerboard found"),
+  skipped.clear();
+  tools::PlaneCalibrationOptions reported = o;
+  reported.on_skip = [&](const std::string& line) { skipped.push_back(line); };
+  EXPECT_NE(error_of(with_plain, reported).find("the 9x6 checkerboard was found in 1 of 2 views"),
             std::string::npos);
+  EXPECT_EQ(skipped, std::vector<std::string>{"plain.png: no 9x6 checkerboard found"});
 
   // Parallel boards at different distances.
   const std::vector<tools::CalibrationView> parallel = {render_view({0.9, 10, 0}, "near"),
