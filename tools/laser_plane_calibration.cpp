@@ -1140,11 +1140,21 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
   hal::LaserMount& laser = result.calibration.laser;
   laser = o.laser_prior;
   laser.plane = std::array<double, 4>{plane.normal[0], plane.normal[1], plane.normal[2], plane.e};
-  // The paper's model Y = -d + tan(90 deg - beta) Z with the sheet along x: d where the plane
-  // crosses the y axis, beta from its slope in the y-z plane. Kept within the file's limits.
-  const double b = plane.normal[1];
-  double baseline = b != 0 ? plane.e / b : 0.0;
-  double angle = 90.0 - std::atan2(-plane.normal[2], b) / kDeg;
+  // The paper's model Y = -d + tan(90 deg - beta) Z with the sheet along x, turned to the side
+  // of the camera the projector is on: the axis the plane's normal leans to most (y above or
+  // below, x left or right; e > 0 gives the sign). d where the plane crosses that axis, beta
+  // from its slope toward the optical axis. Kept within the file's limits.
+  const double a = plane.normal[0], b = plane.normal[1];
+  double along = 0;
+  if (std::abs(b) >= std::abs(a)) {
+    laser.side = b > 0 ? hal::LaserSide::kAbove : hal::LaserSide::kBelow;
+    along = std::abs(b);
+  } else {
+    laser.side = a > 0 ? hal::LaserSide::kLeft : hal::LaserSide::kRight;
+    along = std::abs(a);
+  }
+  const double baseline = along > 0 ? plane.e / along : 0.0;
+  const double angle = 90.0 - std::atan2(-plane.normal[2], along) / kDeg;
   result.fits_baseline_model = baseline >= 1e-3 && baseline <= 10 && angle >= 1 && angle <= 179;
   laser.baseline_m = std::clamp(baseline, 1e-3, 10.0);
   laser.angle_deg = std::clamp(angle, 1.0, 179.0);
@@ -1178,7 +1188,8 @@ void write_calibration_file(const std::string& path, const PlaneCalibrationResul
   std::fprintf(f, "laser:\n");
   std::fprintf(f, "  # the paper's d and beta nearest to the plane%s; `plane` is what is used\n",
                r.fits_baseline_model ? "" : " (clamped: the plane does not fit that model)");
-  std::fprintf(f, "  baseline_m: %.10g\n  angle_deg: %.10g\n", l.baseline_m, l.angle_deg);
+  std::fprintf(f, "  baseline_m: %.10g\n  angle_deg: %.10g\n  side: %s\n", l.baseline_m,
+               l.angle_deg, hal::to_string(l.side));
   std::fprintf(f, "  sheet_width_m: %.10g\n", l.sheet_width_m);
   std::fprintf(f, "  # a*X + b*Y + c*Z + e = 0, camera frame, metres; (a, b, c) a unit vector\n");
   std::fprintf(f, "  plane: [%.12g, %.12g, %.12g, %.12g]\n", p[0], p[1], p[2], p[3]);

@@ -99,8 +99,9 @@ struct PlaneCalibrationResult {
   double plane_rms_px = 0, plane_max_px = 0;
   // The plane's unit normal and distance: plane = [n, -distance] or sign-flipped so that e > 0.
   double normal_angle_to_y_deg = 0;  // angle between the normal and the camera's y axis
-  // baseline_m / angle_deg of the paper's model closest to the plane; false when the plane
-  // cannot be written that way within the calibration file's limits (then clamped).
+  // baseline_m / angle_deg / side of the paper's model closest to the plane (in
+  // calibration.laser); false when the plane cannot be written that way within the calibration
+  // file's limits (then clamped).
   bool fits_baseline_model = true;
 };
 

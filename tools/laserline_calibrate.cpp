@@ -111,8 +111,9 @@ void print_report(const laserline::tools::PlaneCalibrationResult& r) {
   std::printf("  plane [%.9f, %.9f, %.9f, %.9f]\n", p[0], p[1], p[2], p[3]);
   std::printf("  distance from the camera centre %.2f mm, normal %.3f deg from the y axis\n",
               1000.0 * p[3], r.normal_angle_to_y_deg);
-  std::printf("  as baseline and angle: %.2f mm, %.3f deg%s\n",
+  std::printf("  as baseline and angle: %.2f mm, %.3f deg, the projector %s the camera%s\n",
               1000.0 * r.calibration.laser.baseline_m, r.calibration.laser.angle_deg,
+              laserline::hal::to_string(r.calibration.laser.side),
               r.fits_baseline_model ? "" : " (clamped: the plane does not fit that model)");
   std::printf("residuals over %d of %d laser points (views' lines):\n", r.inliers, r.points);
   std::printf("  distance to the plane: RMS %.3f mm, max %.3f mm\n", r.plane_rms_mm,
