@@ -48,6 +48,16 @@ constexpr int kMinRemovalPoints = 12;
 // line's brightness above its surroundings has fallen to this fraction of its peak.
 constexpr int kMaxHalfWidthPx = 40;
 constexpr double kWidthLevel = 0.1;
+// The profile across the line has stopped falling where it falls by less than this fraction of
+// the line's height per pixel.
+constexpr double kFootSlope = 0.02;
+// A line stands at least this high (grey levels) above its foot on either side, and on its lower
+// side at least this fraction of its height on the other.
+constexpr double kMinRise = 8.0;
+constexpr double kRiseBalance = 0.25;
+// On a laser-on image alone, the detector's points count within this distance of the band the
+// line was taken out of.
+constexpr int kGateMarginPx = 2;
 // A view's line agrees with a plane when its points lie within this distance (pixels, median) of
 // the line where the plane meets its board.
 constexpr double kAgreePx = 3.0;
@@ -80,6 +90,10 @@ struct BoardView {
   double offset = 0;
   std::vector<cv::Point2d> laser_px;  // undistorted pixel coordinates of the line's points
   std::vector<cv::Vec3d> laser_xyz;   // on the board plane, camera frame, metres
+  // Without a laser-off image: where the line was found and taken out before the corner search
+  // (empty: no line found). The detector's points are kept there only.
+  bool gated = false;
+  cv::Mat line_band;
 };
 
 std::vector<cv::Point3f> board_points(const PlaneCalibrationOptions& o) {
@@ -249,11 +263,12 @@ pipeline::DetectorOptions detector_options(const PlaneCalibrationOptions& o,
 // detector_options()). Throws std::invalid_argument, from the detector, when it cannot work.
 class LineFinder {
  public:
-  LineFinder(const PlaneCalibrationOptions& o, const hal::CameraIntrinsics& cam) {
+  LineFinder(const PlaneCalibrationOptions& o, const hal::CameraIntrinsics& cam,
+             const std::string& detector) {
     const auto plane = o.laser_prior.plane_coefficients();
     transposed_ = std::abs(plane[0]) > std::abs(plane[1]);
     const pipeline::DetectorOptions d = detector_options(o, cam, transposed_);
-    detector_ = pipeline::make_detector(o.detector, d);
+    detector_ = pipeline::make_detector(detector, d);
     if (!detector_) throw std::invalid_argument("unknown detector");
     detector_->reset(d.geometry.width, d.geometry.height);
     profile_ = pipeline::Profile(detector_->max_points(d.geometry.width, d.geometry.height));
@@ -261,7 +276,7 @@ class LineFinder {
 
   // The detector's chosen points (one per epipolar line) in a mono8 image of the camera's size,
   // in its pixel coordinates.
-  std::vector<cv::Point2d> find(const cv::Mat& image) {
+  std::vector<cv::Point2d> find(const cv::Mat& image, bool candidates = false) {
     const cv::Mat* in = &image;
     if (transposed_) {
       cv::transpose(image, transposed_image_);
@@ -272,7 +287,7 @@ class LineFinder {
     detector_->detect(iv, pipeline::FrameContext{sequence_++, true}, profile_);
     std::vector<cv::Point2d> points;
     for (const auto& p : profile_.points()) {
-      if (!p.valid || !std::isfinite(p.v)) continue;
+      if ((!p.valid && !candidates) || !std::isfinite(p.v)) continue;
       if (transposed_) {
         points.emplace_back(p.v, p.u);
       } else {
@@ -337,10 +352,26 @@ void find_laser(BoardView& bv, const ViewImages& images, const PlaneCalibrationO
   cv::fillPoly(outside, std::vector<std::vector<cv::Point>>{polygon}, cv::Scalar(0));
   image.setTo(0, outside);
 
+  // On a laser-on image alone the squares' edges compete with the line: only the points where
+  // the line was found before (its band, a little wider) are the line's.
+  cv::Mat near_line;
+  if (bv.gated && !bv.line_band.empty()) {
+    cv::dilate(bv.line_band, near_line,
+               cv::getStructuringElement(cv::MORPH_ELLIPSE,
+                                         cv::Size(2 * kGateMarginPx + 1, 2 * kGateMarginPx + 1)));
+  }
   std::vector<cv::Point2d> raw;
   for (const auto& p : finder.find(image)) {
     const cv::Point2f at(static_cast<float>(p.x), static_cast<float>(p.y));
-    if (cv::pointPolygonTest(outline, at, true) >= kBoardInsetPx) raw.push_back(p);
+    if (cv::pointPolygonTest(outline, at, true) < kBoardInsetPx) continue;
+    if (bv.gated) {
+      const int x = cvRound(p.x), y = cvRound(p.y);
+      if (near_line.empty() || x < 0 || y < 0 || x >= near_line.cols || y >= near_line.rows ||
+          near_line.at<std::uint8_t>(y, x) == 0) {
+        continue;
+      }
+    }
+    raw.push_back(p);
   }
   report.laser_candidates = static_cast<int>(raw.size());
   if (raw.empty()) return;
@@ -547,22 +578,15 @@ bool follow_line(const std::vector<cv::Point2d>& points, LineCourse& course,
   return static_cast<int>(near.size()) >= kMinRemovalPoints;
 }
 
-}  // namespace
+// The mean brightness across a line (over its length, so that the squares average out) at each
+// offset from its centre: how high it stands above its feet on either side, and how far out it
+// reaches (where it has fallen to kWidthLevel of its height above its foot).
+struct AcrossLine {
+  double rise[2] = {0, 0};
+  int reach[2] = {0, 0};
+};
 
-LineRemoval remove_laser_line(const cv::Mat& board, const std::vector<cv::Point2d>& points,
-                              cv::Mat& out) {
-  if (board.type() != CV_8UC1 || board.cols < 2 || board.rows < 2) {
-    fail("remove_laser_line: the board image must be mono8, at least 2x2");
-  }
-  LineRemoval removal;
-  out = board.clone();
-  LineCourse course;
-  std::vector<std::size_t> near;
-  if (!follow_line(points, course, near)) return removal;
-
-  // Its width where it matters, in the board's image: the mean brightness across the line (over
-  // its length, so the squares average out) at each offset from its centre, out to where it has
-  // fallen back to its surroundings on either side.
+AcrossLine across_line(const cv::Mat& image, const LineCourse& course) {
   constexpr int kS = kMaxHalfWidthPx;
   std::vector<double> profile(2 * kS + 1, 0.0);
   int lengthwise = 0;
@@ -570,7 +594,7 @@ LineRemoval remove_laser_line(const cv::Mat& board, const std::vector<cv::Point2
     const double centre = course.across(t);
     for (int s = -kS; s <= kS; ++s) {
       const cv::Point2d p = course.at(t, centre + s);
-      profile[static_cast<std::size_t>(s + kS)] += sample(board, p.x, p.y);
+      profile[static_cast<std::size_t>(s + kS)] += sample(image, p.x, p.y);
     }
   }
   for (double& v : profile)
@@ -579,21 +603,61 @@ LineRemoval remove_laser_line(const cv::Mat& board, const std::vector<cv::Point2
   double peak = 0;
   for (int s = -1 - spread; s <= 1 + spread; ++s)
     peak = std::max(peak, profile[static_cast<std::size_t>(s + kS)]);
+  AcrossLine a;
   for (int side = 0; side < 2; ++side) {
     const int sign = side == 0 ? -1 : 1;
-    double base = peak;
+    const auto at = [&](int k) { return profile[static_cast<std::size_t>(kS + sign * k)]; };
+    double lowest = peak;
     for (int k = 1; k <= kS; ++k)
-      base = std::min(base, profile[static_cast<std::size_t>(kS + sign * k)]);
-    const double level = base + kWidthLevel * (peak - base);
-    int reach = kS;
+      lowest = std::min(lowest, at(k));
+    // The line's foot: past its upper half, where the profile stops falling (what lies beyond,
+    // e.g. the dark edge of the board, is not the line's).
+    const double flat = kFootSlope * (peak - lowest);
+    int foot = kS;
     for (int k = 1; k <= kS; ++k) {
-      if (profile[static_cast<std::size_t>(kS + sign * k)] <= level) {
-        reach = k;
+      if (at(k) < 0.5 * (peak + lowest) && at(k) > at(k - 1) - flat) {
+        foot = k - 1;
         break;
       }
     }
+    a.rise[side] = peak - at(foot);
+    const double level = at(foot) + kWidthLevel * a.rise[side];
+    a.reach[side] = foot;
+    for (int k = 1; k <= foot; ++k) {
+      if (at(k) <= level) {
+        a.reach[side] = k;
+        break;
+      }
+    }
+  }
+  return a;
+}
+
+}  // namespace
+
+LineRemoval remove_laser_line(const cv::Mat& board, const cv::Mat& laser,
+                              const std::vector<cv::Point2d>& points, cv::Mat& out) {
+  if (board.type() != CV_8UC1 || laser.type() != CV_8UC1 || board.size() != laser.size() ||
+      board.cols < 2 || board.rows < 2) {
+    fail("remove_laser_line: the board and laser images must be mono8 of one size, at least 2x2");
+  }
+  LineRemoval removal;
+  out = board.clone();
+  LineCourse course;
+  std::vector<std::size_t> near;
+  if (!follow_line(points, course, near)) return removal;
+  // A laser line stands out of its surroundings on both sides in its own light; a step (the
+  // board's edge) or a row of squares' edges taken for one does not.
+  const AcrossLine light = across_line(laser, course);
+  const double low = std::min(light.rise[0], light.rise[1]);
+  const double high = std::max(light.rise[0], light.rise[1]);
+  if (!(low >= kMinRise && low >= kRiseBalance * high)) return removal;
+  // Its width where it matters, in the board's image.
+  const AcrossLine seen = across_line(board, course);
+  for (int side = 0; side < 2; ++side) {
     // One pixel more for the tail below the level, and the course's own scatter.
-    removal.half_width_px[side] = std::min(static_cast<double>(kS), reach + 1.0 + 2.0 * course.rms);
+    removal.half_width_px[side] =
+        std::min(static_cast<double>(kMaxHalfWidthPx), seen.reach[side] + 1.0 + 2.0 * course.rms);
   }
 
   // The band, filled along the normal from its two sides. It runs a half width beyond the
@@ -740,12 +804,17 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
     provisional.cx = (size.width - 1) / 2.0;
     provisional.cy = (size.height - 1) / 2.0;
   }
-  std::optional<LineFinder> removal_finder;
-  try {
-    removal_finder.emplace(o, provisional);
-  } catch (const std::invalid_argument&) {
-    // The mount gives the detector nothing to search with the guessed intrinsics: the corners
-    // are searched in the raw images; the detector's error, if it persists, comes below.
+  // The line's points for its removal: the user's detector's and `maxvalue`'s (each column's
+  // brightest pixel: no width model, so it also finds lines much wider or brighter than the
+  // nominal mount's, which the front-end's width normalisation may pass over).
+  std::vector<LineFinder> removal_finders;
+  for (const std::string& name : {o.detector, std::string("maxvalue")}) {
+    try {
+      removal_finders.emplace_back(o, provisional, name);
+    } catch (const std::invalid_argument&) {
+      // Nothing to search with the guessed intrinsics: that detector does not help the
+      // removal; its error, if it persists with the final intrinsics, comes below.
+    }
   }
   std::vector<ViewImages> images(views.size());
   std::vector<BoardView> boards;
@@ -758,15 +827,19 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
     if (!im.board_off.empty()) {
       if (find_corners(im.board_off, o, b.corners)) from = "laser-off image";
     } else {
-      LineRemoval removal;
-      if (removal_finder) {
-        cv::Mat removed;
-        removal = remove_laser_line(im.board_on, removal_finder->find(im.laser_on), removed);
-        if (removal.points > 0 && find_corners(removed, o, b.corners)) from = "line removed";
+      std::vector<cv::Point2d> points;
+      for (LineFinder& finder : removal_finders) {
+        const std::vector<cv::Point2d> found = finder.find(im.laser_on);
+        points.insert(points.end(), found.begin(), found.end());
       }
+      cv::Mat removed;
+      const LineRemoval removal = remove_laser_line(im.board_on, im.laser_on, points, removed);
+      if (removal.points > 0 && find_corners(removed, o, b.corners)) from = "line removed";
       if (from.empty() && find_corners(im.board_on, o, b.corners)) from = "laser-on image";
       // Found either way, the corners the line covered are not where they were found.
       const int placed = from.empty() ? 0 : place_hidden_corners(b.corners, removal.band, o);
+      b.gated = true;
+      b.line_band = removal.band;
       if (placed > 0) {
         from += " (" + std::to_string(placed) + " corner" + (placed > 1 ? "s" : "") +
                 " under the line placed from their neighbours)";
@@ -916,7 +989,7 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
   // The laser line on each board, in 3-D.
   std::optional<LineFinder> finder;
   try {
-    finder.emplace(o, cam);
+    finder.emplace(o, cam, o.detector);
   } catch (const std::invalid_argument& e) {
     fail("detector " + o.detector + ": " + e.what());
   }
