@@ -69,8 +69,10 @@ struct PlaneCalibrationOptions {
 
 struct ViewReport {
   std::string name;
-  bool board = false;        // its checkerboard was found
-  std::string corners_from;  // "laser-off image", "line removed" or "laser-on image"
+  bool board = false;  // its checkerboard was found
+  // "laser-off image", "line removed" or "laser-on image", with how many corners under the line
+  // were placed from their neighbours
+  std::string corners_from;
   std::string skipped;       // why the view does not contribute to the plane; empty when it does
   double corner_rms_px = 0;  // reprojection of the board's corners with the final intrinsics
   double distance_m = 0;     // camera centre to the board plane
@@ -105,8 +107,10 @@ struct PlaneCalibrationResult {
   bool fits_baseline_model = true;
 };
 
-// Runs the whole calibration. Throws PlaneCalibrationError with a one-line message naming the
-// view (or the reason) when it cannot.
+// Runs the whole calibration. Views that cannot contribute (no board, no line on it, ...) are
+// left out, each reported once through options.on_skip and in its ViewReport. Throws
+// PlaneCalibrationError with a one-line message naming the view (or the reason, with how many
+// views were left out for each) when the rest do not give a calibration.
 PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>& views,
                                              const PlaneCalibrationOptions& options);
 
