@@ -5,13 +5,17 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <map>
+#include <memory>
 #include <numbers>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 #include <sstream>
 
 #include "tools/frame_channel.hpp"
@@ -33,9 +37,30 @@ constexpr int kMinLinePoints = 20;
 // Candidates closer to the board's outline than this (pixels) are left out: the line's end on
 // the board's edge and the edge itself are not reliable.
 constexpr double kBoardInsetPx = 6.0;
-// Height of the opening that removes the laser line from a laser-on image before the corner
-// search: longer than the line is thick, shorter than a square is high.
-constexpr int kLineOpeningPx = 21;
+// A board seen more obliquely than this gives its line's points as rays that graze it: a small
+// error in the pose moves them far along the board.
+constexpr double kMaxTiltDeg = 75.0;
+// Removal of the line before the corner search (raw pixels, the lens still in them): points
+// within this distance of the course followed, at least this many of them.
+constexpr double kRemovalInlierPx = 3.0;
+constexpr int kMinRemovalPoints = 12;
+// The band filled is at most this wide on either side of the line's centre, and ends where the
+// line's brightness above its surroundings has fallen to this fraction of its peak.
+constexpr int kMaxHalfWidthPx = 40;
+constexpr double kWidthLevel = 0.1;
+// The profile across the line has stopped falling where it falls by less than this fraction of
+// the line's height per pixel.
+constexpr double kFootSlope = 0.02;
+// A line stands at least this high (grey levels) above its foot on either side, and on its lower
+// side at least this fraction of its height on the other.
+constexpr double kMinRise = 8.0;
+constexpr double kRiseBalance = 0.25;
+// On a laser-on image alone, the detector's points count within this distance of the band the
+// line was taken out of.
+constexpr int kGateMarginPx = 2;
+// A view's line agrees with a plane when its points lie within this distance (pixels, median) of
+// the line where the plane meets its board.
+constexpr double kAgreePx = 3.0;
 
 [[noreturn]] void fail(const std::string& message) {
   throw PlaneCalibrationError(message);
@@ -51,14 +76,24 @@ cv::Matx33d camera_matrix(const hal::CameraIntrinsics& c) {
   return {c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1};
 }
 
+// The images of one view as the calibration uses them (mono8): the laser's channel and the
+// board's (luma), with the laser on and (when taken) off.
+struct ViewImages {
+  cv::Mat laser_on, laser_off, board_on, board_off;
+};
+
 struct BoardView {
-  const CalibrationView* view = nullptr;
+  std::size_t index = 0;  // into the views
   std::vector<cv::Point2f> corners;
   cv::Vec3d rvec, tvec;
   cv::Vec3d normal;  // board plane in the camera frame: normal . X = offset, offset > 0
   double offset = 0;
   std::vector<cv::Point2d> laser_px;  // undistorted pixel coordinates of the line's points
   std::vector<cv::Vec3d> laser_xyz;   // on the board plane, camera frame, metres
+  // Without a laser-off image: where the line was found and taken out before the corner search
+  // (empty: no line found). The detector's points are kept there only.
+  bool gated = false;
+  cv::Mat line_band;
 };
 
 std::vector<cv::Point3f> board_points(const PlaneCalibrationOptions& o) {
@@ -75,8 +110,15 @@ std::vector<cv::Point3f> board_points(const PlaneCalibrationOptions& o) {
 bool find_corners(const cv::Mat& grey, const PlaneCalibrationOptions& o,
                   std::vector<cv::Point2f>& corners) {
   const cv::Size pattern(o.board_columns, o.board_rows);
-  const int flags = cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE;
-  if (!cv::findChessboardCorners(grey, pattern, corners, flags)) return false;
+  // The quad-based detector first (fast); then the sector-based one, which also finds boards
+  // that are small, blurred, dim or crossed by what is left of the line (a quarter of a second
+  // per megapixel, more where there is no board).
+  const bool found =
+      cv::findChessboardCorners(grey, pattern, corners,
+                                cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE) ||
+      cv::findChessboardCornersSB(grey, pattern, corners,
+                                  cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_EXHAUSTIVE);
+  if (!found) return false;
   // Refinement window: about a third of the smallest square seen, so it never reaches the next
   // corner.
   double nearest = 1e9;
@@ -93,9 +135,68 @@ bool find_corners(const cv::Mat& grey, const PlaneCalibrationOptions& o,
   return true;
 }
 
-// The straight line (undistorted pixels) through most points, by RANSAC then least squares;
+// Corners the removed line covered: the band lost the squares' edges that ran along the line, so
+// what was found there is where the band put them, not where they are. Each is placed instead
+// by the homography of its board's neighbours outside the band (within two squares, else three:
+// near enough that the lens bends them little); returns how many were.
+int place_hidden_corners(std::vector<cv::Point2f>& corners, const cv::Mat& band,
+                         const PlaneCalibrationOptions& o) {
+  if (band.empty()) return 0;
+  constexpr int kMarginPx = 2;  // cornerSubPix's gradients reach this far into the band
+  cv::Mat near_band;
+  cv::dilate(
+      band, near_band,
+      cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * kMarginPx + 1, 2 * kMarginPx + 1)));
+  const int columns = o.board_columns, rows = o.board_rows;
+  std::vector<char> hidden(corners.size(), 0);
+  for (std::size_t i = 0; i < corners.size(); ++i) {
+    const int x = cvRound(corners[i].x), y = cvRound(corners[i].y);
+    hidden[i] =
+        x >= 0 && y >= 0 && x < band.cols && y < band.rows && near_band.at<std::uint8_t>(y, x) != 0;
+  }
+  std::vector<cv::Point2f> placed = corners;
+  int count = 0;
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < columns; ++c) {
+      const std::size_t i = static_cast<std::size_t>(r * columns + c);
+      if (!hidden[i]) continue;
+      for (int reach = 2; reach <= 3; ++reach) {
+        std::vector<cv::Point2f> grid, image;
+        std::vector<int> rows_used, columns_used;
+        for (int rr = std::max(0, r - reach); rr <= std::min(rows - 1, r + reach); ++rr) {
+          for (int cc = std::max(0, c - reach); cc <= std::min(columns - 1, c + reach); ++cc) {
+            const std::size_t j = static_cast<std::size_t>(rr * columns + cc);
+            if (hidden[j]) continue;
+            grid.emplace_back(static_cast<float>(cc), static_cast<float>(rr));
+            image.push_back(corners[j]);
+            rows_used.push_back(rr);
+            columns_used.push_back(cc);
+          }
+        }
+        // A homography needs the neighbours to span both directions of the board.
+        const auto spans = [](std::vector<int> v) {
+          std::sort(v.begin(), v.end());
+          return std::unique(v.begin(), v.end()) - v.begin() >= 2;
+        };
+        if (grid.size() < 6 || !spans(rows_used) || !spans(columns_used)) continue;
+        const cv::Mat h = cv::findHomography(grid, image, 0);
+        if (h.empty()) continue;
+        std::vector<cv::Point2f> at;
+        cv::perspectiveTransform(
+            std::vector<cv::Point2f>{{static_cast<float>(c), static_cast<float>(r)}}, at, h);
+        placed[i] = at[0];
+        ++count;
+        break;
+      }
+    }
+  }
+  corners = std::move(placed);
+  return count;
+}
+
+// The straight line through most points (within `tolerance`), by RANSAC then least squares;
 // returns the inliers' indices.
-std::vector<std::size_t> line_inliers(const std::vector<cv::Point2d>& points) {
+std::vector<std::size_t> line_inliers(const std::vector<cv::Point2d>& points, double tolerance) {
   std::vector<std::size_t> best;
   if (points.size() < 2) return best;
   cv::RNG rng(0x6c617365);  // fixed: the same views give the same calibration
@@ -103,7 +204,7 @@ std::vector<std::size_t> line_inliers(const std::vector<cv::Point2d>& points) {
     std::vector<std::size_t> in;
     const cv::Point2d n(-direction.y, direction.x);
     for (std::size_t i = 0; i < points.size(); ++i) {
-      if (std::abs((points[i] - p).dot(n)) <= kLineInlierPx) in.push_back(i);
+      if (std::abs((points[i] - p).dot(n)) <= tolerance) in.push_back(i);
     }
     return in;
   };
@@ -128,9 +229,75 @@ std::vector<std::size_t> line_inliers(const std::vector<cv::Point2d>& points) {
   return best;
 }
 
-void find_laser(BoardView& bv, const PlaneCalibrationOptions& o, const hal::CameraIntrinsics& cam,
-                pipeline::Detector& detector, pipeline::Profile& profile, ViewReport& report) {
-  const CalibrationView& view = *bv.view;
+// What the detector is told about the scanner: the nominal mount decides which way its epipolar
+// lines run (columns, rows for a projector beside the camera, or at an angle).
+pipeline::DetectorOptions detector_options(const PlaneCalibrationOptions& o,
+                                           const hal::CameraIntrinsics& cam) {
+  pipeline::DetectorOptions d;
+  pipeline::ScannerGeometry& g = d.geometry;
+  g.width = cam.width;
+  g.height = cam.height;
+  g.fx = cam.fx;
+  g.fy = cam.fy;
+  g.cx = cam.cx;
+  g.cy = cam.cy;
+  g.distortion = cam.distortion;
+  g.laser_plane = o.laser_prior.plane_coefficients();
+  g.sheet_width_m = o.laser_prior.sheet_width_m;
+  d.frontend = o.frontend;
+  return d;
+}
+
+// A laserline detector over whole images of one size, each on its own (no previous frame), in
+// the image's pixel coordinates whichever way the line runs. Throws std::invalid_argument, from
+// the detector, when it cannot work.
+class LineFinder {
+ public:
+  LineFinder(const PlaneCalibrationOptions& o, const hal::CameraIntrinsics& cam,
+             const std::string& detector)
+      : width_(cam.width), height_(cam.height) {
+    const pipeline::DetectorOptions d = detector_options(o, cam);
+    detector_ = pipeline::make_detector(detector, d);
+    if (!detector_) throw std::invalid_argument("unknown detector");
+    detector_->reset(width_, height_);
+    profile_ = pipeline::Profile(detector_->max_points(width_, height_));
+  }
+
+  // The detector's chosen points (one per epipolar line), or with `candidates` every candidate,
+  // in a mono8 image of the camera's size, in its pixel coordinates.
+  std::vector<cv::Point2d> find(const cv::Mat& image, bool candidates = false) {
+    const pipeline::ImageView iv{image.data, image.cols, image.rows, static_cast<int>(image.step)};
+    profile_.clear();
+    detector_->reset(width_, height_);  // each view on its own: no previous frame to follow
+    detector_->detect(iv, pipeline::FrameContext{0, true}, profile_);
+    std::vector<cv::Point2d> points;
+    for (const auto& p : profile_.points()) {
+      if ((!p.valid && !candidates) || !std::isfinite(p.v)) continue;
+      const auto [x, y] = profile_.image_point(p);
+      points.emplace_back(x, y);
+    }
+    return points;
+  }
+
+ private:
+  int width_, height_;
+  std::unique_ptr<pipeline::Detector> detector_;
+  pipeline::Profile profile_;
+};
+
+// A grey level between pixels (bilinear), the image's edge extended. The image is at least 2x2.
+double sample(const cv::Mat& image, double x, double y) {
+  x = std::clamp(x, 0.0, image.cols - 1.001);
+  y = std::clamp(y, 0.0, image.rows - 1.001);
+  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  const double fx = x - x0, fy = y - y0;
+  const std::uint8_t* r0 = image.ptr<std::uint8_t>(y0) + x0;
+  const std::uint8_t* r1 = image.ptr<std::uint8_t>(y0 + 1) + x0;
+  return (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
+}
+
+void find_laser(BoardView& bv, const ViewImages& images, const PlaneCalibrationOptions& o,
+                const hal::CameraIntrinsics& cam, LineFinder& finder, ViewReport& report) {
   // The board's squares' outline in the (distorted) image.
   const cv::Matx33d k = camera_matrix(cam);
   const cv::Mat dist(cam.distortion, false);
@@ -153,10 +320,10 @@ void find_laser(BoardView& bv, const PlaneCalibrationOptions& o, const hal::Came
   // The detector sees the board only: the scene around it cannot take the line's place among a
   // column's candidates.
   cv::Mat image;  // a new buffer: the view's images are the caller's
-  if (view.laser_off.empty()) {
-    image = view.laser_on.clone();
+  if (images.laser_off.empty()) {
+    image = images.laser_on.clone();
   } else {
-    cv::subtract(view.laser_on, view.laser_off, image);  // saturating at 0
+    cv::subtract(images.laser_on, images.laser_off, image);  // saturating at 0
   }
   cv::Mat outside(image.size(), CV_8UC1, cv::Scalar(255));
   std::vector<cv::Point> polygon;
@@ -164,23 +331,34 @@ void find_laser(BoardView& bv, const PlaneCalibrationOptions& o, const hal::Came
     polygon.emplace_back(cvRound(p.x), cvRound(p.y));
   cv::fillPoly(outside, std::vector<std::vector<cv::Point>>{polygon}, cv::Scalar(0));
   image.setTo(0, outside);
-  const pipeline::ImageView iv{image.data, image.cols, image.rows, static_cast<int>(image.step)};
-  profile.clear();
-  detector.reset(image.cols, image.rows);  // each view on its own: no previous frame to follow
-  detector.detect(iv, pipeline::FrameContext{0, true}, profile);
 
+  // On a laser-on image alone the squares' edges compete with the line: only the points where
+  // the line was found before (its band, a little wider) are the line's.
+  cv::Mat near_line;
+  if (bv.gated && !bv.line_band.empty()) {
+    cv::dilate(bv.line_band, near_line,
+               cv::getStructuringElement(cv::MORPH_ELLIPSE,
+                                         cv::Size(2 * kGateMarginPx + 1, 2 * kGateMarginPx + 1)));
+  }
   std::vector<cv::Point2d> raw;
-  for (const auto& p : profile.points()) {
-    if (!p.valid || !std::isfinite(p.v)) continue;
-    const cv::Point2f at(static_cast<float>(p.u), p.v);
-    if (cv::pointPolygonTest(outline, at, true) >= kBoardInsetPx) raw.emplace_back(p.u, p.v);
+  for (const auto& p : finder.find(image)) {
+    const cv::Point2f at(static_cast<float>(p.x), static_cast<float>(p.y));
+    if (cv::pointPolygonTest(outline, at, true) < kBoardInsetPx) continue;
+    if (bv.gated) {
+      const int x = cvRound(p.x), y = cvRound(p.y);
+      if (near_line.empty() || x < 0 || y < 0 || x >= near_line.cols || y >= near_line.rows ||
+          near_line.at<std::uint8_t>(y, x) == 0) {
+        continue;
+      }
+    }
+    raw.push_back(p);
   }
   report.laser_candidates = static_cast<int>(raw.size());
   if (raw.empty()) return;
   std::vector<cv::Point2d> undistorted;
   cv::undistortPoints(raw, undistorted, k, dist, cv::noArray(), k);
 
-  const std::vector<std::size_t> in = line_inliers(undistorted);
+  const std::vector<std::size_t> in = line_inliers(undistorted, kLineInlierPx);
   for (std::size_t i : in) {
     const cv::Point2d& u = undistorted[i];
     const cv::Vec3d ray((u.x - cam.cx) / cam.fx, (u.y - cam.cy) / cam.fy, 1.0);
@@ -264,6 +442,274 @@ double median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
+// The laser's line as a polynomial across its straight course: s = sum c_k tau^k in the frame of
+// the straight line (t along it from `origin`, s along its normal), tau = (t - t_mid) / t_scale
+// so that the fit is well conditioned. The lens bends a straight line into nearly a parabola
+// (k1), with a fourth-order part (k2) toward the image's edges.
+struct LineCourse {
+  static constexpr int kTerms = 5;
+  cv::Point2d origin, direction, normal;
+  double t_mid = 0, t_scale = 1, t_min = 0, t_max = 0;
+  cv::Vec<double, kTerms> c{};
+  double rms = 0;
+
+  double across(double t) const {
+    const double tau = (t - t_mid) / t_scale;
+    double s = 0;
+    for (int k = kTerms - 1; k >= 0; --k)
+      s = s * tau + c[k];
+    return s;
+  }
+  cv::Point2d at(double t, double s) const { return origin + t * direction + s * normal; }
+};
+
+// The points of (t, s) within kRemovalInlierPx of the course; sets its t range and RMS.
+std::vector<std::size_t> near_course(LineCourse& course, const std::vector<double>& t,
+                                     const std::vector<double>& s) {
+  std::vector<std::size_t> near;
+  double sq = 0;
+  course.t_min = 1e300;
+  course.t_max = -1e300;
+  for (std::size_t i = 0; i < t.size(); ++i) {
+    const double r = s[i] - course.across(t[i]);
+    if (std::abs(r) > kRemovalInlierPx) continue;
+    near.push_back(i);
+    sq += r * r;
+    course.t_min = std::min(course.t_min, t[i]);
+    course.t_max = std::max(course.t_max, t[i]);
+  }
+  course.rms = near.empty() ? 0.0 : std::sqrt(sq / static_cast<double>(near.size()));
+  return near;
+}
+
+// Least squares of the course's polynomial (`terms` of them) through the points `use`.
+void fit_course(LineCourse& course, const std::vector<double>& t, const std::vector<double>& s,
+                const std::vector<std::size_t>& use, int terms) {
+  double lo = 1e300, hi = -1e300;
+  for (std::size_t i : use) {
+    lo = std::min(lo, t[i]);
+    hi = std::max(hi, t[i]);
+  }
+  course.t_mid = 0.5 * (lo + hi);
+  course.t_scale = std::max(0.5 * (hi - lo), 1.0);
+  cv::Mat a(static_cast<int>(use.size()), terms, CV_64F),
+      b(static_cast<int>(use.size()), 1, CV_64F);
+  for (std::size_t k = 0; k < use.size(); ++k) {
+    const double tau = (t[use[k]] - course.t_mid) / course.t_scale;
+    double power = 1.0;
+    for (int j = 0; j < terms; ++j, power *= tau)
+      a.at<double>(static_cast<int>(k), j) = power;
+    b.at<double>(static_cast<int>(k)) = s[use[k]];
+  }
+  cv::Mat c;
+  cv::solve(a, b, c, cv::DECOMP_SVD);
+  course.c = {};
+  for (int j = 0; j < terms; ++j)
+    course.c[j] = c.at<double>(j);
+}
+
+// The line's course through `points`, or false when fewer than kMinRemovalPoints lie on one.
+// The frame is the straight line through most points; the parabola through most points in that
+// frame (RANSAC: a distorted line may leave the straight one's tolerance long before its ends),
+// refined by least squares.
+bool follow_line(const std::vector<cv::Point2d>& points, LineCourse& course,
+                 std::vector<std::size_t>& near) {
+  const std::vector<std::size_t> straight = line_inliers(points, kRemovalInlierPx);
+  if (static_cast<int>(straight.size()) < kMinRemovalPoints) return false;
+  std::vector<cv::Point2f> fit;
+  for (std::size_t i : straight)
+    fit.emplace_back(static_cast<float>(points[i].x), static_cast<float>(points[i].y));
+  cv::Vec4f line;
+  cv::fitLine(fit, line, cv::DIST_L2, 0, 0.01, 0.01);
+  course.origin = cv::Point2d(line[2], line[3]);
+  course.direction = cv::Point2d(line[0], line[1]);
+  course.normal = cv::Point2d(-line[1], line[0]);
+  std::vector<double> t(points.size()), s(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const cv::Point2d d = points[i] - course.origin;
+    t[i] = d.dot(course.direction);
+    s[i] = d.dot(course.normal);
+  }
+  near = near_course(course, t, s);  // the straight line itself (c = 0)
+  cv::RNG rng(0x636f7572);           // fixed: the same views give the same calibration
+  const int count = static_cast<int>(points.size());
+  for (int k = 0; k < kLineRansacIterations; ++k) {
+    std::vector<std::size_t> three = {static_cast<std::size_t>(rng.uniform(0, count)),
+                                      static_cast<std::size_t>(rng.uniform(0, count)),
+                                      static_cast<std::size_t>(rng.uniform(0, count))};
+    std::sort(three.begin(), three.end(),
+              [&](std::size_t i, std::size_t j) { return t[i] < t[j]; });
+    if (t[three[1]] - t[three[0]] < 10.0 || t[three[2]] - t[three[1]] < 10.0) continue;
+    LineCourse trial = course;
+    fit_course(trial, t, s, three, 3);
+    std::vector<std::size_t> in = near_course(trial, t, s);
+    if (in.size() > near.size()) {
+      near = std::move(in);
+      course = trial;
+    }
+  }
+  for (int round = 0; round < 5 && static_cast<int>(near.size()) >= kMinRemovalPoints; ++round) {
+    fit_course(course, t, s, near, near.size() >= 30 ? LineCourse::kTerms : 3);
+    std::vector<std::size_t> next = near_course(course, t, s);
+    const bool same = next == near;
+    near = std::move(next);
+    if (same) break;
+  }
+  return static_cast<int>(near.size()) >= kMinRemovalPoints;
+}
+
+// The mean brightness across a line (over its length, so that the squares average out) at each
+// offset from its centre: how high it stands above its feet on either side, and how far out it
+// reaches (where it has fallen to kWidthLevel of its height above its foot).
+struct AcrossLine {
+  double rise[2] = {0, 0};
+  int reach[2] = {0, 0};
+};
+
+AcrossLine across_line(const cv::Mat& image, const LineCourse& course) {
+  constexpr int kS = kMaxHalfWidthPx;
+  std::vector<double> profile(2 * kS + 1, 0.0);
+  int lengthwise = 0;
+  for (double t = course.t_min; t <= course.t_max; t += 2.0, ++lengthwise) {
+    const double centre = course.across(t);
+    for (int s = -kS; s <= kS; ++s) {
+      const cv::Point2d p = course.at(t, centre + s);
+      profile[static_cast<std::size_t>(s + kS)] += sample(image, p.x, p.y);
+    }
+  }
+  for (double& v : profile)
+    v /= std::max(lengthwise, 1);
+  const int spread = static_cast<int>(std::ceil(2.0 * course.rms));
+  double peak = 0;
+  for (int s = -1 - spread; s <= 1 + spread; ++s)
+    peak = std::max(peak, profile[static_cast<std::size_t>(s + kS)]);
+  AcrossLine a;
+  for (int side = 0; side < 2; ++side) {
+    const int sign = side == 0 ? -1 : 1;
+    const auto at = [&](int k) { return profile[static_cast<std::size_t>(kS + sign * k)]; };
+    double lowest = peak;
+    for (int k = 1; k <= kS; ++k)
+      lowest = std::min(lowest, at(k));
+    // The line's foot: past its upper half, where the profile stops falling (what lies beyond,
+    // e.g. the dark edge of the board, is not the line's).
+    const double flat = kFootSlope * (peak - lowest);
+    int foot = kS;
+    for (int k = 1; k <= kS; ++k) {
+      if (at(k) < 0.5 * (peak + lowest) && at(k) > at(k - 1) - flat) {
+        foot = k - 1;
+        break;
+      }
+    }
+    a.rise[side] = peak - at(foot);
+    const double level = at(foot) + kWidthLevel * a.rise[side];
+    a.reach[side] = foot;
+    for (int k = 1; k <= foot; ++k) {
+      if (at(k) <= level) {
+        a.reach[side] = k;
+        break;
+      }
+    }
+  }
+  return a;
+}
+
+}  // namespace
+
+LineRemoval remove_laser_line(const cv::Mat& board, const cv::Mat& laser,
+                              const std::vector<cv::Point2d>& points, cv::Mat& out) {
+  if (board.type() != CV_8UC1 || laser.type() != CV_8UC1 || board.size() != laser.size() ||
+      board.cols < 2 || board.rows < 2) {
+    fail("remove_laser_line: the board and laser images must be mono8 of one size, at least 2x2");
+  }
+  LineRemoval removal;
+  out = board.clone();
+  LineCourse course;
+  std::vector<std::size_t> near;
+  if (!follow_line(points, course, near)) return removal;
+  // A laser line stands out of its surroundings on both sides in its own light; a step (the
+  // board's edge) or a row of squares' edges taken for one does not.
+  const AcrossLine light = across_line(laser, course);
+  const double low = std::min(light.rise[0], light.rise[1]);
+  const double high = std::max(light.rise[0], light.rise[1]);
+  if (!(low >= kMinRise && low >= kRiseBalance * high)) return removal;
+  // Its width where it matters, in the board's image.
+  const AcrossLine seen = across_line(board, course);
+  for (int side = 0; side < 2; ++side) {
+    // One pixel more for the tail below the level, and the course's own scatter.
+    removal.half_width_px[side] =
+        std::min(static_cast<double>(kMaxHalfWidthPx), seen.reach[side] + 1.0 + 2.0 * course.rms);
+  }
+
+  // The band, filled along the normal from its two sides. It runs a half width beyond the
+  // points found, where the line fades out.
+  const double h0 = removal.half_width_px[0], h1 = removal.half_width_px[1];
+  const double t0 = course.t_min - std::max(h0, h1), t1 = course.t_max + std::max(h0, h1);
+  std::vector<cv::Point2f> hull;
+  for (double t = t0;; t += 4.0) {
+    const double tt = std::min(t, t1), centre = course.across(tt);
+    const cv::Point2d a = course.at(tt, centre - h0 - 1), b = course.at(tt, centre + h1 + 1);
+    hull.emplace_back(static_cast<float>(a.x), static_cast<float>(a.y));
+    hull.emplace_back(static_cast<float>(b.x), static_cast<float>(b.y));
+    if (tt >= t1) break;
+  }
+  const cv::Rect box = cv::boundingRect(hull) & cv::Rect(0, 0, board.cols, board.rows);
+  removal.band = cv::Mat::zeros(board.size(), CV_8UC1);
+  for (int y = box.y; y < box.y + box.height; ++y) {
+    std::uint8_t* row = out.ptr<std::uint8_t>(y);
+    std::uint8_t* filled = removal.band.ptr<std::uint8_t>(y);
+    for (int x = box.x; x < box.x + box.width; ++x) {
+      const cv::Point2d d = cv::Point2d(x, y) - course.origin;
+      const double t = d.dot(course.direction);
+      if (t < t0 || t > t1) continue;
+      const double centre = course.across(t);
+      const double s = d.dot(course.normal) - centre;
+      if (s < -h0 || s > h1) continue;
+      const double lo = -h0 - 1, hi = h1 + 1;
+      const cv::Point2d a = course.at(t, centre + lo), b = course.at(t, centre + hi);
+      const double w = (s - lo) / (hi - lo);
+      row[x] = cv::saturate_cast<std::uint8_t>((1 - w) * sample(board, a.x, a.y) +
+                                               w * sample(board, b.x, b.y));
+      filled[x] = 255;
+    }
+  }
+  removal.points = static_cast<int>(near.size());
+  return removal;
+}
+
+namespace {
+
+ViewImages images_of(const CalibrationView& v, const hal::LaserChannel& laser,
+                     const hal::LaserChannel& board) {
+  ViewImages im;
+  std::string problem;
+  auto convert = [&](const cv::Mat& raw, const hal::LaserChannel& channel, cv::Mat& out,
+                     const char* which) {
+    if (!to_laser_mono8(raw, channel, out, problem)) fail(v.name + which + ": " + problem);
+  };
+  convert(v.laser_on, laser, im.laser_on, "");
+  convert(v.laser_on, board, im.board_on, "");
+  if (!v.laser_off.empty()) {
+    convert(v.laser_off, laser, im.laser_off, " (laser off)");
+    convert(v.laser_off, board, im.board_off, " (laser off)");
+  }
+  return im;
+}
+
+// "3 without a 9x6 checkerboard, 1 without the laser line on the board": how many views were
+// left out for each reason.
+std::string tally(const std::vector<std::string>& reasons) {
+  std::map<std::string, int> count;
+  std::vector<std::string> order;
+  for (const auto& r : reasons) {
+    if (r.empty()) continue;
+    if (count[r]++ == 0) order.push_back(r);
+  }
+  std::string out;
+  for (const auto& r : order)
+    out += (out.empty() ? "" : ", ") + std::to_string(count[r]) + " " + r;
+  return out;
+}
+
 }  // namespace
 
 PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>& views,
@@ -274,62 +720,138 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
     fail("the board must have different numbers of inner corners across and down (e.g. 9x6)");
   }
   if (!(o.square_m > 0)) fail("the square size must be > 0");
+  const auto detectors = pipeline::detector_names();
+  if (std::find(detectors.begin(), detectors.end(), o.detector) == detectors.end()) {
+    std::string known;
+    for (const auto& d : detectors)
+      known += (known.empty() ? "" : ", ") + d;
+    fail("unknown detector " + o.detector + " (known: " + known + ")");
+  }
   if (views.size() < 2) {
     fail("need at least 2 views (board poses that are not parallel), got " +
          std::to_string(views.size()));
   }
   const cv::Size size = views.front().laser_on.size();
   for (const auto& v : views) {
-    if (v.laser_on.empty() || v.laser_on.type() != CV_8UC1) fail(v.name + ": not a mono8 image");
+    if (v.laser_on.empty()) fail(v.name + ": empty image");
     if (v.laser_on.size() != size) {
       fail(v.name + ": image size " + std::to_string(v.laser_on.cols) + "x" +
            std::to_string(v.laser_on.rows) + " differs from the first view's " +
            std::to_string(size.width) + "x" + std::to_string(size.height));
     }
-    if (!v.laser_off.empty() && (v.laser_off.size() != size || v.laser_off.type() != CV_8UC1)) {
+    if (!v.laser_off.empty() &&
+        (v.laser_off.size() != size || v.laser_off.type() != v.laser_on.type())) {
       fail(v.name + ": its laser-off image differs in size or type from the laser-on image");
     }
+  }
+  if (size.width < 16 || size.height < 16) {
+    fail(views.front().name + ": image smaller than 16x16");
   }
   if (o.intrinsics && (o.intrinsics->width != size.width || o.intrinsics->height != size.height)) {
     fail("the images are " + std::to_string(size.width) + "x" + std::to_string(size.height) +
          " but the given intrinsics are for " + std::to_string(o.intrinsics->width) + "x" +
          std::to_string(o.intrinsics->height));
   }
-
-  // Corners in every view.
-  std::vector<BoardView> boards(views.size());
-  for (std::size_t i = 0; i < views.size(); ++i) {
-    boards[i].view = &views[i];
-    bool found = false;
-    if (!views[i].laser_off.empty()) {
-      found = find_corners(views[i].laser_off, o, boards[i].corners);
-    } else {
-      // The laser line across the board breaks up the squares' edges. The sheet contains the
-      // camera's x axis, so the line runs along the rows and is a few pixels thick: an opening
-      // with a vertical segment longer than that removes it and keeps the squares.
-      cv::Mat without_line;
-      cv::morphologyEx(views[i].laser_on, without_line, cv::MORPH_OPEN,
-                       cv::getStructuringElement(cv::MORPH_RECT, cv::Size(1, kLineOpeningPx)));
-      found = find_corners(without_line, o, boards[i].corners);
-    }
-    if (!found) {
-      fail(views[i].name + ": no " + std::to_string(o.board_columns) + "x" +
-           std::to_string(o.board_rows) +
-           " checkerboard found (the whole board must be in view; --board counts inner "
-           "corners)");
-    }
-  }
+  // The board is black and white, so it is in every channel of a colour image: luma (mostly
+  // green, two of a Bayer sensor's four sites) gives it with the least noise. The laser's part of
+  // luma is taken out with the line. (The channels without the laser found fewer real boards:
+  // dim blue is noisy.)
+  const hal::LaserChannel board_light = hal::parse_laser_channel("grey");
+  const std::string pattern = std::to_string(o.board_columns) + "x" + std::to_string(o.board_rows);
 
   PlaneCalibrationResult result;
+  result.views.resize(views.size());
+  // Why each view does not contribute to the plane, as counted in a fatal error's summary.
+  std::vector<std::string> left_out(views.size());
+  auto skip = [&](std::size_t i, const std::string& why, const std::string& kind) {
+    result.views[i].skipped = why;
+    left_out[i] = kind;
+    if (o.on_skip) o.on_skip(views[i].name + ": " + why);
+  };
+  for (std::size_t i = 0; i < views.size(); ++i)
+    result.views[i].name = views[i].name;
+
+  // Corners in every view. Without a laser-off image the line is taken out of the image first
+  // (found by the detector with the intrinsics given, or a guess: a field of view of about 53
+  // degrees), and the raw image is searched when that does not give the board.
+  hal::CameraIntrinsics provisional;
+  if (o.intrinsics) {
+    provisional = *o.intrinsics;
+  } else {
+    provisional.width = size.width;
+    provisional.height = size.height;
+    provisional.fx = provisional.fy = size.width;
+    provisional.cx = (size.width - 1) / 2.0;
+    provisional.cy = (size.height - 1) / 2.0;
+  }
+  // The line's points for its removal: the user's detector's and `maxvalue`'s (each column's
+  // brightest pixel: no width model, so it also finds lines much wider or brighter than the
+  // nominal mount's, which the front-end's width normalisation may pass over).
+  std::vector<LineFinder> removal_finders;
+  for (const std::string& name : {o.detector, std::string("maxvalue")}) {
+    try {
+      removal_finders.emplace_back(o, provisional, name);
+    } catch (const std::invalid_argument&) {
+      // Nothing to search with the guessed intrinsics: that detector does not help the
+      // removal; its error, if it persists with the final intrinsics, comes below.
+    }
+  }
+  std::vector<ViewImages> images(views.size());
+  std::vector<BoardView> boards;
+  for (std::size_t i = 0; i < views.size(); ++i) {
+    images[i] = images_of(views[i], o.channel, board_light);
+    const ViewImages& im = images[i];
+    BoardView b;
+    b.index = i;
+    std::string from;
+    if (!im.board_off.empty()) {
+      if (find_corners(im.board_off, o, b.corners)) from = "laser-off image";
+    } else {
+      std::vector<cv::Point2d> points;
+      for (LineFinder& finder : removal_finders) {
+        const std::vector<cv::Point2d> found = finder.find(im.laser_on);
+        points.insert(points.end(), found.begin(), found.end());
+      }
+      cv::Mat removed;
+      const LineRemoval removal = remove_laser_line(im.board_on, im.laser_on, points, removed);
+      if (removal.points > 0 && find_corners(removed, o, b.corners)) from = "line removed";
+      if (from.empty() && find_corners(im.board_on, o, b.corners)) from = "laser-on image";
+      // Found either way, the corners the line covered are not where they were found.
+      const int placed = from.empty() ? 0 : place_hidden_corners(b.corners, removal.band, o);
+      b.gated = true;
+      b.line_band = removal.band;
+      if (placed > 0) {
+        from += " (" + std::to_string(placed) + " corner" + (placed > 1 ? "s" : "") +
+                " under the line placed from their neighbours)";
+      }
+    }
+    if (from.empty()) {
+      skip(i,
+           "no " + pattern + " checkerboard found" +
+               (im.board_off.empty() ? "" : " in its laser-off image"),
+           "without a " + pattern + " checkerboard");
+      continue;
+    }
+    result.views[i].board = true;
+    result.views[i].corners_from = from;
+    boards.push_back(std::move(b));
+  }
+  if (boards.size() < 2) {
+    fail("the " + pattern + " checkerboard was found in " + std::to_string(boards.size()) + " of " +
+         std::to_string(views.size()) +
+         " views, need at least 2 (the whole board must be in view; --board counts inner "
+         "corners)");
+  }
+
   hal::CameraIntrinsics cam;
   const std::vector<cv::Point3f> object = board_points(o);
   if (o.intrinsics) {
     cam = *o.intrinsics;
   } else {
-    std::vector<std::vector<cv::Point3f>> objects(views.size(), object);
-    std::vector<std::vector<cv::Point2f>> images;
+    std::vector<std::vector<cv::Point3f>> objects(boards.size(), object);
+    std::vector<std::vector<cv::Point2f>> corners;
     for (const auto& b : boards)
-      images.push_back(b.corners);
+      corners.push_back(b.corners);
     int flags = 0;
     switch (o.distortion_terms) {
       case 0:
@@ -349,7 +871,8 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
     }
     cv::Mat k, dist;
     std::vector<cv::Mat> rvecs, tvecs;
-    result.camera_rms_px = cv::calibrateCamera(objects, images, size, k, dist, rvecs, tvecs, flags);
+    result.camera_rms_px =
+        cv::calibrateCamera(objects, corners, size, k, dist, rvecs, tvecs, flags);
     cam.width = size.width;
     cam.height = size.height;
     cam.fx = k.at<double>(0, 0);
@@ -393,13 +916,12 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
   const cv::Mat dist(cam.distortion, false);
   double corner_sq = 0;
   std::size_t corner_count = 0;
-  result.views.resize(views.size());
-  for (std::size_t i = 0; i < boards.size(); ++i) {
-    BoardView& b = boards[i];
-    ViewReport& r = result.views[i];
-    r.name = views[i].name;
+  std::vector<BoardView> posed;
+  for (BoardView& b : boards) {
+    ViewReport& r = result.views[b.index];
     if (!cv::solvePnP(object, b.corners, k, dist, b.rvec, b.tvec, false, cv::SOLVEPNP_ITERATIVE)) {
-      fail(views[i].name + ": the board's pose could not be estimated");
+      skip(b.index, "the board's pose could not be estimated", "whose board's pose failed");
+      continue;
     }
     std::vector<cv::Point2f> projected;
     cv::projectPoints(object, b.rvec, b.tvec, k, dist, projected);
@@ -421,6 +943,12 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
     }
     r.distance_m = b.offset;
     r.tilt_deg = std::acos(std::clamp(std::abs(b.normal[2]), 0.0, 1.0)) / kDeg;
+    posed.push_back(std::move(b));
+  }
+  boards = std::move(posed);
+  if (boards.size() < 2) {
+    fail("the board's pose was found in " + std::to_string(boards.size()) + " of " +
+         std::to_string(views.size()) + " views, need at least 2: " + tally(left_out));
   }
   result.corner_rms_px = std::sqrt(corner_sq / static_cast<double>(corner_count));
 
@@ -439,54 +967,52 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
   }
 
   // The laser line on each board, in 3-D.
-  pipeline::DetectorOptions detector_options;
-  detector_options.geometry.width = cam.width;
-  detector_options.geometry.height = cam.height;
-  detector_options.geometry.fx = cam.fx;
-  detector_options.geometry.fy = cam.fy;
-  detector_options.geometry.cx = cam.cx;
-  detector_options.geometry.cy = cam.cy;
-  detector_options.geometry.distortion = cam.distortion;
-  detector_options.geometry.laser_plane = o.laser_prior.plane_coefficients();
-  detector_options.geometry.sheet_width_m = o.laser_prior.sheet_width_m;
-  detector_options.frontend = o.frontend;
-  std::unique_ptr<pipeline::Detector> detector;
+  std::optional<LineFinder> finder;
   try {
-    detector = pipeline::make_detector(o.detector, detector_options);
+    finder.emplace(o, cam, o.detector);
   } catch (const std::invalid_argument& e) {
     fail("detector " + o.detector + ": " + e.what());
   }
-  if (!detector) fail("unknown detector " + o.detector);
-  detector->reset(cam.width, cam.height);
-  pipeline::Profile profile(detector->max_points(cam.width, cam.height));
 
   std::vector<cv::Vec3d> points;
-  std::vector<int> view_of;
+  std::vector<int> view_of;  // index into boards
   int views_with_line = 0;
   for (std::size_t i = 0; i < boards.size(); ++i) {
-    find_laser(boards[i], o, cam, *detector, profile, result.views[i]);
-    if (static_cast<int>(boards[i].laser_xyz.size()) < kMinLinePoints) {
-      boards[i].laser_xyz.clear();
-      boards[i].laser_px.clear();
-      result.views[i].laser_points = 0;
+    BoardView& b = boards[i];
+    ViewReport& r = result.views[b.index];
+    if (r.tilt_deg > kMaxTiltDeg) {
+      skip(b.index,
+           format("the board is seen nearly edge-on (tilted %.0f deg, at most %.0f)", r.tilt_deg,
+                  kMaxTiltDeg),
+           "with the board seen edge-on");
+      continue;
+    }
+    find_laser(b, images[b.index], o, cam, *finder, r);
+    if (static_cast<int>(b.laser_xyz.size()) < kMinLinePoints) {
+      if (r.laser_candidates == 0) {
+        skip(b.index, "no laser line on the board", "without the laser line on the board");
+      } else {
+        skip(b.index,
+             "too few points on the laser line (" + std::to_string(b.laser_xyz.size()) + ", need " +
+                 std::to_string(kMinLinePoints) + ")",
+             "with too few points on the line");
+      }
+      b.laser_xyz.clear();
+      b.laser_px.clear();
+      r.laser_points = 0;
       continue;
     }
     ++views_with_line;
-    for (const auto& p : boards[i].laser_xyz) {
+    for (const auto& p : b.laser_xyz) {
       points.push_back(p);
       view_of.push_back(static_cast<int>(i));
     }
   }
   if (views_with_line < 2) {
-    std::string without;
-    for (const auto& r : result.views) {
-      if (r.laser_points == 0) without += (without.empty() ? "" : ", ") + r.name;
-    }
-    fail("the laser line was found on the board in " + std::to_string(views_with_line) +
-         " view(s), need at least 2 (none in: " + without + ")");
+    fail("the laser line was found on the board in " + std::to_string(views_with_line) + " of " +
+         std::to_string(views.size()) + " views, need at least 2: " + tally(left_out));
   }
   result.points = static_cast<int>(points.size());
-
   // Plane fit with outlier rejection: 3 robust sigmas (MAD), at least 0.1 mm, until stable.
   std::vector<char> allowed(points.size(), 1), use;
   Plane plane;
@@ -508,12 +1034,85 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
       plane = fit_plane(points, use);
     }
   };
-  robust_fit();
-  // A view whose line is mostly off the plane saw something else as the line (e.g. a square's
-  // edge, where the line is not on the board): it is left out whole, and the plane fitted again.
+  // The views whose lines agree on one plane, found before any least squares: a view that took
+  // something else for the line would pull a fit toward it, and several such views could
+  // outweigh the rest. Of the planes through the lines of two views, the one most points agree
+  // with: a view agrees when its points lie, in the median, within kAgreePx of the line where the
+  // plane meets its board in the image.
+  {
+    std::vector<std::size_t> first(boards.size(), 0), count(boards.size(), 0);
+    for (std::size_t i = points.size(); i-- > 0;) {
+      first[static_cast<std::size_t>(view_of[i])] = i;
+      ++count[static_cast<std::size_t>(view_of[i])];
+    }
+    auto median_px = [&](std::size_t v, const Plane& p) {
+      const BoardView& b = boards[v];
+      const cv::Vec3d m = b.offset * p.normal + p.e * b.normal;
+      const cv::Vec3d m_px = k.inv().t() * m;
+      const double norm = std::hypot(m_px[0], m_px[1]);
+      std::vector<double> d;
+      for (const auto& u : b.laser_px)
+        d.push_back(std::abs(m_px[0] * u.x + m_px[1] * u.y + m_px[2]) / norm);
+      return median(d);
+    };
+    std::vector<std::size_t> lined;
+    for (std::size_t v = 0; v < boards.size(); ++v) {
+      if (count[v] > 0) lined.push_back(v);
+    }
+    std::vector<char> agree(boards.size(), 0), best(boards.size(), 0);
+    std::size_t best_points = 0;
+    std::vector<char> pair(points.size());
+    for (std::size_t i = 0; i < lined.size(); ++i) {
+      for (std::size_t j = i + 1; j < lined.size(); ++j) {
+        std::fill(pair.begin(), pair.end(), 0);
+        for (std::size_t v : {lined[i], lined[j]})
+          std::fill_n(pair.begin() + static_cast<std::ptrdiff_t>(first[v]), count[v], 1);
+        cv::Vec3d centroid;
+        cv::Matx31d spread_values;
+        cv::eigen(scatter_of(points, pair, centroid), spread_values);
+        if (!(spread_values(1) > 1e-4 * spread_values(0))) continue;  // the two lines are one
+        const Plane trial = fit_plane(points, pair);
+        std::size_t agreeing = 0;
+        for (std::size_t v : lined) {
+          agree[v] = median_px(v, trial) <= kAgreePx;
+          agreeing += agree[v] ? count[v] : 0;
+        }
+        if (agreeing > best_points) {
+          best_points = agreeing;
+          best = agree;
+        }
+      }
+    }
+    int remaining = 0;
+    for (std::size_t v : lined) {
+      if (best[v]) {
+        ++remaining;
+        continue;
+      }
+      std::fill_n(allowed.begin() + static_cast<std::ptrdiff_t>(first[v]), count[v], 0);
+    }
+    if (remaining < 2) {
+      fail(
+          "the laser lines found do not lie on one plane (no 2 views agree): check that the "
+          "line crosses the board in every view, or give --laser-off images; " +
+          tally(left_out));
+    }
+    robust_fit();
+    for (std::size_t v : lined) {
+      if (best[v]) continue;
+      skip(boards[v].index,
+           format("its laser line is off the plane the other views agree on (%.1f px from it "
+                  "in the median): something else was taken for the line",
+                  median_px(v, plane)),
+           "with the line off the plane");
+    }
+  }
+  // A view whose line is mostly off the plane even so saw something else as the line (e.g. a
+  // square's edge beside it): it is left out whole, and the plane fitted again.
   {
     std::vector<int> total(boards.size(), 0), kept(boards.size(), 0);
     for (std::size_t i = 0; i < points.size(); ++i) {
+      if (!allowed[i]) continue;
       ++total[static_cast<std::size_t>(view_of[i])];
       kept[static_cast<std::size_t>(view_of[i])] += use[i] ? 1 : 0;
     }
@@ -523,6 +1122,11 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
       if (total[v] == 0) continue;
       if (2 * kept[v] < total[v]) {
         dropped = true;
+        skip(boards[v].index,
+             "its laser line is off the plane the other views agree on (" +
+                 std::to_string(kept[v]) + " of " + std::to_string(total[v]) +
+                 " points on it): something else was taken for the line",
+             "with the line off the plane");
         for (std::size_t i = 0; i < points.size(); ++i) {
           if (view_of[i] == static_cast<int>(v)) allowed[i] = 0;
         }
@@ -533,7 +1137,8 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
     if (remaining < 2) {
       fail(
           "the laser lines found do not lie on one plane (fewer than 2 views agree): check "
-          "that the line crosses the board in every view, or give --laser-off images");
+          "that the line crosses the board in every view, or give --laser-off images; " +
+          tally(left_out));
     }
     if (dropped) robust_fit();
   }
@@ -572,15 +1177,15 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
       result.plane_max_mm = std::max(result.plane_max_mm, mm);
       result.plane_max_px = std::max(result.plane_max_px, px);
       ++inliers;
-      ++result.views[i].plane_inliers;
+      ++result.views[b.index].plane_inliers;
     }
   }
   result.inliers = inliers;
   result.plane_rms_mm = std::sqrt(sq_mm / inliers);
   result.plane_rms_px = std::sqrt(sq_px / inliers);
   for (std::size_t i = 0; i < boards.size(); ++i) {
-    const int n = result.views[i].plane_inliers;
-    result.views[i].plane_rms_mm = n > 0 ? std::sqrt(view_sq[i] / n) : 0.0;
+    ViewReport& r = result.views[boards[i].index];
+    r.plane_rms_mm = r.plane_inliers > 0 ? std::sqrt(view_sq[i] / r.plane_inliers) : 0.0;
   }
   result.normal_angle_to_y_deg = std::acos(std::clamp(std::abs(plane.normal[1]), 0.0, 1.0)) / kDeg;
 
@@ -588,11 +1193,21 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
   hal::LaserMount& laser = result.calibration.laser;
   laser = o.laser_prior;
   laser.plane = std::array<double, 4>{plane.normal[0], plane.normal[1], plane.normal[2], plane.e};
-  // The paper's model Y = -d + tan(90 deg - beta) Z with the sheet along x: d where the plane
-  // crosses the y axis, beta from its slope in the y-z plane. Kept within the file's limits.
-  const double b = plane.normal[1];
-  double baseline = b != 0 ? plane.e / b : 0.0;
-  double angle = 90.0 - std::atan2(-plane.normal[2], b) / kDeg;
+  // The paper's model Y = -d + tan(90 deg - beta) Z with the sheet along x, turned to the side
+  // of the camera the projector is on: the axis the plane's normal leans to most (y above or
+  // below, x left or right; e > 0 gives the sign). d where the plane crosses that axis, beta
+  // from its slope toward the optical axis. Kept within the file's limits.
+  const double a = plane.normal[0], b = plane.normal[1];
+  double along = 0;
+  if (std::abs(b) >= std::abs(a)) {
+    laser.side = b > 0 ? hal::LaserSide::kAbove : hal::LaserSide::kBelow;
+    along = std::abs(b);
+  } else {
+    laser.side = a > 0 ? hal::LaserSide::kLeft : hal::LaserSide::kRight;
+    along = std::abs(a);
+  }
+  const double baseline = along > 0 ? plane.e / along : 0.0;
+  const double angle = 90.0 - std::atan2(-plane.normal[2], along) / kDeg;
   result.fits_baseline_model = baseline >= 1e-3 && baseline <= 10 && angle >= 1 && angle <= 179;
   laser.baseline_m = std::clamp(baseline, 1e-3, 10.0);
   laser.angle_deg = std::clamp(angle, 1.0, 179.0);
@@ -626,7 +1241,8 @@ void write_calibration_file(const std::string& path, const PlaneCalibrationResul
   std::fprintf(f, "laser:\n");
   std::fprintf(f, "  # the paper's d and beta nearest to the plane%s; `plane` is what is used\n",
                r.fits_baseline_model ? "" : " (clamped: the plane does not fit that model)");
-  std::fprintf(f, "  baseline_m: %.10g\n  angle_deg: %.10g\n", l.baseline_m, l.angle_deg);
+  std::fprintf(f, "  baseline_m: %.10g\n  angle_deg: %.10g\n  side: %s\n", l.baseline_m,
+               l.angle_deg, hal::to_string(l.side));
   std::fprintf(f, "  sheet_width_m: %.10g\n", l.sheet_width_m);
   std::fprintf(f, "  # a*X + b*Y + c*Z + e = 0, camera frame, metres; (a, b, c) a unit vector\n");
   std::fprintf(f, "  plane: [%.12g, %.12g, %.12g, %.12g]\n", p[0], p[1], p[2], p[3]);
@@ -634,7 +1250,7 @@ void write_calibration_file(const std::string& path, const PlaneCalibrationResul
   if (std::fclose(f) != 0 || !ok) fail(path + ": could not be written completely");
 }
 
-cv::Mat load_mono8(const std::string& path) {
+cv::Mat load_image(const std::string& path, const hal::LaserChannel& channel) {
   cv::Mat raw;
   try {
     raw = cv::imread(path, cv::IMREAD_UNCHANGED);
@@ -647,8 +1263,8 @@ cv::Mat load_mono8(const std::string& path) {
   }
   cv::Mat out;
   std::string problem;
-  if (!to_laser_mono8(raw, hal::LaserChannel{}, out, problem)) fail(path + ": " + problem);
-  return out;
+  if (!to_laser_mono8(raw, channel, out, problem)) fail(path + ": " + problem);
+  return raw;
 }
 
 std::vector<std::string> expand_image_inputs(const std::vector<std::string>& inputs) {

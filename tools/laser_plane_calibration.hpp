@@ -5,6 +5,7 @@
 // run it on simulated views without files.
 
 #include <array>
+#include <functional>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -13,6 +14,7 @@
 #include <opencv2/core.hpp>
 
 #include "hal/calibration.hpp"
+#include "hal/laser_channel.hpp"
 #include "pipeline/detector.hpp"
 
 namespace laserline::tools {
@@ -25,8 +27,9 @@ class PlaneCalibrationError : public std::runtime_error {
 };
 
 // One board pose: the image with the laser on and, if taken, the same pose with the laser off
-// (mono8, same size). With the laser off the corners are found without the line crossing them
-// and the line is found in the difference, free of the board's own edges.
+// (same size and type), as read from the files: mono or colour (OpenCV's BGR order), 8 or 16
+// bit. With the laser off the corners are found without the line crossing them and the line is
+// found in the difference, free of the board's own edges.
 struct CalibrationView {
   std::string name;  // for messages (the file name)
   cv::Mat laser_on;
@@ -48,6 +51,12 @@ struct PlaneCalibrationOptions {
   hal::LaserMount laser_prior;
   std::string detector = "fir";
   pipeline::FrontendOptions frontend = wide_search();
+  // Which light of colour images is the laser's: the line is searched there, the board in luma.
+  // Mono images are taken as they are.
+  hal::LaserChannel channel;
+  // Called once for each view that does not contribute to the plane, with one line
+  // "<view>: <why>", as soon as that is known (a fatal error may follow).
+  std::function<void(const std::string&)> on_skip;
 
   // The front-end's defaults, but searching nearly every row: the plane is not known yet.
   static pipeline::FrontendOptions wide_search() {
@@ -60,6 +69,11 @@ struct PlaneCalibrationOptions {
 
 struct ViewReport {
   std::string name;
+  bool board = false;  // its checkerboard was found
+  // "laser-off image", "line removed" or "laser-on image", with how many corners under the line
+  // were placed from their neighbours
+  std::string corners_from;
+  std::string skipped;       // why the view does not contribute to the plane; empty when it does
   double corner_rms_px = 0;  // reprojection of the board's corners with the final intrinsics
   double distance_m = 0;     // camera centre to the board plane
   double tilt_deg = 0;       // angle between the board normal and the optical axis
@@ -87,13 +101,16 @@ struct PlaneCalibrationResult {
   double plane_rms_px = 0, plane_max_px = 0;
   // The plane's unit normal and distance: plane = [n, -distance] or sign-flipped so that e > 0.
   double normal_angle_to_y_deg = 0;  // angle between the normal and the camera's y axis
-  // baseline_m / angle_deg of the paper's model closest to the plane; false when the plane
-  // cannot be written that way within the calibration file's limits (then clamped).
+  // baseline_m / angle_deg / side of the paper's model closest to the plane (in
+  // calibration.laser); false when the plane cannot be written that way within the calibration
+  // file's limits (then clamped).
   bool fits_baseline_model = true;
 };
 
-// Runs the whole calibration. Throws PlaneCalibrationError with a one-line message naming the
-// view (or the reason) when it cannot.
+// Runs the whole calibration. Views that cannot contribute (no board, no line on it, ...) are
+// left out, each reported once through options.on_skip and in its ViewReport. Throws
+// PlaneCalibrationError with a one-line message naming the view (or the reason, with how many
+// views were left out for each) when the rest do not give a calibration.
 PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>& views,
                                              const PlaneCalibrationOptions& options);
 
@@ -103,9 +120,28 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
 void write_calibration_file(const std::string& path, const PlaneCalibrationResult& result,
                             const std::string& provenance);
 
-// A frame as the detector sees it: mono8; colour frames give their green channel (the laser's
-// colour), 16-bit frames are scaled to 8 bit. Throws PlaneCalibrationError naming the file.
-cv::Mat load_mono8(const std::string& path);
+// The laser line taken out of a laser-on image so that the checkerboard under it can be found:
+// `points` are the line's points as detectors found them (raw pixels, any order; points off the
+// line are outliers) in `laser` (the laser's light), `board` the image the board is searched in
+// (mono8, same size). The line, in any direction, is followed as a straight line bent by the lens
+// (a polynomial across it); it must stand out of its surroundings on both sides in `laser` (a
+// step or a row of squares' edges does not). Its width is measured in `board` across it, and
+// only that band is filled in `out` (a copy of `board`), each pixel interpolated along the
+// line's normal between the pixels just beyond the band on either side: the squares' edges that
+// cross the line continue across it; what ran along the line inside the band is lost (see
+// `band`). `points` is 0 when no line was found (fewer than a dozen points on one, or not
+// standing out): `out` is then `board` unchanged.
+struct LineRemoval {
+  int points = 0;                    // the points followed
+  double half_width_px[2] = {0, 0};  // the band filled on either side of the line's centre
+  cv::Mat band;                      // mono8, 255 where filled (empty when nothing was)
+};
+LineRemoval remove_laser_line(const cv::Mat& board, const cv::Mat& laser,
+                              const std::vector<cv::Point2d>& points, cv::Mat& out);
+
+// An image file as read (mono or colour, 8 or 16 bit), checked to give the laser's channel.
+// Throws PlaneCalibrationError naming the file.
+cv::Mat load_image(const std::string& path, const hal::LaserChannel& channel);
 
 // Image files given directly or found in folders (sorted by name), in order. Throws
 // PlaneCalibrationError for a path that is neither.

@@ -5,10 +5,12 @@
 #include <cstdlib>
 #include <opencv2/core/utils/logger.hpp>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "hal/calibration.hpp"
+#include "hal/laser_channel.hpp"
 #include "tools/laser_plane_calibration.hpp"
 
 namespace {
@@ -29,11 +31,19 @@ constexpr const char* kUsage =
     "                        the difference on - off. Strongly recommended.\n"
     "  --distortion-terms N  when estimating intrinsics: 0 none, 2 k1 k2, 4 k1 k2 p1 p2,\n"
     "                        5 k1 k2 p1 p2 k3 (default 5)\n"
+    "  --channel CHANNEL     the laser's light in colour images: red, green (default), blue,\n"
+    "                        grey, or a weighted sum such as 'red - (green + blue) / 2'. The\n"
+    "                        board is searched in luma. Mono images are taken as they are.\n"
     "  --detector NAME       laser detector on each view (default fir)\n"
-    "  --baseline-m D --angle-deg B --sheet-width-m W\n"
+    "  --saturation-level N  grey level from which the line's core counts as clipped (its\n"
+    "                        centre is then the middle of the run; default 255); lower it\n"
+    "                        for colour or compressed images, whose clipped cores are noisy\n"
+    "  --baseline-m D --angle-deg B --sheet-width-m W --laser-side SIDE\n"
     "                        the nominal mount (design values; default: --calib's laser\n"
-    "                        section, else 0.25 m, 80 deg, 0.003 m): where the detector looks\n"
-    "                        for the line. sheet_width_m is written to the output as is.\n"
+    "                        section, else 0.25 m, 80 deg, 0.003 m, above): where the detector\n"
+    "                        looks for the line. SIDE: above, below, left or right of the\n"
+    "                        camera (left and right: the line runs down the image).\n"
+    "                        sheet_width_m is written to the output as is.\n"
     "  --output FILE         the calibration file to write (camera + laser with `plane`)\n"
     "  INPUT                 laser-on images, files or folders (sorted by name), one per pose\n"
     "\n"
@@ -41,6 +51,7 @@ constexpr const char* kUsage =
     "poses with the board tilted differently (6-10 recommended: near and far, tilted left,\n"
     "right, up and down), the whole board in view and the laser line across it. Estimating the\n"
     "intrinsics needs the tilts; with --calib, 2 tilted poses at different distances suffice.\n"
+    "A view without the board or without the line on it is reported and left out.\n"
     "Exit status: 0 written, 1 the views do not give a calibration, 2 bad arguments.\n";
 
 [[noreturn]] void usage_error(const std::string& message) {
@@ -61,13 +72,22 @@ double parse_number(const std::string& option, const char* text, double min, dou
 void print_report(const laserline::tools::PlaneCalibrationResult& r) {
   const auto& c = r.calibration.camera;
   std::printf("views:\n");
-  std::printf("  %-40s %8s %8s %8s %7s %7s %7s %8s\n", "view", "corn.px", "dist.m", "tilt.deg",
-              "cand.", "line", "inl.", "rms.mm");
+  std::printf("  %-40s %8s %8s %8s %7s %7s %7s %8s  %s\n", "view", "corn.px", "dist.m", "tilt.deg",
+              "cand.", "line", "inl.", "rms.mm", "corners from / left out");
+  int used = 0;
   for (const auto& v : r.views) {
-    std::printf("  %-40s %8.3f %8.3f %8.2f %7d %7d %7d %8.3f\n", v.name.c_str(), v.corner_rms_px,
-                v.distance_m, v.tilt_deg, v.laser_candidates, v.laser_points, v.plane_inliers,
-                v.plane_rms_mm);
+    used += v.skipped.empty() ? 1 : 0;
+    const std::string status = v.skipped.empty() ? v.corners_from : "left out: " + v.skipped;
+    if (!v.board) {
+      std::printf("  %-40s %8s %8s %8s %7s %7s %7s %8s  %s\n", v.name.c_str(), "-", "-", "-", "-",
+                  "-", "-", "-", status.c_str());
+      continue;
+    }
+    std::printf("  %-40s %8.3f %8.3f %8.2f %7d %7d %7d %8.3f  %s\n", v.name.c_str(),
+                v.corner_rms_px, v.distance_m, v.tilt_deg, v.laser_candidates, v.laser_points,
+                v.plane_inliers, v.plane_rms_mm, status.c_str());
   }
+  std::printf("  %d of %zu views give the plane\n", used, r.views.size());
   if (r.intrinsics_estimated) {
     std::printf("camera (estimated, calibrateCamera RMS %.3f px):\n", r.camera_rms_px);
   } else {
@@ -91,8 +111,9 @@ void print_report(const laserline::tools::PlaneCalibrationResult& r) {
   std::printf("  plane [%.9f, %.9f, %.9f, %.9f]\n", p[0], p[1], p[2], p[3]);
   std::printf("  distance from the camera centre %.2f mm, normal %.3f deg from the y axis\n",
               1000.0 * p[3], r.normal_angle_to_y_deg);
-  std::printf("  as baseline and angle: %.2f mm, %.3f deg%s\n",
+  std::printf("  as baseline and angle: %.2f mm, %.3f deg, the projector %s the camera%s\n",
               1000.0 * r.calibration.laser.baseline_m, r.calibration.laser.angle_deg,
+              laserline::hal::to_string(r.calibration.laser.side),
               r.fits_baseline_model ? "" : " (clamped: the plane does not fit that model)");
   std::printf("residuals over %d of %d laser points (views' lines):\n", r.inliers, r.points);
   std::printf("  distance to the plane: RMS %.3f mm, max %.3f mm\n", r.plane_rms_mm,
@@ -109,6 +130,8 @@ int main(int argc, char** argv) {
   std::string calib_path, output;
   std::vector<std::string> inputs, off_inputs;
   std::optional<double> baseline, angle, sheet_width;
+  laserline::hal::LaserSide side = laserline::hal::LaserSide::kAbove;
+  bool side_given = false;
   bool board_given = false, square_given = false;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
@@ -146,6 +169,27 @@ int main(int argc, char** argv) {
       }
     } else if (arg == "--detector") {
       options.detector = value();
+    } else if (arg == "--saturation-level") {
+      options.frontend.saturation_level = static_cast<int>(parse_number(arg, value(), 1, 255));
+    } else if (arg == "--channel") {
+      try {
+        options.channel = laserline::hal::parse_laser_channel(value());
+      } catch (const std::invalid_argument& e) {
+        usage_error(std::string("--channel: ") + e.what());
+      }
+    } else if (arg == "--laser-side") {
+      const std::string text = value();
+      side_given = false;
+      for (auto s : {laserline::hal::LaserSide::kAbove, laserline::hal::LaserSide::kBelow,
+                     laserline::hal::LaserSide::kLeft, laserline::hal::LaserSide::kRight}) {
+        if (text == laserline::hal::to_string(s)) {
+          side = s;
+          side_given = true;
+        }
+      }
+      if (!side_given) {
+        usage_error("--laser-side: expected above, below, left or right, got '" + text + "'");
+      }
     } else if (arg == "--baseline-m") {
       baseline = parse_number(arg, value(), 1e-3, 10.0);
     } else if (arg == "--angle-deg") {
@@ -179,6 +223,10 @@ int main(int argc, char** argv) {
   if (baseline) options.laser_prior.baseline_m = *baseline;
   if (angle) options.laser_prior.angle_deg = *angle;
   if (sheet_width) options.laser_prior.sheet_width_m = *sheet_width;
+  if (side_given) options.laser_prior.side = side;
+  options.on_skip = [](const std::string& message) {
+    std::fprintf(stderr, "laserline-calibrate: left out %s\n", message.c_str());
+  };
 
   try {
     const std::vector<std::string> on_files = laserline::tools::expand_image_inputs(inputs);
@@ -195,8 +243,10 @@ int main(int argc, char** argv) {
     for (std::size_t i = 0; i < on_files.size(); ++i) {
       laserline::tools::CalibrationView v;
       v.name = on_files[i];
-      v.laser_on = laserline::tools::load_mono8(on_files[i]);
-      if (!off_files.empty()) v.laser_off = laserline::tools::load_mono8(off_files[i]);
+      v.laser_on = laserline::tools::load_image(on_files[i], options.channel);
+      if (!off_files.empty()) {
+        v.laser_off = laserline::tools::load_image(off_files[i], options.channel);
+      }
       views.push_back(std::move(v));
     }
     const auto result = laserline::tools::calibrate_laser_plane(views, options);
