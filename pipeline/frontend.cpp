@@ -1044,8 +1044,9 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
           for (; word != 0; word &= word - 1) {
             const int i = w * 64 + std::countr_zero(word);
             const Lane lane = row[i];
-            // A ridge, not an edge: the band-pass a quarter of the peak below zero on both
-            // sides (a line gives a half to three quarters; an edge nothing on its bright side).
+            // A ridge, not an edge: the band-pass an eighth of the peak below zero on both sides
+            // (a line gives a half to three quarters, a line lying on a texture edge less on the
+            // edge's bright side; an edge nothing on its bright side).
             // Each side: out to where the band-pass crosses zero (farther for a line wider than
             // the model), then the lowest value within half an outer box beyond.
             auto lowest = [&](int side) LASERLINE_ROW_LAMBDA {
@@ -1062,7 +1063,7 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
                 glowing_ ? (near_down ? lowest_up : lowest_down) : std::max(lowest_up, lowest_down);
             // (A clipped core much wider than the model is flat: the band-pass sees its two
             // flanks as edges. Its run is found and centred by the refinement.)
-            if (4 * needed > -static_cast<int>(lane) &&
+            if (8 * needed > -static_cast<int>(lane) &&
                 current_.at(begin + i, static_cast<int>(rows_.source_row(r) + 0.5f)) < saturation) {
               continue;
             }
