@@ -1044,36 +1044,11 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
           for (; word != 0; word &= word - 1) {
             const int i = w * 64 + std::countr_zero(word);
             const Lane lane = row[i];
-            // A ridge, not an edge: the band-pass an eighth of the peak below zero on both sides
-            // (a line gives a half to three quarters, a line lying on a texture edge less on the
-            // edge's bright side; an edge nothing on its bright side).
-            // Each side: out to where the band-pass crosses zero (farther for a line wider than
-            // the model), then the lowest value within half an outer box beyond.
-            auto lowest = [&](int side) LASERLINE_ROW_LAMBDA {
-              int d = reach_ + 1;
-              while (d < look && band(r + side * d)[i] > 0)
-                ++d;
-              int low = 0;
-              for (const int last_row = std::min(d + ridge_, look); d <= last_row; ++d)
-                low = std::min<int>(low, band(r + side * d)[i]);
-              return low;
-            };
-            const int lowest_up = lowest(-1), lowest_down = lowest(+1);
-            const int needed =
-                glowing_ ? (near_down ? lowest_up : lowest_down) : std::max(lowest_up, lowest_down);
-            // (A clipped core much wider than the model is flat: the band-pass sees its two
-            // flanks as edges. Its run is found and centred by the refinement.)
-            if (8 * needed > -static_cast<int>(lane) &&
-                current_.at(begin + i, static_cast<int>(rows_.source_row(r) + 0.5f)) < saturation) {
-              continue;
-            }
             const int u = begin + i;
             const float value = static_cast<float>(lane) * unit;
-            const float snr = value / noise_at(u);
-            if (!(snr >= threshold)) continue;
             // Keep the strongest few per column (bounded work and output). Strongest by
             // band-pass amplitude: the laser adds light, while a faint texture edge in a quiet
-            // neighbourhood can have the higher SNR.
+            // neighbourhood can have the higher SNR. (Checked first: it is the cheapest test.)
             Peak* best = column_best_.data() + static_cast<std::size_t>(u) * per_column;
             const int n = column_count_[u];
             int slot = n;
@@ -1082,9 +1057,37 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
               for (int j = 1; j < n; ++j)
                 if (best[j].band < best[slot].band) slot = j;
               if (best[slot].band >= value) continue;
-            } else {
-              column_count_[u] = static_cast<std::uint8_t>(n + 1);
             }
+            // A ridge, not an edge: the band-pass an eighth of the peak below zero on both sides
+            // (a line gives a half to three quarters, a line lying on a texture edge less on the
+            // edge's bright side; an edge nothing on its bright side).
+            // Each side: out to where the band-pass crosses zero (farther for a line wider than
+            // the model), then the lowest value within half an outer box beyond.
+            const int enough = -static_cast<int>(lane) / 8;  // (rounded toward zero)
+            auto lowest = [&](int side) LASERLINE_ROW_LAMBDA {
+              int d = reach_ + 1;
+              while (d < look && band(r + side * d)[i] > 0)
+                ++d;
+              int low = 0;
+              for (const int last_row = std::min(d + ridge_, look); d <= last_row; ++d) {
+                low = std::min<int>(low, band(r + side * d)[i]);
+                if (low < enough) break;  // low enough: no need to look farther
+              }
+              return low;
+            };
+            const int lowest_up = glowing_ && !near_down ? 0 : lowest(-1);
+            const int lowest_down = glowing_ && near_down ? 0 : lowest(+1);
+            const int needed =
+                glowing_ ? (near_down ? lowest_up : lowest_down) : std::max(lowest_up, lowest_down);
+            // (A clipped core much wider than the model is flat: the band-pass sees its two
+            // flanks as edges. Its run is found and centred by the refinement.)
+            if (8 * needed > -static_cast<int>(lane) &&
+                current_.at(u, static_cast<int>(rows_.source_row(r) + 0.5f)) < saturation) {
+              continue;
+            }
+            const float snr = value / noise_at(u);
+            if (!(snr >= threshold)) continue;
+            if (n < per_column) column_count_[u] = static_cast<std::uint8_t>(n + 1);
             // Sub-row position of the band-pass peak, mapped back to an original row: the
             // guess the refinement starts from.
             const auto above = static_cast<float>(up[i]), below = static_cast<float>(down[i]);

@@ -33,6 +33,7 @@ void LineSelector::reset(int lines, int per_line) {
   score_.assign(candidates, 0.0f);
   from_.assign(candidates, -1);
   prefix_best_.assign(static_cast<std::size_t>(lines), 0.0f);
+  column_best_.assign(static_cast<std::size_t>(lines), 0.0f);
   prefix_at_.assign(static_cast<std::size_t>(lines), -1);
   previous_.assign(candidates, kNaN);
   previous_count_.assign(static_cast<std::size_t>(lines), 0);
@@ -95,9 +96,11 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
       std::int32_t from = running_at;
       for (int gap = 0; gap <= o.max_gap && line - 1 - gap >= 0; ++gap) {
         const int before = line - 1 - gap;
+        const float skipped = gap_cost * static_cast<float>(gap);
+        // (No candidate of that line can do better: the jump costs nothing at best.)
+        if (column_best_[static_cast<std::size_t>(before)] - skipped <= best) continue;
         const int m = counts[static_cast<std::size_t>(before)];
         const float allowed = free * static_cast<float>(gap + 1);
-        const float skipped = gap_cost * static_cast<float>(gap);
         for (int j = 0; j < m; ++j) {
           const std::int32_t prior = before * k + j;
           const float jump =
@@ -113,13 +116,16 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
       score_[static_cast<std::size_t>(at)] = unary + best;
       from_[static_cast<std::size_t>(at)] = from;
     }
+    float column_best = -std::numeric_limits<float>::infinity();
     for (int i = 0; i < n; ++i) {
       const std::int32_t at = line * k + i;
+      column_best = std::max(column_best, score_[static_cast<std::size_t>(at)]);
       if (score_[static_cast<std::size_t>(at)] > running_best) {
         running_best = score_[static_cast<std::size_t>(at)];
         running_at = at;
       }
     }
+    column_best_[static_cast<std::size_t>(line)] = column_best;
   }
   // The best path, back from its end.
   for (std::int32_t at = running_at; at >= 0; at = from_[static_cast<std::size_t>(at)])

@@ -27,7 +27,7 @@ struct LineSelectionOptions {
   double jump_free_px = 2.0;
   double jump_cost_db_per_px = 2.0;
   double gap_cost_db = 1.0;
-  int max_gap = 16;  // lines a piece of curve can skip (a dark patch, an occlusion)
+  int max_gap = 8;  // lines a piece of curve can skip (a dark patch, an occlusion)
   double previous_bonus_db = 6.0;
   double previous_tolerance_px = 2.5;
 };
@@ -63,6 +63,7 @@ class LineSelector {
   int lines_ = 0, per_line_ = 0;
   std::vector<float> score_;             // per candidate: the best total of a path ending there
   std::vector<std::int32_t> from_;       // per candidate: its predecessor on that path, -1 none
+  std::vector<float> column_best_;       // per line: the best total of a path ending on it
   std::vector<float> prefix_best_;       // per line: the best total of any path before it (>= 0)
   std::vector<std::int32_t> prefix_at_;  // ... and the candidate it ends at, -1 the empty path
   std::vector<float> previous_;          // per line: the previous frame's candidates' positions
