@@ -1507,6 +1507,38 @@ float Frontend::refine_row(int u, float v_guess) const {
   // samples just beyond the line on either side, is removed first: ambient light under the line
   // would bend the logarithms.
   if (best - edge < 0 || best + edge > last) return static_cast<float>(best);
+  if (glowing_ && best - 2 * edge - 2 >= 0 && best + 2 * edge + 2 <= last) {
+    // Where the water glows, the glow ends at the line in a step: a straight baseline through it
+    // would pull the fit toward the glow by about a pixel, and the brightest sample is often the
+    // glow's last one rather than the line's centre. Each side's light is followed instead (a
+    // straight line through two samples beyond the line on that side), meeting at the line's
+    // centre, the centre pixel taking each side's share; the fit is centred again on its result.
+    const int near = rows_.near_side();
+    float estimate = static_cast<float>(best);
+    for (int pass = 0; pass < 3; ++pass) {
+      const int middle = static_cast<int>(std::lround(estimate));
+      auto side_line = [&](int side) {
+        const float close = sample(middle + side * edge), far = sample(middle + side * 2 * edge);
+        return std::array<float, 2>{close, (far - close) / static_cast<float>(edge)};
+      };
+      const auto front = side_line(near), back = side_line(-near);
+      auto baseline = [&](int v) {
+        const float into_front = static_cast<float>(near) * (static_cast<float>(v) - estimate);
+        const float share = std::clamp(0.5f + into_front, 0.0f, 1.0f);
+        const float distance = static_cast<float>(std::abs(v - middle));
+        const float f = front[0] + front[1] * (distance - static_cast<float>(edge));
+        const float b = back[0] + back[1] * (distance - static_cast<float>(edge));
+        return b + share * (f - b);
+      };
+      const float a = sample(middle - spacing) - baseline(middle - spacing);
+      const float b = sample(middle) - baseline(middle);
+      const float c = sample(middle + spacing) - baseline(middle + spacing);
+      estimate =
+          static_cast<float>(middle) + static_cast<float>(spacing) * gaussian_offset(a, b, c);
+      if (std::abs(estimate - static_cast<float>(middle)) < 0.5f) break;  // centred where it is
+    }
+    return estimate;
+  }
   const float before = sample(best - edge), after = sample(best + edge);
   const float slope = (after - before) / static_cast<float>(2 * edge);
   const float level = 0.5f * (before + after);
@@ -1549,7 +1581,7 @@ bool Frontend::water_glows(const ImageView& frame) const {
   const auto middle = static_cast<std::ptrdiff_t>(n / 2);
   std::nth_element(excess.begin(), excess.begin() + middle, excess.begin() + n);
   std::nth_element(line.begin(), line.begin() + middle, line.begin() + n);
-  return excess[middle] > 0.5f * std::max(line[middle], 1.0f);
+  return excess[middle] > 0.25f * std::max(line[middle], 1.0f);
 }
 
 void Frontend::find_candidates(Profile& out) {
@@ -1640,7 +1672,7 @@ void Frontend::select_line(Profile& out) {
 
 void Frontend::refine(std::span<ProfilePoint> points, std::size_t count) const {
 #if LASERLINE_AVX2_KERNELS
-  if (avx2_ && subtracting_) {
+  if (avx2_ && subtracting_ && !glowing_) {
     refine_avx2(points, count);
     return;
   }
