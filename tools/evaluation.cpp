@@ -1,6 +1,9 @@
 #include "tools/evaluation.hpp"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <numbers>
 #include <opencv2/imgcodecs.hpp>
@@ -316,7 +319,10 @@ Score evaluate(const Scenario& scenario, const std::string& detector_name,
       const float position = truth.position[static_cast<std::size_t>(p.u)];
       if (std::isnan(position)) continue;
       const double error = p.v - position;
-      if (std::abs(error) <= tolerance_px) ++score.correct_points;
+      if (std::abs(error) <= tolerance_px) {
+        ++score.correct_points;
+        score.sum_snr_db += p.snr_db;
+      }
       double& b = best[static_cast<std::size_t>(p.u)];
       if (std::abs(error) < std::abs(b)) b = error;
     }
@@ -333,6 +339,175 @@ Score evaluate(const Scenario& scenario, const std::string& detector_name,
     if (on_frame) on_frame({i, &pixels, format.width, format.height, &truth, &profile});
   }
   return score;
+}
+
+Scenario turbidity_scenario(double level, int width, int height) {
+  Scenario s;
+  for (const Scenario& c : standard_scenarios(width, height))
+    if (c.name == "clean") s = c;
+  s.name = "turbidity";
+  char description[96];
+  std::snprintf(description, sizeof description, "a tank, the wall 1.4 m away, %.1f FTU", level);
+  s.description = description;
+  s.scene.distance_m = 1.4;
+  s.scene.ambient = 20;
+  s.scene.texture_contrast = 0.3;
+  s.scene.laser_peak = 150;
+  s.scene.noise_sigma = 2.0;
+  s.scene.seed = 53;
+  s.scene.attenuation_per_m = 0.15 * level;
+  s.scene.backscatter = 6.0 * level;
+  s.scene.forward_scatter = std::min(0.6, 0.06 * level);
+  s.scene.scatter_halo_px = 2.0 * level;
+  s.scene.veiling = std::min(0.6, 0.06 * level);
+  return s;
+}
+
+TurbiditySweep sweep_turbidity(const std::vector<double>& levels,
+                               const std::vector<double>& passband_ratios,
+                               const std::vector<std::string>& detectors, int frames,
+                               double tolerance_px) {
+  TurbiditySweep sweep;
+  sweep.levels = levels;
+  sweep.passband_ratios = passband_ratios;
+  sweep.detectors = detectors;
+  for (const double ratio : passband_ratios) {
+    std::vector<double> snr;
+    for (const double level : levels) {
+      Scenario s = turbidity_scenario(level);
+      s.frames = frames;
+      pipeline::DetectorOptions o;
+      o.frontend.passband_ratio = ratio;
+      snr.push_back(evaluate(s, "fir", o, tolerance_px).mean_snr_db());
+    }
+    sweep.snr_db.push_back(snr);
+  }
+  for (const std::string& name : detectors) {
+    std::vector<double> recall;
+    double loses = std::numeric_limits<double>::quiet_NaN();
+    for (const double level : levels) {
+      Scenario s = turbidity_scenario(level);
+      s.frames = frames;
+      recall.push_back(evaluate(s, name, {}, tolerance_px).recall());
+      if (std::isnan(loses) && recall.back() < 0.5) loses = level;
+    }
+    sweep.recall.push_back(recall);
+    sweep.loses_line_at.push_back(loses);
+  }
+  return sweep;
+}
+
+bool write_turbidity_csv(const std::string& csv_path, const TurbiditySweep& sweep) {
+  std::FILE* f = std::fopen(csv_path.c_str(), "w");
+  if (f == nullptr) return false;
+  std::fprintf(f, "turbidity_ftu");
+  for (const double ratio : sweep.passband_ratios)
+    std::fprintf(f, ",snr_db_passband_%g", ratio);
+  for (const std::string& d : sweep.detectors)
+    std::fprintf(f, ",recall_%s", d.c_str());
+  std::fprintf(f, "\n");
+  for (std::size_t i = 0; i < sweep.levels.size(); ++i) {
+    std::fprintf(f, "%g", sweep.levels[i]);
+    for (const auto& snr : sweep.snr_db)
+      std::fprintf(f, ",%.2f", snr[i]);
+    for (const auto& recall : sweep.recall)
+      std::fprintf(f, ",%.4f", recall[i]);
+    std::fprintf(f, "\n");
+  }
+  return std::fclose(f) == 0;
+}
+
+namespace {
+
+// A line chart on `image` inside `area`: x from the levels, y from y_lo to y_hi.
+struct Chart {
+  cv::Mat& image;
+  cv::Rect area;
+  double x_lo, x_hi, y_lo, y_hi;
+  bool legend_below = false;  // the legend in the lower left corner, else the upper right
+
+  cv::Point at(double x, double y) const {
+    const double fx = (x - x_lo) / (x_hi - x_lo), fy = (y - y_lo) / (y_hi - y_lo);
+    return {area.x + static_cast<int>(std::lround(fx * area.width)),
+            area.y + area.height -
+                static_cast<int>(std::lround(std::clamp(fy, 0.0, 1.0) * area.height))};
+  }
+  void axes(const std::string& title, const std::string& x_label, double y_step) const {
+    const cv::Scalar ink(0, 0, 0), grid(220, 220, 220);
+    for (double y = y_lo; y <= y_hi + 1e-9; y += y_step) {
+      cv::line(image, at(x_lo, y), at(x_hi, y), grid, 1);
+      char text[16];
+      std::snprintf(text, sizeof text, "%g", y);
+      cv::putText(image, text, at(x_lo, y) + cv::Point(-40, 5), cv::FONT_HERSHEY_SIMPLEX, 0.4, ink,
+                  1, cv::LINE_AA);
+    }
+    for (double x = x_lo; x <= x_hi + 1e-9; x += x_hi - x_lo > 10 ? 2.0 : 1.0) {
+      char text[16];
+      std::snprintf(text, sizeof text, "%g", x);
+      cv::putText(image, text, at(x, y_lo) + cv::Point(-4, 18), cv::FONT_HERSHEY_SIMPLEX, 0.4, ink,
+                  1, cv::LINE_AA);
+    }
+    cv::rectangle(image, area, ink, 1);
+    cv::putText(image, title, {area.x, area.y - 12}, cv::FONT_HERSHEY_SIMPLEX, 0.5, ink, 1,
+                cv::LINE_AA);
+    cv::putText(image, x_label, {area.x + area.width / 2 - 60, area.y + area.height + 38},
+                cv::FONT_HERSHEY_SIMPLEX, 0.45, ink, 1, cv::LINE_AA);
+  }
+  void curve(const std::vector<double>& xs, const std::vector<double>& ys, const cv::Scalar& colour,
+             const std::string& label, int legend_row) const {
+    for (std::size_t i = 0; i + 1 < xs.size(); ++i)
+      cv::line(image, at(xs[i], ys[i]), at(xs[i + 1], ys[i + 1]), colour, 2, cv::LINE_AA);
+    for (std::size_t i = 0; i < xs.size(); ++i)
+      cv::circle(image, at(xs[i], ys[i]), 3, colour, cv::FILLED, cv::LINE_AA);
+    const cv::Point legend =
+        legend_below ? cv::Point(area.x + 12, area.y + area.height - 90 + 18 * legend_row)
+                     : cv::Point(area.x + area.width - 170, area.y + 18 + 18 * legend_row);
+    cv::line(image, legend, legend + cv::Point(20, 0), colour, 2, cv::LINE_AA);
+    cv::putText(image, label, legend + cv::Point(26, 4), cv::FONT_HERSHEY_SIMPLEX, 0.4,
+                cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+  }
+};
+
+}  // namespace
+
+bool write_turbidity_plot(const std::string& png_path, const TurbiditySweep& sweep) {
+  if (sweep.levels.size() < 2) return false;
+  cv::Mat image(520, 1100, CV_8UC3, cv::Scalar(255, 255, 255));
+  const std::array<cv::Scalar, 6> colours{cv::Scalar(180, 90, 20), cv::Scalar(40, 140, 40),
+                                          cv::Scalar(20, 20, 200), cv::Scalar(160, 40, 160),
+                                          cv::Scalar(0, 140, 200), cv::Scalar(90, 90, 90)};
+  const double x_lo = sweep.levels.front(), x_hi = sweep.levels.back();
+  double snr_hi = 10;
+  for (const auto& snr : sweep.snr_db)
+    for (double v : snr)
+      snr_hi = std::max(snr_hi, std::ceil(v / 5.0) * 5.0);
+  const Chart snr{image, cv::Rect(70, 50, 430, 380), x_lo, x_hi, 0.0, snr_hi};
+  snr.axes("SNR of the detected line (fir), dB", "turbidity, FTU", 5.0);
+  // The paper's limit: below 3 dB no clear detection.
+  cv::line(image, snr.at(x_lo, 3.0), snr.at(x_hi, 3.0), cv::Scalar(0, 0, 0), 1, cv::LINE_4);
+  cv::putText(image, "3 dB", snr.at(x_lo, 3.0) + cv::Point(4, -4), cv::FONT_HERSHEY_SIMPLEX, 0.4,
+              cv::Scalar(0, 0, 0), 1, cv::LINE_AA);
+  for (std::size_t k = 0; k < sweep.snr_db.size(); ++k) {
+    char label[40];
+    std::snprintf(label, sizeof label, "passband ratio %g", sweep.passband_ratios[k]);
+    snr.curve(sweep.levels, sweep.snr_db[k], colours[k % colours.size()], label,
+              static_cast<int>(k));
+  }
+  const Chart recall{image, cv::Rect(630, 50, 430, 380), x_lo, x_hi, 0.0, 100.0, true};
+  recall.axes("line found (recall), %", "turbidity, FTU", 20.0);
+  for (std::size_t k = 0; k < sweep.recall.size(); ++k) {
+    std::vector<double> percent;
+    for (double r : sweep.recall[k])
+      percent.push_back(100.0 * r);
+    std::string label = sweep.detectors[k];
+    if (!std::isnan(sweep.loses_line_at[k])) {
+      char at[32];
+      std::snprintf(at, sizeof at, " (< 50%% at %g)", sweep.loses_line_at[k]);
+      label += at;
+    }
+    recall.curve(sweep.levels, percent, colours[k % colours.size()], label, static_cast<int>(k));
+  }
+  return cv::imwrite(png_path, image);
 }
 
 bool write_overlay(const std::string& path, const ScoredFrame& frame, double tolerance_px) {

@@ -39,11 +39,13 @@ struct Score {
   double sum_error = 0;     // over the closest correct point of each found column
   double sum_squared_error = 0;
   double max_error = 0;
+  double sum_snr_db = 0;  // over the correct points: the SNR the detector gave them
 
   double recall() const { return truth_columns ? double(found_columns) / truth_columns : 0.0; }
   double precision() const { return points ? double(correct_points) / points : 1.0; }
   double rms() const { return found_columns ? std::sqrt(sum_squared_error / found_columns) : 0.0; }
   double bias() const { return found_columns ? sum_error / found_columns : 0.0; }
+  double mean_snr_db() const { return correct_points ? sum_snr_db / correct_points : 0.0; }
 };
 
 // One scored frame, for overlays: the frame, its truth and the detector's points.
@@ -64,6 +66,33 @@ hal::SimLineFamily line_family(const pipeline::SearchAxes& axes);
 Score evaluate(const Scenario& scenario, const std::string& detector,
                pipeline::DetectorOptions options, double tolerance_px,
                const std::function<void(const ScoredFrame&)>& on_frame = {});
+
+// The paper's Fig. 7 (its section V-B): the scanner 1.4 m from a wall in a tank, the water made
+// more turbid step by step. `level` is the turbidity on a scale of formazine units (FTU): the
+// beam attenuation (0.15 per metre per unit), the light the sheet scatters back (6 grey levels
+// per unit) and forward (6 % per unit, into a halo 2 px per unit wide) and the veiling light grow
+// with it.
+Scenario turbidity_scenario(double level, int width = 1280, int height = 1024);
+
+// SNR of the detected line and recall against turbidity, for several band-pass widths (the
+// front-end's passband_ratio: the outer box in inner boxes) and every detector.
+struct TurbiditySweep {
+  std::vector<double> levels;
+  std::vector<double> passband_ratios;
+  std::vector<std::vector<double>> snr_db;  // [passband][level]: mean SNR of the found points (fir)
+  std::vector<std::string> detectors;
+  std::vector<std::vector<double>> recall;  // [detector][level]
+  // Per detector, the lowest level at which its recall falls below half (NaN: it never does).
+  std::vector<double> loses_line_at;
+};
+TurbiditySweep sweep_turbidity(const std::vector<double>& levels,
+                               const std::vector<double>& passband_ratios,
+                               const std::vector<std::string>& detectors, int frames,
+                               double tolerance_px);
+// The sweep as a plot (PNG: SNR against turbidity per passband, and recall per detector) and a
+// CSV beside it. False when a file could not be written.
+bool write_turbidity_plot(const std::string& png_path, const TurbiditySweep& sweep);
+bool write_turbidity_csv(const std::string& csv_path, const TurbiditySweep& sweep);
 
 // Draws the truth (blue, 6 px above the line), valid points (green within the tolerance, red
 // otherwise) and rejected candidates (dim yellow) on a frame and writes a PNG. Returns false when

@@ -2,6 +2,7 @@
 // exact ground truth and prints a table of recall, precision and sub-pixel error. Anyone can rerun
 // it; the tests assert the same figures.
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
@@ -18,11 +19,16 @@ void usage(std::FILE* out) {
   std::fprintf(out,
                "usage: laserline-evaluate [--tolerance PX] [--frames N] [--size WxH] "
                "[--overlay-dir DIR] [--detector NAME]... [--scenario NAME]...\n"
-               "                          [--validation chain_code|image_features]\n"
+               "                          [--validation chain_code|image_features] [--markdown]\n"
+               "       laserline-evaluate --turbidity-plot FILE.png [--frames N]\n"
                "Scores detectors on simulated scenarios (ground truth exact): recall, precision\n"
                "within the tolerance (default 2 px), RMS error and bias of the found points.\n"
                "--validation: how backprojection associates segments between frames (default\n"
-               "chain_code, the paper's; image_features tracks the segment's box in the image).\n");
+               "chain_code, the paper's; image_features tracks the segment's box in the image).\n"
+               "--markdown: one row per scenario, recall / precision of each detector.\n"
+               "--turbidity-plot: the paper's Fig. 7: the SNR of the detected line against\n"
+               "turbidity (0 to 12 FTU, the wall 1.4 m away) for band-pass widths 2, 3, 4.5 and 6\n"
+               "(passband_ratio), and each detector's recall, as FILE.png and FILE.csv.\n");
 }
 
 }  // namespace
@@ -32,7 +38,8 @@ int main(int argc, char** argv) {
   double tolerance = 2.0;
   int frames = 16;
   int width = 1280, height = 1024;
-  std::string overlay_dir;
+  std::string overlay_dir, turbidity_plot;
+  bool markdown = false;
   std::vector<std::string> detectors, scenarios;
   pipeline::DetectorOptions options;
   for (int i = 1; i < argc; ++i) {
@@ -68,6 +75,10 @@ int main(int argc, char** argv) {
         } else {
           throw std::invalid_argument(v);
         }
+      } else if (arg == "--markdown") {
+        markdown = true;
+      } else if (arg == "--turbidity-plot") {
+        turbidity_plot = value();
       } else if (arg == "--scenario") {
         scenarios.push_back(value());
       } else if (arg == "--help" || arg == "-h") {
@@ -89,15 +100,52 @@ int main(int argc, char** argv) {
   }
   if (detectors.empty()) detectors = pipeline::detector_names();
   if (!overlay_dir.empty()) std::filesystem::create_directories(overlay_dir);
+  if (!turbidity_plot.empty()) {
+    std::vector<double> levels;
+    for (int level = 0; level <= 12; ++level)
+      levels.push_back(level);
+    const tools::TurbiditySweep sweep =
+        tools::sweep_turbidity(levels, {2.0, 3.0, 4.5, 6.0}, detectors, frames, tolerance);
+    const std::string csv =
+        std::filesystem::path(turbidity_plot).replace_extension(".csv").string();
+    if (!tools::write_turbidity_plot(turbidity_plot, sweep) ||
+        !tools::write_turbidity_csv(csv, sweep)) {
+      std::fprintf(stderr, "laserline-evaluate: cannot write %s or %s\n", turbidity_plot.c_str(),
+                   csv.c_str());
+      return 1;
+    }
+    for (std::size_t k = 0; k < sweep.detectors.size(); ++k) {
+      if (std::isnan(sweep.loses_line_at[k])) {
+        std::printf("%-14s finds over half the line up to %g FTU\n", sweep.detectors[k].c_str(),
+                    levels.back());
+      } else {
+        std::printf("%-14s loses the line (under half found) at %g FTU\n",
+                    sweep.detectors[k].c_str(), sweep.loses_line_at[k]);
+      }
+    }
+    std::printf("wrote %s and %s\n", turbidity_plot.c_str(), csv.c_str());
+    return 0;
+  }
+  if (markdown) {
+    std::printf("| scenario |");
+    for (const std::string& name : detectors)
+      std::printf(" %s |", name.c_str());
+    std::printf("\n|---|");
+    for (std::size_t k = 0; k < detectors.size(); ++k)
+      std::printf("---|");
+    std::printf("\n");
+  }
 
-  std::printf("%-24s %-14s %7s %9s %9s %8s %8s %8s\n", "scenario", "detector", "frames", "recall",
-              "precision", "rms_px", "bias_px", "max_px");
+  if (!markdown)
+    std::printf("%-24s %-14s %7s %9s %9s %8s %8s %8s\n", "scenario", "detector", "frames", "recall",
+                "precision", "rms_px", "bias_px", "max_px");
   for (tools::Scenario scenario : tools::standard_scenarios(width, height)) {
     if (!scenarios.empty() &&
         std::find(scenarios.begin(), scenarios.end(), scenario.name) == scenarios.end()) {
       continue;
     }
     scenario.frames = frames;
+    if (markdown) std::printf("| %s |", scenario.name.c_str());
     for (const std::string& name : detectors) {
       tools::Score score;
       try {
@@ -115,10 +163,15 @@ int main(int argc, char** argv) {
                      scenario.name.c_str(), e.what());
         return 1;
       }
-      std::printf("%-24s %-14s %7d %8.2f%% %8.2f%% %8.3f %8.3f %8.3f\n", scenario.name.c_str(),
-                  name.c_str(), score.frames, 100.0 * score.recall(), 100.0 * score.precision(),
-                  score.rms(), score.bias(), score.max_error);
+      if (markdown) {
+        std::printf(" %.1f / %.1f |", 100.0 * score.recall(), 100.0 * score.precision());
+      } else {
+        std::printf("%-24s %-14s %7d %8.2f%% %8.2f%% %8.3f %8.3f %8.3f\n", scenario.name.c_str(),
+                    name.c_str(), score.frames, 100.0 * score.recall(), 100.0 * score.precision(),
+                    score.rms(), score.bias(), score.max_error);
+      }
     }
+    if (markdown) std::printf("\n");
   }
   return 0;
 }
