@@ -840,5 +840,196 @@ TEST(SimSceneColour, BayerFramesCarryTheRgbFramesSampleOfEachPixelsColour) {
   EXPECT_GT(finite_count(rgb_truth.position), 250);
 }
 
+// ---- Turbid water ----------------------------------------------------------------------------
+
+TEST(SimSceneTurbidity, ForwardScatterKeepsTheLinesEnergyAndCentreAndSpreadsItIntoTheHalo) {
+  // The paper's mounting, a slanted line on a textured surface, sensor noise. The laser's light in
+  // a column is the lit frame minus the dark one (the same frame number: the same noise, which
+  // cancels); what is left of the rounding is, per pixel, round(x + L) - round(x) - L: zero mean,
+  // |e| < 1, variance at most 1/4. Sums over the 2 * 45 + 1 rows around the line are good to
+  // sqrt(91 / 4) per column, their mean over n columns to sqrt(91 / (4 n)).
+  SimSceneOptions o = still_options();
+  o.tilt_y_deg = 10;
+  o.texture_contrast = 0.15;
+  o.ambient = 20;
+  o.laser_peak = 180;  // with the brightest texture and the noise, below 255
+  o.noise_sigma = 2;
+  SimScene clear(o);
+  o.forward_scatter = 0.5;
+  o.scatter_halo_px = 8;
+  SimScene turbid(o);
+  const std::uint64_t seq = 5;
+  const SimGroundTruth truth = truth_of(clear, seq, true);
+  ASSERT_TRUE(same_truth(truth, truth_of(turbid, seq, true)));  // the truth is the core's
+  const Image clear_lit = render(clear, seq, true), clear_dark = render(clear, seq, false);
+  const Image turbid_lit = render(turbid, seq, true), turbid_dark = render(turbid, seq, false);
+  ASSERT_EQ(clear_dark.data, turbid_dark.data);
+
+  constexpr int kHalfBand = 45;  // 5 halo sigmas and more
+  const int width = clear_lit.width;
+  double energy_clear = 0, energy_turbid = 0, centre_error = 0, centre_var = 0;
+  double halo_inner = 0, halo_outer = 0, model_inner = 0, model_outer = 0;
+  int columns = 0;
+  for (int u = 0; u < width; ++u) {
+    const double c = truth.position[u], sigma = truth.width_px[u];
+    ASSERT_TRUE(std::isfinite(c));
+    const int v0 = static_cast<int>(std::lround(c));
+    ASSERT_GE(v0 - kHalfBand, 0);
+    ASSERT_LT(v0 + kHalfBand, clear_lit.height);
+    double e0 = 0, e1 = 0, moment = 0, spread = 0;
+    for (int v = v0 - kHalfBand; v <= v0 + kHalfBand; ++v) {
+      const double l0 = clear_lit.at(u, v) - clear_dark.at(u, v);
+      const double l1 = turbid_lit.at(u, v) - turbid_dark.at(u, v);
+      ASSERT_LT(turbid_lit.at(u, v), 255);
+      ASSERT_LT(clear_lit.at(u, v), 255);
+      e0 += l0;
+      e1 += l1;
+      moment += (v - c) * l1;
+      spread += (v - c) * (v - c) / 4;
+    }
+    // Per column: the energies agree to 5 standard deviations of their difference.
+    EXPECT_NEAR(e1, e0, 5 * std::sqrt(2 * (2 * kHalfBand + 1) / 4.0)) << "column " << u;
+    energy_clear += e0;
+    energy_turbid += e1;
+    centre_error += moment / e1;
+    centre_var += spread / (e1 * e1);
+    // The halo: a Gaussian of sigma hypot(sigma, scatter_halo_px) holding forward_scatter of the
+    // energy, whose peak follows from the clear line's energy (peak * sigma * sqrt(2 pi)). At 4
+    // core sigmas and more the core has nothing left.
+    const double halo_sigma = std::hypot(sigma, o.scatter_halo_px);
+    const double halo_peak = o.forward_scatter * e0 / (halo_sigma * std::sqrt(2 * kPi));
+    for (int v = v0 - kHalfBand; v <= v0 + kHalfBand; ++v) {
+      const double d = std::abs(v - c);
+      if (d < 4) continue;
+      const double model = halo_peak * std::exp(-d * d / (2 * halo_sigma * halo_sigma));
+      const double seen = turbid_lit.at(u, v) - turbid_dark.at(u, v);
+      (d < 12 ? model_inner : model_outer) += model;
+      (d < 12 ? halo_inner : halo_outer) += seen;
+    }
+    ++columns;
+  }
+  energy_clear /= columns;
+  energy_turbid /= columns;
+  centre_error /= columns;
+  const double energy_sd = std::sqrt(2 * (2 * kHalfBand + 1) / 4.0 / columns);
+  const double centre_sd = std::sqrt(centre_var) / columns;
+  std::printf(
+      "  line energy per column: %.2f clear, %.2f turbid (sd of the difference %.2f); centre "
+      "error %+.4f px (sd %.4f); halo inner %.0f of %.0f, outer %.0f of %.0f\n",
+      energy_clear, energy_turbid, energy_sd, centre_error, centre_sd, halo_inner, model_inner,
+      halo_outer, model_outer);
+  EXPECT_NEAR(energy_turbid, energy_clear, 4 * energy_sd);
+  EXPECT_NEAR(centre_error, 0.0, 4 * centre_sd);
+  // The halo is there, as wide as said: each of its two zones within 5 % (the sums are of
+  // thousands of pixels, their rounding far below that; the core's estimate of the peak is good
+  // to about 2 %).
+  EXPECT_NEAR(halo_inner, model_inner, 0.05 * model_inner);
+  EXPECT_NEAR(halo_outer, model_outer, 0.05 * model_outer);
+  EXPECT_GT(model_outer, 0.2 * model_inner);
+}
+
+TEST(SimSceneTurbidity, VeilingLowersTheContrastByItsShareAndKeepsTheMean) {
+  // Veiling light v: each pixel's ambient light A + (1 - v) (light - A), A the ambient light on
+  // albedo 1: the texture's deviations from A shrink by 1 - v, and the mean stays while the
+  // texture's mean albedo is 1. Noiseless: per pixel to within the rounding of both frames.
+  SimSceneOptions o = still_options();
+  o.noise_sigma = 0;
+  o.ambient = 80;
+  o.texture_contrast = 0.5;
+  o.caustic_peak = 2;  // caustic light veils alike
+  SimScene clear(o);
+  o.veiling = 0.4;
+  SimScene veiled(o);
+  const std::uint64_t seq = 3;
+  const Image a = render(clear, seq, false), b = render(veiled, seq, false);
+  const double n = static_cast<double>(a.data.size());
+  double mean_a = 0, mean_b = 0;
+  for (std::size_t i = 0; i < a.data.size(); ++i) {
+    const double expected = o.ambient + (1 - o.veiling) * (a.data[i] - o.ambient);
+    ASSERT_NEAR(b.data[i], expected, 0.5 + 0.5 * (1 - o.veiling) + 1e-9) << "pixel " << i;
+    mean_a += a.data[i] / n;
+    mean_b += b.data[i] / n;
+  }
+  double var_a = 0, var_b = 0;
+  for (std::size_t i = 0; i < a.data.size(); ++i) {
+    var_a += (a.data[i] - mean_a) * (a.data[i] - mean_a) / n;
+    var_b += (b.data[i] - mean_b) * (b.data[i] - mean_b) / n;
+  }
+  std::printf("  mean %.2f -> %.2f, sd %.2f -> %.2f (x %.3f)\n", mean_a, mean_b, std::sqrt(var_a),
+              std::sqrt(var_b), std::sqrt(var_b / var_a));
+  // Rounding adds variance 1/12 to each frame (which the texture's variance dwarfs).
+  EXPECT_NEAR(std::sqrt(var_b / var_a), 1 - o.veiling, 0.01);
+  EXPECT_NEAR(mean_b, mean_a, 0.02 * o.ambient);
+  EXPECT_NEAR(mean_b - mean_a, o.veiling * (o.ambient - mean_a), 0.5);
+
+  // The laser's light is not veiled: lit minus dark is the same in both waters.
+  const Image la = render(clear, seq, true), lb = render(veiled, seq, true);
+  int lit = 0;
+  for (std::size_t i = 0; i < a.data.size(); ++i) {
+    if (la.data[i] == 255 || lb.data[i] == 255) continue;  // clipped
+    const int line_a = la.data[i] - a.data[i], line_b = lb.data[i] - b.data[i];
+    // Each difference is the line's light to within (-1, 1): they differ by at most 1.
+    ASSERT_LE(std::abs(line_a - line_b), 1) << "pixel " << i;
+    lit += line_a > 20 ? 1 : 0;
+  }
+  EXPECT_GT(lit, 320);
+}
+
+TEST(SimSceneTurbidity, BackscatterStaysOnTheCameraSideOfTheLineForEveryFamily) {
+  // A pixel can glow only where its ray crosses the sheet before the surface: 0 < Z_sheet <
+  // Z_surface, both computed here per pixel. Where that fails for the pixel and its eight
+  // neighbours (the renderer decides per line, to within a pixel), the frame is the clear water's
+  // bit for bit; on the camera's side it is brighter. Rows (the laser beside the camera) and the
+  // oblique family, on a tilted surface (the columns: test_sim_scene.cpp).
+  for (const bool oblique : {false, true}) {
+    SCOPED_TRACE(oblique ? "oblique" : "rows");
+    SimSceneOptions o = still_options();
+    if (oblique) {
+      o.calibration.laser.plane = turned_sheet(o.calibration.laser, -35 * kDegree);
+    } else {
+      o.calibration.laser.side = LaserSide::kRight;
+    }
+    o.tilt_x_deg = 15;
+    o.tilt_y_deg = -12;
+    o.attenuation_per_m = 0.2;
+    SimScene clear(o);
+    o.backscatter = 30;
+    SimScene turbid(o);
+    const std::uint64_t seq = 2;
+    const Image a = render(clear, seq, true), b = render(turbid, seq, true);
+    const CameraIntrinsics& cam = o.calibration.camera;
+    const CameraPlane plane = base_plane_in_camera(o, clear.camera_pose(seq));
+    auto near_side = [&](int u, int v) {
+      const double p = sheet_inverse_depth(o.calibration, u, v);
+      const double q = dot3(plane.n, ray_of(cam, u, v)) / plane.d;  // the surface's 1/Z
+      return p > 0 && p > q;
+    };
+    int far = 0, near = 0;
+    double brightening = 0;
+    for (int v = 1; v + 1 < a.height; ++v) {
+      for (int u = 1; u + 1 < a.width; ++u) {
+        int near_count = 0;
+        for (int dv = -1; dv <= 1; ++dv) {
+          for (int du = -1; du <= 1; ++du)
+            near_count += near_side(u + du, v + dv) ? 1 : 0;
+        }
+        if (near_count == 0) {
+          ASSERT_EQ(a.at(u, v), b.at(u, v)) << "far side " << u << ", " << v;
+          ++far;
+        } else if (near_count == 9) {
+          brightening += b.at(u, v) - a.at(u, v);
+          ++near;
+        }
+      }
+    }
+    std::printf("  %d pixels on the far side unchanged; %d on the camera's side %.1f brighter\n",
+                far, near, brightening / near);
+    EXPECT_GT(far, 10000);
+    EXPECT_GT(near, 10000);
+    EXPECT_GT(brightening / near, 2.0);
+    EXPECT_EQ(render(clear, seq, false).data, render(turbid, seq, false).data);
+  }
+}
+
 }  // namespace
 }  // namespace laserline::hal
