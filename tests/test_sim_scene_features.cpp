@@ -1031,5 +1031,122 @@ TEST(SimSceneTurbidity, BackscatterStaysOnTheCameraSideOfTheLineForEveryFamily) 
   }
 }
 
+// ---- Caustics ---------------------------------------------------------------------------------
+
+TEST(SimSceneCaustics, KeepTheMeanAmbientLightAndPeakAtCausticPeak) {
+  // A flat grey surface (albedo 1), noiseless: each pixel is round(ambient * caustic light). Over
+  // eight frames a second apart (the pattern drifts by 0.2 m, two cells, between them) and some
+  // 100 cells in each, the mean light is the ambient light. How well: the curves hold about 3 %
+  // of the light pattern's area, varying by about that much from cell to cell, so the mean of the
+  // caustic light over N cells varies by about (peak - 1) * 0.03 / sqrt(N), under 1 % here for
+  // N = 8 * 100; allowed 3 %. Not keeping the mean (the curves added on top) would add some 15 %.
+  SimSceneOptions o = still_options();
+  o.noise_sigma = 0;
+  o.texture_contrast = 0;
+  o.ambient = 40;
+  o.caustic_peak = 6;
+  o.caustic_scale_m = 0.1;
+  SimScene scene(o);
+  double mean = 0, brightest = 0;
+  int frames = 0;
+  for (std::uint64_t seq = 0; seq < 240; seq += 30) {
+    const Image img = render(scene, seq, false);
+    double sum = 0;
+    for (std::uint8_t p : img.data) {
+      sum += p;
+      brightest = std::max(brightest, static_cast<double>(p));
+    }
+    mean += sum / static_cast<double>(img.data.size());
+    ++frames;
+  }
+  mean /= frames;
+  std::printf("  mean light %.2f of ambient %.0f; brightest %.0f = %.2f x the mean (peak %.0f)\n",
+              mean, o.ambient, brightest, brightest / mean, o.caustic_peak);
+  EXPECT_NEAR(mean, o.ambient, 0.03 * o.ambient);
+  // The brightest light is caustic_peak times the ambient light (where the curves of the
+  // pattern meet), never more but for rounding.
+  EXPECT_LE(brightest, o.caustic_peak * o.ambient + 0.5);
+  EXPECT_GE(brightest, 0.85 * o.caustic_peak * o.ambient);
+}
+
+TEST(SimSceneCaustics, ThePatternDriftsOverTheStillTextureAndLeavesTheLineAlone) {
+  // A still camera: the textured surface stays pixel for pixel while the caustics move over it.
+  SimSceneOptions o = still_options();
+  o.noise_sigma = 0;
+  o.ambient = 40;
+  o.texture_contrast = 0.5;
+  SimScene plain(o);
+  o.caustic_peak = 4;
+  o.caustic_speed_m_s = 0.3;
+  SimScene caustic(o);
+  SimSceneOptions flat = o;
+  flat.texture_contrast = 0;  // the caustic light alone, times the ambient light
+  SimScene light(flat);
+  const std::uint64_t a = 10, b = 13;  // 0.1 s: the pattern moves by some 3 cm
+  const Image plain_a = render(plain, a, false), plain_b = render(plain, b, false);
+  ASSERT_EQ(plain_a.data, plain_b.data);
+  const Image light_a = render(light, a, false), light_b = render(light, b, false);
+  const Image caustic_a = render(caustic, a, false), caustic_b = render(caustic, b, false);
+  // The caustic light multiplies the texture where it is: round(A albedo f) against the rounded
+  // round(A albedo) and round(A f) of the other two frames.
+  for (const auto& [lit, texture_lit] : {std::pair{&light_a, &caustic_a}, {&light_b, &caustic_b}}) {
+    for (std::size_t i = 0; i < plain_a.data.size(); ++i) {
+      const double f = lit->data[i], p = plain_a.data[i];
+      if (f == 255 || texture_lit->data[i] == 255) continue;
+      ASSERT_NEAR(texture_lit->data[i], f * p / o.ambient,
+                  0.5 + (0.5 * f + 0.5 * p + 0.25) / o.ambient + 1e-9)
+          << "pixel " << i;
+    }
+  }
+  // ... and moved between the frames.
+  double moved = 0;
+  for (std::size_t i = 0; i < light_a.data.size(); ++i)
+    moved += std::abs(light_a.data[i] - light_b.data[i]);
+  moved /= static_cast<double>(light_a.data.size());
+  std::printf("  caustic light moved: mean |difference| %.2f grey levels in 0.1 s\n", moved);
+  EXPECT_GT(moved, 2.0);
+
+  // Where it is depends on speed * time alone: still at speed 0, the same at twice the speed and
+  // half the time (bit for bit: scaling by 2 is exact).
+  flat.caustic_speed_m_s = 0;
+  SimScene still(flat);
+  EXPECT_EQ(render(still, a, false).data, render(still, b, false).data);
+  flat.caustic_speed_m_s = 2 * o.caustic_speed_m_s;
+  SimScene fast(flat);
+  EXPECT_EQ(render(fast, 7, false).data, render(light, 14, false).data);
+  EXPECT_NE(render(fast, 7, false).data, render(light, 7, false).data);
+
+  // The laser's light is not the ambient light: lit minus dark is the same with caustics.
+  const Image plain_lit = render(plain, a, true), caustic_lit = render(caustic, a, true);
+  for (std::size_t i = 0; i < plain_a.data.size(); ++i) {
+    if (plain_lit.data[i] == 255 || caustic_lit.data[i] == 255) continue;
+    ASSERT_LE(
+        std::abs((caustic_lit.data[i] - caustic_a.data[i]) - (plain_lit.data[i] - plain_a.data[i])),
+        1)
+        << "pixel " << i;
+  }
+}
+
+TEST(SimSceneCaustics, PeakOneIsNoCausticsWhateverTheOtherCausticOptions) {
+  SimSceneOptions o = still_options();
+  o.sway_m = 0.02;
+  o.backscatter = 10;
+  SimScene plain(o);
+  o.caustic_peak = 1;
+  o.caustic_scale_m = 0.37;
+  o.caustic_speed_m_s = -3;
+  SimScene none(o);
+  EXPECT_EQ(render(plain, 17, true).data, render(none, 17, true).data);
+  EXPECT_EQ(render(plain, 18, false).data, render(none, 18, false).data);
+  auto rejects = [](auto change) {
+    SimSceneOptions bad = still_options();
+    change(bad);
+    EXPECT_THROW(SimScene{bad}, std::invalid_argument);
+  };
+  rejects([](SimSceneOptions& b) { b.caustic_peak = 0.5; });
+  rejects([](SimSceneOptions& b) { b.caustic_scale_m = 0; });
+  rejects([](SimSceneOptions& b) { b.caustic_speed_m_s = std::nan(""); });
+}
+
 }  // namespace
 }  // namespace laserline::hal
