@@ -1148,5 +1148,147 @@ TEST(SimSceneCaustics, PeakOneIsNoCausticsWhateverTheOtherCausticOptions) {
   rejects([](SimSceneOptions& b) { b.caustic_speed_m_s = std::nan(""); });
 }
 
+// ---- Marine snow -----------------------------------------------------------------------------
+
+struct Spot {
+  int u, v, peak;
+};
+
+// The local maxima of at least `threshold` in an image of added light (ties broken toward the
+// first in row order).
+std::vector<Spot> find_spots(const std::vector<int>& light, int width, int height, int threshold) {
+  std::vector<Spot> spots;
+  for (int v = 0; v < height; ++v) {
+    for (int u = 0; u < width; ++u) {
+      const int x = light[static_cast<std::size_t>(v) * width + u];
+      if (x < threshold) continue;
+      bool peak = true;
+      for (int dv = -1; dv <= 1 && peak; ++dv) {
+        for (int du = -1; du <= 1 && peak; ++du) {
+          const int uu = u + du, vv = v + dv;
+          if ((du == 0 && dv == 0) || uu < 0 || vv < 0 || uu >= width || vv >= height) continue;
+          const int y = light[static_cast<std::size_t>(vv) * width + uu];
+          const bool before = dv < 0 || (dv == 0 && du < 0);
+          peak = before ? x > y : x >= y;
+        }
+      }
+      if (peak) spots.push_back({u, v, x});
+    }
+  }
+  return spots;
+}
+
+TEST(SimSceneSnow, SpotsLieInTheSheetInFrontOfTheSurfaceNewEachFrameAndOnlyWithTheLaser) {
+  // The snow's light is the snowy frame minus the clear one (the same frame: the same noise).
+  // Each spot's centre must see the sheet nearer than the surface along its ray (Z computed here
+  // per pixel; within a pixel, the 3 x 3 around the brightest) and no nearer than
+  // snow_min_depth_m; all the added light must belong to the spots.
+  struct Mount {
+    const char* name;
+    LaserSide side;
+    double turn_deg;  // the sheet turned about the optical axis (0: the side's own model)
+  };
+  for (const Mount& mount :
+       {Mount{"above", LaserSide::kAbove, 0.0}, Mount{"right", LaserSide::kRight, 0.0},
+        Mount{"turned", LaserSide::kAbove, 30.0}}) {
+    SCOPED_TRACE(mount.name);
+    SimSceneOptions o = still_options();
+    o.calibration.laser.side = mount.side;
+    if (mount.turn_deg != 0)
+      o.calibration.laser.plane = turned_sheet(o.calibration.laser, mount.turn_deg * kDegree);
+    o.tilt_x_deg = 8;
+    o.tilt_y_deg = -10;
+    o.texture_contrast = 0.3;
+    o.laser_peak = 150;
+    o.noise_sigma = 2;
+    SimScene clear(o);
+    o.snow_per_frame = 25;
+    o.snow_size_px = 1.2;
+    o.snow_brightness = 0.8;
+    o.snow_min_depth_m = 0.5;  // the sheet is in the frame from 0.46 m on (paper's mounting)
+    SimScene snowy(o);
+    const CameraIntrinsics& cam = o.calibration.camera;
+    const CameraPlane plane = base_plane_in_camera(o, clear.camera_pose(0));
+    auto sheet_depth = [&](int u, int v) {
+      const double p = sheet_inverse_depth(o.calibration, u, v);
+      return p > 0 ? 1.0 / p : 1e300;
+    };
+    std::vector<std::vector<Spot>> frames;
+    for (std::uint64_t seq : {4u, 5u}) {
+      ASSERT_EQ(render(snowy, seq, false).data, render(clear, seq, false).data);
+      ASSERT_TRUE(same_truth(truth_of(snowy, seq, true), truth_of(clear, seq, true)));
+      const Image s = render(snowy, seq, true), c = render(clear, seq, true);
+      std::vector<int> light(s.data.size());
+      for (std::size_t i = 0; i < light.size(); ++i) {
+        light[i] = s.data[i] - c.data[i];
+        ASSERT_GE(light[i], 0) << "pixel " << i;  // light added, never taken
+      }
+      const std::vector<Spot> spots = find_spots(light, s.width, s.height, 8);
+      double nearest = 1e300, farthest = 0;
+      for (const Spot& spot : spots) {
+        double lo = 1e300, hi = 0;
+        for (int dv = -1; dv <= 1; ++dv) {
+          for (int du = -1; du <= 1; ++du) {
+            lo = std::min(lo, sheet_depth(spot.u + du, spot.v + dv));
+            hi = std::max(hi, sheet_depth(spot.u + du, spot.v + dv));
+          }
+        }
+        const double surface = plane.d / dot3(plane.n, ray_of(cam, spot.u, spot.v));
+        EXPECT_LT(lo, surface) << "spot at " << spot.u << ", " << spot.v << " behind the surface";
+        EXPECT_GE(hi, o.snow_min_depth_m) << "spot at " << spot.u << ", " << spot.v;
+        EXPECT_LE(spot.peak, o.snow_brightness * o.laser_peak + 1);
+        nearest = std::min(nearest, lo);
+        farthest = std::max(farthest, hi / surface);
+      }
+      // All the added light is the spots' (Gaussians of sigma up to 1.4 snow_size_px, drawn to
+      // 4 sigma), or a spot's hidden in the saturated line.
+      const double reach = 4 * 1.4 * o.snow_size_px + 1;
+      int stray = 0;
+      for (int v = 0; v < s.height; ++v) {
+        for (int u = 0; u < s.width; ++u) {
+          if (light[static_cast<std::size_t>(v) * s.width + u] == 0) continue;
+          bool near_spot = false;
+          for (const Spot& spot : spots)
+            near_spot = near_spot || std::hypot(u - spot.u, v - spot.v) <= reach;
+          // A spot on the line can be hidden where the line saturates: its tails remain.
+          for (int dv = -8; dv <= 8 && !near_spot; ++dv) {
+            for (int du = -8; du <= 8 && !near_spot; ++du) {
+              const int uu = u + du, vv = v + dv;
+              near_spot = uu >= 0 && vv >= 0 && uu < s.width && vv < s.height &&
+                          s.at(uu, vv) == 255 && std::hypot(du, dv) <= reach;
+            }
+          }
+          stray += near_spot ? 0 : 1;
+        }
+      }
+      EXPECT_EQ(stray, 0);
+      std::printf("  %s, frame %d: %zu spots, sheet depths %.2f m to %.2f of the surface's\n",
+                  mount.name, static_cast<int>(seq), spots.size(), nearest, farthest);
+      // Two spots can merge into one; particles falling outside the frame are not drawn.
+      EXPECT_LE(static_cast<int>(spots.size()), o.snow_per_frame);
+      EXPECT_GE(static_cast<int>(spots.size()),
+                mount.turn_deg == 0 ? o.snow_per_frame - 3 : o.snow_per_frame / 2);
+      frames.push_back(spots);
+    }
+    // New snow each frame: hardly a spot in the same place.
+    int same = 0;
+    for (const Spot& a : frames[0]) {
+      for (const Spot& b : frames[1])
+        same += a.u == b.u && a.v == b.v ? 1 : 0;
+    }
+    EXPECT_LE(same, 2);
+    // Deterministic per seed and frame, whatever was rendered before; another seed, other snow.
+    SimScene again(o);
+    EXPECT_EQ(render(again, 4, true).data, render(snowy, 4, true).data);
+    (void)render(snowy, 9, true);
+    EXPECT_EQ(render(snowy, 5, true).data, render(again, 5, true).data);
+    o.seed = 77;
+    SimScene other(o);
+    o.snow_per_frame = 0;
+    SimScene other_clear(o);
+    EXPECT_NE(render(other, 4, true).data, render(other_clear, 4, true).data);
+  }
+}
+
 }  // namespace
 }  // namespace laserline::hal
