@@ -1614,5 +1614,101 @@ TEST(SimSceneObjects, TruthOnTheMovingReliefMatchesABruteForceSearchAlongTheCame
   EXPECT_GT(used, 300);
 }
 
+// ---- Panning ---------------------------------------------------------------------------------
+
+// The scan's angle at time t: a triangle wave from 0 up to +amplitude, down to -amplitude and
+// back to 0, at rate degrees a second.
+double scan_angle_deg(double rate, double amplitude, double t) {
+  const double x = std::fmod(rate * t, 4 * amplitude);
+  if (x <= amplitude) return x;
+  if (x <= 3 * amplitude) return 2 * amplitude - x;
+  return x - 4 * amplitude;
+}
+
+TEST(SimScenePan, TheCameraTurnsAboutItsYAxisByTheScansTriangleWave) {
+  SimSceneOptions o = still_options();
+  o.scan_rate_deg_s = 12;
+  o.scan_amplitude_deg = 6;  // a period of 2 s, 60 frames
+  for (const bool pan : {false, true}) {
+    SCOPED_TRACE(pan ? "pan" : "tilt");
+    o.scan_pan = pan;
+    SimScene scene(o);
+    double sign = 0, largest = 0;
+    for (std::uint64_t seq = 0; seq <= 130; ++seq) {
+      const double expected = scan_angle_deg(12, 6, seq / o.frame_rate_hz) * kDegree;
+      const SimCameraPose pose = scene.camera_pose(seq);
+      const auto& r = pose.rotation;  // world -> camera; its last row is the optical axis
+      for (double t : pose.translation)
+        EXPECT_NEAR(t, 0.0, 1e-15);
+      if (pan) {
+        // The y axis stays; the optical axis turns in the x-z plane.
+        EXPECT_NEAR(r[4], 1.0, 1e-12);
+        EXPECT_NEAR(r[1], 0.0, 1e-12);
+        EXPECT_NEAR(r[7], 0.0, 1e-12);
+        const double angle = std::atan2(r[6], r[8]);
+        if (sign == 0 && std::abs(angle) > 1e-3) sign = angle > 0 ? 1 : -1;
+        EXPECT_NEAR(angle, sign * expected, 1e-12) << "frame " << seq;
+        largest = std::max(largest, std::abs(angle));
+      } else {
+        // The x axis stays; the optical axis turns up (toward -y) first.
+        EXPECT_NEAR(r[0], 1.0, 1e-12);
+        EXPECT_NEAR(r[3], 0.0, 1e-12);
+        EXPECT_NEAR(r[6], 0.0, 1e-12);
+        EXPECT_NEAR(std::atan2(-r[7], r[8]), expected, 1e-12) << "frame " << seq;
+        largest = std::max(largest, std::abs(std::atan2(-r[7], r[8])));
+      }
+    }
+    EXPECT_NEAR(largest, 6 * kDegree, 1e-12);
+  }
+
+  // With the laser beside the camera the scene moves across the line, which runs down the image:
+  // the texture of frame a is found in frame b where the poses put the surface's points (a
+  // horizontal shift of some 7 px), and the truth along rows is exact in the turned camera.
+  o.scan_pan = true;
+  o.calibration.laser.side = LaserSide::kLeft;
+  o.noise_sigma = 0;
+  o.ambient = 150;
+  o.texture_contrast = 0.6;
+  SimScene scene(o);
+  const std::uint64_t a = 3, b = 6;
+  const Image ia = render(scene, a, false), ib = render(scene, b, false);
+  const SimCameraPose pa = scene.camera_pose(a), pb = scene.camera_pose(b);
+  const CameraPlane plane = base_plane_in_camera(o, pa);
+  const CameraIntrinsics& cam = o.calibration.camera;
+  auto sample = [&](double x, double y) {
+    const int u0 = static_cast<int>(x), v0 = static_cast<int>(y);
+    const double fu = x - u0, fv = y - v0;
+    return (1 - fv) * ((1 - fu) * ib.at(u0, v0) + fu * ib.at(u0 + 1, v0)) +
+           fv * ((1 - fu) * ib.at(u0, v0 + 1) + fu * ib.at(u0 + 1, v0 + 1));
+  };
+  double error_posed = 0, error_still = 0, shift_u = 0, shift_v = 0;
+  int used = 0;
+  for (int v = 4; v < ia.height - 4; v += 3) {
+    for (int u = 4; u < ia.width - 4; u += 3) {
+      const Vec3 r = ray_of(cam, u, v);
+      const double z = plane.d / dot3(plane.n, r);
+      const Vec3 x = to_camera(pb, to_world(pa, {z * r[0], z * r[1], z}));
+      const double ub = cam.cx + cam.fx * x[0] / x[2], vb = cam.cy + cam.fy * x[1] / x[2];
+      if (ub < 1 || vb < 1 || ub > ib.width - 2 || vb > ib.height - 2) continue;
+      error_posed += std::abs(ia.at(u, v) - sample(ub, vb));
+      error_still += std::abs(ia.at(u, v) - ib.at(u, v));
+      shift_u += std::abs(ub - u);
+      shift_v += std::abs(vb - v);
+      ++used;
+    }
+  }
+  ASSERT_GT(used, 5000);
+  std::printf("  pan: shift %.2f px across, %.2f px down; grey error %.2f posed, %.2f still\n",
+              shift_u / used, shift_v / used, error_posed / used, error_still / used);
+  EXPECT_GT(shift_u / used, 5.0);
+  EXPECT_LT(shift_v / used, 0.1 * shift_u / used);
+  EXPECT_LT(error_posed / used, 4.0);  // bilinear sampling of frame b across hard texture edges
+  EXPECT_LT(error_posed, 0.3 * error_still);
+  for (const std::uint64_t seq : {a, b, std::uint64_t{20}}) {
+    const TruthCounts counts = expect_flat_truth_exact(scene, seq, truth_of(scene, seq, true));
+    EXPECT_EQ(counts.lit, cam.height) << "frame " << seq;
+  }
+}
+
 }  // namespace
 }  // namespace laserline::hal
