@@ -1069,6 +1069,49 @@ TEST(SimSceneCaustics, KeepTheMeanAmbientLightAndPeakAtCausticPeak) {
   EXPECT_GE(brightest, 0.85 * o.caustic_peak * o.ambient);
 }
 
+TEST(SimSceneCaustics, KeepTheMeanUpToTheHighestPeakAllowed) {
+  // The pattern's curves cover a few per cent of the surface: a caustic_peak beyond 1 / (that
+  // share) cannot keep the mean with light between the curves that is >= 0; the options allow up
+  // to 100. To see the caustic light f from 0 to 100 times the mean in 8 bit: ambient light A =
+  // 4.9 half veiled, each pixel A / 2 (f + 1) (from 2.45 to 247.45), noise of sigma 0.6 dithering
+  // the rounding (a pixel would be clipped below 0 at -2.95 levels, 4.9 sigma, about 5e-7 of them;
+  // none reach 255). The mean of f is good to a few per cent over eight frames and some 800 cells
+  // (see above).
+  for (const double peak : {40.0, 100.0}) {
+    SimSceneOptions o = still_options();
+    o.noise_sigma = 0.6;
+    o.texture_contrast = 0;
+    o.ambient = 4.9;
+    o.veiling = 0.5;
+    o.caustic_peak = peak;
+    o.caustic_scale_m = 0.1;
+    const double half = o.ambient / 2;
+    for (const std::uint64_t seed : {1u, 2u, 3u}) {
+      o.seed = seed;
+      SimScene scene(o);
+      double mean = 0, brightest = 0;
+      int frames = 0;
+      for (std::uint64_t seq = 0; seq < 240; seq += 30) {
+        const Image img = render(scene, seq, false);
+        double sum = 0;
+        for (std::uint8_t p : img.data) {
+          sum += p;
+          brightest = std::max(brightest, static_cast<double>(p));
+        }
+        mean += sum / static_cast<double>(img.data.size());
+        ++frames;
+      }
+      const double f_mean = (mean / frames - half) / half, f_max = (brightest - half) / half;
+      std::printf("  peak %.0f, seed %d: mean caustic light %.3f, brightest %.1f\n", peak,
+                  static_cast<int>(seed), f_mean, f_max);
+      EXPECT_NEAR(f_mean, 1.0, 0.04) << "peak " << peak << ", seed " << seed;
+      EXPECT_LE(f_max, peak + 4.8 / half);  // the noise: at most 127 / 16 sigma
+      // The thinner the curves, the rarer a pixel on the very crossing of two.
+      EXPECT_GE(f_max, 0.7 * peak);
+    }
+  }
+}
+
 TEST(SimSceneCaustics, ThePatternDriftsOverTheStillTextureAndLeavesTheLineAlone) {
   // A still camera: the textured surface stays pixel for pixel while the caustics move over it.
   SimSceneOptions o = still_options();

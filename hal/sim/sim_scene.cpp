@@ -353,7 +353,9 @@ SimScene::SimScene(const SimSceneOptions& options) : options_(options) {
   const auto lines = static_cast<std::size_t>(lines_.count);
   texture_ = make_texture(options_);
   paint_checkerboard(texture_, options_);
-  if (options_.caustic_peak > 1) caustics_ = make_caustics(options_.seed, caustic_mean_);
+  if (options_.caustic_peak > 1) {
+    caustics_ = make_caustics(options_.seed, options_.caustic_peak, caustic_mean_);
+  }
   noise_ = make_noise_table(options_.seed);
   // One image row, then the glow floor of each of its pixels, each padded to whole kernel blocks;
   // the padding never glows.
@@ -701,7 +703,8 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
                0.0f};
     // base + gain * mean = 1 and base + gain = caustic_peak: the curves' light, the mean kept.
     caustic.gain = static_cast<float>((options_.caustic_peak - 1.0) / (1.0 - caustic_mean_));
-    caustic.base = 1.0f - caustic.gain * caustic_mean_;
+    // >= 0 but for float rounding when make_caustics() thinned the curves (base 0).
+    caustic.base = std::max(0.0f, 1.0f - caustic.gain * caustic_mean_);
   }
   const float veil = static_cast<float>(options_.veiling);
 
