@@ -288,8 +288,10 @@ TruthCounts expect_flat_truth_exact(const SimScene& scene, std::uint64_t sequenc
 // Sub-pixel centre of the rendered line along line k of an axis-aligned family (columns or rows)
 // by a 3-point Gaussian (ln-parabola) fit at the brightest pixel, exact on a noiseless Gaussian
 // profile but for rounding to 8 bit; `bound` receives how far that rounding (+-0.5 on each sample,
-// to first order) can move it, with the profile's width taken from the fit itself.
-double fit_axis_line(const Image& img, const SimLineFamily& lines, int k, double& bound) {
+// to first order) can move it, with the profile's width taken from the fit itself; `sigma` (if
+// given) receives that width, exact but for the rounding too.
+double fit_axis_line(const Image& img, const SimLineFamily& lines, int k, double& bound,
+                     double* sigma = nullptr) {
   const int length = lines.along[0] != 0 ? img.width : img.height;
   auto sample = [&](int p) {
     const auto [x, y] = lines.to_image(k, p);
@@ -306,6 +308,7 @@ double fit_axis_line(const Image& img, const SimLineFamily& lines, int k, double
   const double la = std::log(sa), lb = std::log(sb), lc = std::log(sc);
   const double curvature = la - 2 * lb + lc;  // -1 / sigma^2
   const double s2 = -1.0 / curvature;
+  if (sigma != nullptr) *sigma = std::sqrt(s2);
   // delta = (la - lc) / (2 curvature), |delta| <= 1/2: d delta / d ln sample is at most
   // s2 / 2 (1 + ...) for the outer samples and s2 / 2 for the middle one.
   bound = s2 / 2 * (0.5 / sa + 0.5 / sc) + 0.5 * s2 * (0.5 / sa + 1.0 / sb + 0.5 / sc) + 1e-3;
@@ -344,9 +347,10 @@ std::array<double, N> solve(std::array<std::array<double, N>, N> m, std::array<d
 // sheet width) ln I is a quadratic in (position, line) near it, which a weighted least-squares fit
 // over the pixels within `reach` lines of k recovers; its peak on line k is the centre. Weights
 // I^2 (rounding's variance of ln I is 1 / (12 I^2)); `bound` receives the first-order effect of
-// +-0.5 rounding on every sample. `guess` is a position near the line's centre.
+// +-0.5 rounding on every sample. `guess` is a position near the line's centre; `sigma` (if
+// given) receives the profile's width along the line.
 double fit_any_line(const Image& img, const SimLineFamily& lines, int k, double guess, double reach,
-                    double& bound) {
+                    double& bound, double* sigma = nullptr) {
   struct Sample {
     double p, l, value;
   };
@@ -381,6 +385,7 @@ double fit_any_line(const Image& img, const SimLineFamily& lines, int k, double 
   }
   const auto coef = solve(normal, rhs);
   const double peak = -coef[1] / (2 * coef[2]);
+  if (sigma != nullptr) *sigma = std::sqrt(-1 / (2 * coef[2]));  // along the line
   // d peak / d coef = (-1 / (2 c2), c1 / (2 c2^2)) on (c1, c2); through the normal equations to
   // each sample's ln I, whose rounding error is at most 0.5 / I.
   std::array<double, 6> grad{};
@@ -516,11 +521,21 @@ TEST(SimSceneLines, TruthAlongRowsIsExactForALaserBesideTheCamera) {
     o.blur_px = 0.5;
     SimScene wide(o);
     const SimGroundTruth t2 = truth_of(wide, 0, true);
-    for (int k = 0; k < t2.lines.count; k += 17) {
+    const Image wide_img = render(wide, 0, true);
+    double ratio = 0;
+    for (int k = 0; k < t2.lines.count; ++k) {
       const double sheet = o.calibration.camera.fx * o.calibration.laser.sheet_width_m /
                            t2.depth_m[k] / (2 * std::sqrt(2 * std::log(2.0)));
       EXPECT_NEAR(t2.width_px[k], std::hypot(sheet, o.blur_px), 1e-4) << "row " << k;
+      double bound = 0, sigma = 0;
+      (void)fit_axis_line(wide_img, t2.lines, k, bound, &sigma);
+      ratio += sigma / t2.width_px[k] / t2.lines.count;
     }
+    // And it is the rendered profile's: the fitted sigma, on average over the rows (rounding
+    // moves each fit's curvature by a few per cent, either way).
+    std::printf("  %s: fitted sigma / truth's width %.4f (width about %.2f px)\n", to_string(side),
+                ratio, t2.width_px[100]);
+    EXPECT_NEAR(ratio, 1.0, 0.01);
   }
 }
 
@@ -590,20 +605,27 @@ TEST(SimSceneLines, TruthIsExactAlongTheRenderersObliqueFamilyAndAlongOthers) {
   TruthCounts counts = expect_flat_truth_exact(scene, 0, truth);
   EXPECT_GT(counts.lit, 200);
   int used = 0;
-  double worst = 0, widest = 0;
+  double worst = 0, widest = 0, width_ratio = 0;
   for (int k = 0; k < own.count; ++k) {
     if (!std::isfinite(truth.position[k])) continue;
     const auto [x, y] = own.to_image(k, truth.position[k]);
     if (x < 8 || y < 8 || x > img.width - 9 || y > img.height - 9) continue;  // whole fit window
-    double bound = 0;
-    const double fit = fit_any_line(img, own, k, truth.position[k], 3.0, bound);
+    double bound = 0, sigma = 0;
+    const double fit = fit_any_line(img, own, k, truth.position[k], 3.0, bound, &sigma);
     EXPECT_NEAR(fit, truth.position[k], bound) << "line " << k;
+    width_ratio += sigma / truth.width_px[k];
     worst = std::max(worst, std::abs(fit - truth.position[k]));
     widest = std::max(widest, bound);
     ++used;
   }
-  std::printf("  oblique family: %d lines fitted, worst |fit - truth| %.4f px (bounds <= %.4f)\n",
-              used, worst, widest);
+  width_ratio /= used;
+  std::printf(
+      "  oblique family: %d lines fitted, worst |fit - truth| %.4f px (bounds <= %.4f), fitted "
+      "width / truth's %.4f\n",
+      used, worst, widest, width_ratio);
+  // The truth's width is the rendered profile's along the lines (on average over them: rounding
+  // moves each fit's curvature by a few per cent, either way).
+  EXPECT_NEAR(width_ratio, 1.0, 0.01);
   EXPECT_GT(used, 150);
   EXPECT_LT(widest, 0.05);  // the bound is tight enough to mean something
 
@@ -624,17 +646,23 @@ TEST(SimSceneLines, TruthIsExactAlongTheRenderersObliqueFamilyAndAlongOthers) {
     EXPECT_GT(counts.lit, columns ? 250 : 100);
     used = 0;
     worst = 0;
+    width_ratio = 0;
     for (int k = 0; k < lines.count; ++k) {
       if (!std::isfinite(other.position[k])) continue;
-      double bound = 0;
-      const double fit = fit_axis_line(img, lines, k, bound);
+      double bound = 0, sigma = 0;
+      const double fit = fit_axis_line(img, lines, k, bound, &sigma);
       EXPECT_NEAR(fit, other.position[k], bound) << (columns ? "column " : "row ") << k;
       worst = std::max(worst, std::abs(fit - other.position[k]));
+      width_ratio += sigma / other.width_px[k];
       ++used;
     }
-    std::printf("  along %s: %d fitted, worst |fit - truth| %.4f px\n",
-                columns ? "columns" : "rows", used, worst);
+    width_ratio /= used;
+    std::printf("  along %s: %d fitted, worst |fit - truth| %.4f px, fitted width / truth's %.4f\n",
+                columns ? "columns" : "rows", used, worst, width_ratio);
     EXPECT_EQ(used, counts.lit);
+    // Along lines crossing the line of light obliquely its profile is wider: the truth's width is
+    // that of the profile along these lines.
+    EXPECT_NEAR(width_ratio, 1.0, 0.01);
   }
 }
 

@@ -164,7 +164,7 @@ struct SimGroundTruth {
   SimLineFamily lines;
   std::vector<float> position;  // per line: sub-pixel position of the laser centre, NaN where none
   std::vector<float> depth_m;   // per line: Z of the lit surface point, NaN where none
-  std::vector<float> width_px;  // per line: Gaussian sigma of the rendered line profile
+  std::vector<float> width_px;  // per line: Gaussian sigma of the rendered line profile along it
 };
 
 // Renders the simulated scanner's frames. Construction allocates (texture, noise table, scratch);
