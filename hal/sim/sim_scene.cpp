@@ -19,7 +19,7 @@ namespace {
 
 constexpr int kMaxImageSide = 16384;
 constexpr float kBandSigmas = 5.0f;  // the laser profile is evaluated within +-5 sigma
-constexpr float kEdgeRows = 1.5f;    // truth is NaN when the centre is within 2 px of the border
+constexpr float kEdgeRows = 1.5f;    // truth is NaN when the centre is within 1.5 px of the border
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 constexpr float kNoGlow = 1e30f;  // inverse depth floor of the glow in lines without a line
 constexpr int kMaxSnow = 100000;
