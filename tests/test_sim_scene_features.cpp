@@ -11,7 +11,6 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
-#include <memory>
 #include <numbers>
 #include <stdexcept>
 #include <utility>
@@ -309,9 +308,10 @@ double fit_axis_line(const Image& img, const SimLineFamily& lines, int k, double
   const double curvature = la - 2 * lb + lc;  // -1 / sigma^2
   const double s2 = -1.0 / curvature;
   if (sigma != nullptr) *sigma = std::sqrt(s2);
-  // delta = (la - lc) / (2 curvature), |delta| <= 1/2: d delta / d ln sample is at most
-  // s2 / 2 (1 + ...) for the outer samples and s2 / 2 for the middle one.
-  bound = s2 / 2 * (0.5 / sa + 0.5 / sc) + 0.5 * s2 * (0.5 / sa + 1.0 / sb + 0.5 / sc) + 1e-3;
+  // delta = (la - lc) / (2 C), C = curvature, |delta| <= 1/2: its derivatives by la, lb and lc,
+  // (1 - 2 delta) / (2 C), 2 delta / C and -(1 + 2 delta) / (2 C), are each at most s2 in size,
+  // and a sample x rounded by +-0.5 moves ln x by at most 0.5 / x.
+  bound = s2 * (0.5 / sa + 0.5 / sb + 0.5 / sc) + 1e-3;
   return best + 0.5 * (la - lc) / (la - 2 * lb + lc);
 }
 
@@ -746,7 +746,8 @@ TEST(SimSceneColour, EachChannelIsTheMonoFramesAmbientAndLaserLightInItsShare) {
   half.ambient /= 2;
   half.laser_peak /= 2;
   half.backscatter /= 2;
-  const Image half_frame = render(*std::make_unique<SimScene>(half), seq, true);
+  SimScene half_light(half);
+  const Image half_frame = render(half_light, seq, true);
   ASSERT_EQ(frame.channels, 3);
   int differ = 0, lit = 0, worst = 0;
   for (int v = 0; v < frame.height; ++v) {
