@@ -876,7 +876,34 @@ TEST(SimScene, LargeFramesRenderWithoutHeapAllocation) {
   SimGroundTruth relief_truth;
   relief.ground_truth(0, true, relief_truth);
 
+  // Colour (a Bayer mosaic and RGB), marine snow, caustics, turbid water, bright marks and the
+  // oblique family of a turned sheet; the truth also along a family of the caller's.
+  SimSceneOptions murky = o;
+  murky.colour = SimColour::kBayerGrbg;
+  murky.laser_rgb = {1.0, 0.08, 0.03};
+  murky.ambient_rgb = {0.4, 0.8, 1.0};
+  murky.snow_per_frame = 2000;
+  murky.caustic_peak = 5;
+  murky.forward_scatter = 0.3;
+  murky.veiling = 0.2;
+  murky.marks_per_m2 = 20;
+  SimScene bayer(murky);
+  murky.colour = SimColour::kRgb;
+  murky.calibration.laser.plane = std::array<double, 4>{-0.5, 0.866, -0.176, 0.25};
+  SimScene rgb(murky);
+  ASSERT_NE(rgb.lines().along[0], 0.0);  // oblique
+  std::vector<std::uint8_t> colour_buffer(rgb.raw_bytes());
+  SimGroundTruth rgb_truth, column_truth;
+  rgb.ground_truth(0, true, rgb_truth);
+  const SimLineFamily columns = SimLineFamily::columns(o.calibration.camera.width);
+  rgb.ground_truth(0, true, columns, column_truth);
+
   const std::size_t before = g_allocations.load();
+  bayer.render(5, true, colour_buffer);
+  bayer.render(6, false, colour_buffer);
+  rgb.render(7, true, colour_buffer);
+  rgb.ground_truth(7, true, rgb_truth);
+  rgb.ground_truth(7, true, columns, column_truth);
   relief.render(3, true, buffer);
   relief.ground_truth(3, true, relief_truth);
   scene.render(0, true, buffer);
@@ -885,6 +912,13 @@ TEST(SimScene, LargeFramesRenderWithoutHeapAllocation) {
   scene.ground_truth(1000, true, truth);
   const std::size_t after = g_allocations.load();
   EXPECT_EQ(after - before, 0u) << "render() or ground_truth() allocated";
+  // The colour frame is sane: its red channel (the red laser's) lit along the line and by snow.
+  std::vector<std::uint8_t> dark(rgb.raw_bytes());
+  rgb.render(7, false, dark);
+  int lit = 0;
+  for (std::size_t i = 0; i < dark.size(); i += 3)
+    lit += colour_buffer[i] > dark[i] + 30 ? 1 : 0;
+  EXPECT_GT(lit, 2000);
 
   // The frame is sane: a bright line where the truth says.
   const int u = 1024;

@@ -19,7 +19,7 @@ namespace {
 
 constexpr int kMaxImageSide = 16384;
 constexpr float kBandSigmas = 5.0f;  // the laser profile is evaluated within +-5 sigma
-constexpr float kEdgeRows = 1.5f;    // truth is NaN when the centre is within 2 px of the border
+constexpr float kEdgeRows = 1.5f;    // truth is NaN when the centre is within 1.5 px of the border
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 constexpr float kNoGlow = 1e30f;  // inverse depth floor of the glow in lines without a line
 constexpr int kMaxSnow = 100000;
@@ -353,7 +353,9 @@ SimScene::SimScene(const SimSceneOptions& options) : options_(options) {
   const auto lines = static_cast<std::size_t>(lines_.count);
   texture_ = make_texture(options_);
   paint_checkerboard(texture_, options_);
-  if (options_.caustic_peak > 1) caustics_ = make_caustics(options_.seed, caustic_mean_);
+  if (options_.caustic_peak > 1) {
+    caustics_ = make_caustics(options_.seed, options_.caustic_peak, caustic_mean_);
+  }
   noise_ = make_noise_table(options_.seed);
   // One image row, then the glow floor of each of its pixels, each padded to whole kernel blocks;
   // the padding never glows.
@@ -701,7 +703,8 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
                0.0f};
     // base + gain * mean = 1 and base + gain = caustic_peak: the curves' light, the mean kept.
     caustic.gain = static_cast<float>((options_.caustic_peak - 1.0) / (1.0 - caustic_mean_));
-    caustic.base = 1.0f - caustic.gain * caustic_mean_;
+    // >= 0 but for float rounding when make_caustics() thinned the curves (base 0).
+    caustic.base = std::max(0.0f, 1.0f - caustic.gain * caustic_mean_);
   }
   const float veil = static_cast<float>(options_.veiling);
 
@@ -812,6 +815,30 @@ void SimScene::ground_truth(std::uint64_t sequence, bool laser_on, const SimLine
   const float* relief = relief_.empty() ? nullptr : relief_.data();
   // The centre must lie 1.5 px inside the frame along each image axis the line crosses.
   const std::array<float, 2> last{static_cast<float>(width - 1), static_cast<float>(height - 1)};
+  // Along the renderer's own lines the profile's sigma is the line's; along others it is as the
+  // renderer draws it: each pixel's light is a Gaussian in p - c(l), its position p along the
+  // own lines less the centre c, interpolated between own lines l. Along a line of direction d
+  // that argument changes at d . along - c'(l) d . line_step, and the sigma by 1 / that rate.
+  const bool own = lines.origin == lines_.origin && lines.line_step == lines_.line_step &&
+                   lines.along == lines_.along;
+  auto rendered_sigma = [&](double x, double y, double z) {
+    const double sigma = line_sigma(options_, lines_, z);
+    if (own) return sigma;
+    const auto [l, p] = lines_.to_family(x, y);
+    (void)p;
+    const double k0 = std::floor(l);
+    LineHit h0, h1;
+    if (k0 >= 0 && k0 + 1 < lines_.count) {
+      h0 = solve_line(g, lines_, k0, relief, options_.relief_height_m);
+      h1 = solve_line(g, lines_, k0 + 1, relief, options_.relief_height_m);
+    }
+    // The renderer holds the nearer line's centre where the other is not lit: no slope.
+    const double slope = h0.hit && h1.hit ? h1.position - h0.position : 0.0;
+    const double rate =
+        lines.along[0] * lines_.along[0] + lines.along[1] * lines_.along[1] -
+        slope * (lines.along[0] * lines_.line_step[0] + lines.along[1] * lines_.line_step[1]);
+    return sigma / std::max(std::abs(rate), 1e-6);
+  };
   for (int k = 0; k < lines.count; ++k) {
     const LineHit line =
         laser ? solve_line(g, lines, k, relief, options_.relief_height_m) : LineHit{};
@@ -830,7 +857,7 @@ void SimScene::ground_truth(std::uint64_t sequence, bool laser_on, const SimLine
     }
     truth.position[k] = position;
     truth.depth_m[k] = static_cast<float>(line.z);
-    truth.width_px[k] = static_cast<float>(line_sigma(options_, lines, line.z));
+    truth.width_px[k] = static_cast<float>(rendered_sigma(image[0], image[1], line.z));
   }
 }
 

@@ -71,7 +71,8 @@ struct SimSceneOptions {
   // Sunlight caustics: the ambient light on the surface focused into a network of thin bright
   // curves by the waves, cells of caustic_scale_m, drifting at caustic_speed_m_s over the surface
   // (independently of the surface and the camera). caustic_peak is how bright the curves are
-  // against the mean ambient light, which stays the same (1: no caustics).
+  // against the mean ambient light, which stays the same (1: no caustics); beyond some 30 the
+  // curves get thinner and the light between them is 0.
   double caustic_peak = 1.0;
   double caustic_scale_m = 0.15;
   double caustic_speed_m_s = 0.2;
@@ -163,7 +164,7 @@ struct SimGroundTruth {
   SimLineFamily lines;
   std::vector<float> position;  // per line: sub-pixel position of the laser centre, NaN where none
   std::vector<float> depth_m;   // per line: Z of the lit surface point, NaN where none
-  std::vector<float> width_px;  // per line: Gaussian sigma of the rendered line profile
+  std::vector<float> width_px;  // per line: Gaussian sigma of the rendered line profile along it
 };
 
 // Renders the simulated scanner's frames. Construction allocates (texture, noise table, scratch);

@@ -284,7 +284,7 @@ double relief_at(const float* relief, double x, double y) {
   const double bottom = p[kReliefStride] + fx * (p[kReliefStride + 1] - p[kReliefStride]);
   return top + fy * (bottom - top);
 }
-std::vector<float> make_caustics(std::uint64_t seed, float& mean) {
+std::vector<float> make_caustics(std::uint64_t seed, double caustic_peak, float& mean) {
   const int n = kCausticSize;
   Rng rng(seed ^ 0x636175737469637aULL);
   std::vector<float> smooth(static_cast<std::size_t>(n) * n, 0.0f);
@@ -312,6 +312,45 @@ std::vector<float> make_caustics(std::uint64_t seed, float& mean) {
     }
   }
   mean = static_cast<float>(sum / (static_cast<double>(n) * n));
+  if (caustic_peak * mean <= 1.0) return tile;
+
+  // The light base + gain * pattern, of mean 1 and brightest caustic_peak, has base = 1 - (peak -
+  // 1) m / (1 - m), m the pattern's mean: negative beyond caustic_peak = 1 / m (some 30 to 55, by
+  // the seed). Brighter curves must be thinner: the pattern is raised to the power k > 1 that
+  // brings its mean to 1 / caustic_peak (no light between the curves, as at caustic_peak = 1 / m),
+  // found by bisection over the texels on a curve.
+  std::vector<float> lit;
+  for (int y = 0; y < n; ++y) {
+    for (int x = 0; x < n; ++x) {
+      const float value = tile[static_cast<std::size_t>(y) * kTextureStride + x];
+      if (value > 0) lit.push_back(value);
+    }
+  }
+  const double texels = static_cast<double>(n) * n;
+  auto mean_at = [&](double k) {
+    double s = 0;
+    for (float value : lit)
+      s += std::pow(static_cast<double>(value), k);
+    return s / texels;
+  };
+  double lo = 1.0, hi = 2.0;
+  while (caustic_peak * mean_at(hi) > 1.0) {
+    lo = hi;
+    hi *= 2.0;
+  }
+  for (int step = 0; step < 30; ++step) {
+    const double mid = 0.5 * (lo + hi);
+    (caustic_peak * mean_at(mid) > 1.0 ? lo : hi) = mid;
+  }
+  sum = 0;
+  for (int y = 0; y < kTextureStride; ++y) {
+    for (int x = 0; x < kTextureStride; ++x) {
+      float& value = tile[static_cast<std::size_t>(y) * kTextureStride + x];
+      value = static_cast<float>(std::pow(static_cast<double>(value), hi));
+      if (x < n && y < n) sum += value;
+    }
+  }
+  mean = static_cast<float>(sum / texels);
   return tile;
 }
 

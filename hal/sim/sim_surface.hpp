@@ -107,8 +107,10 @@ std::vector<float> make_relief(const SimSceneOptions& o);
 double relief_at(const float* relief, double x, double y);
 
 // The caustic pattern: a network of thin bright curves (where smooth noise crosses zero), values
-// in [0, 1], wrapping every kCausticSize texels. `mean` receives its mean (about 0.03).
-std::vector<float> make_caustics(std::uint64_t seed, float& mean);
+// in [0, 1], wrapping every kCausticSize texels. `mean` receives its mean (about 0.03), at most
+// 1 / caustic_peak: for a caustic_peak beyond 1 / (its mean) the curves are made thinner, so that
+// the light between them need not be negative to keep the mean.
+std::vector<float> make_caustics(std::uint64_t seed, double caustic_peak, float& mean);
 
 // round(16 * N(0, 1)) by Box-Muller over our own uniform generator (std::normal_distribution is
 // implementation-defined).
