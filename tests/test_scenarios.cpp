@@ -1,0 +1,105 @@
+// Every simulated scenario against its exact ground truth (the figures laserline-evaluate prints
+// and the README's table shows): what the default detector (`background`) and `backprojection`
+// reach in each, and how they stand against `fir` and `maxvalue`.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <map>
+#include <string>
+
+#include "tools/evaluation.hpp"
+
+namespace laserline::tools {
+namespace {
+
+// Scored once per scenario and detector (the whole table takes a few seconds per detector).
+const Score& score(const std::string& scenario, const std::string& detector) {
+  static std::map<std::pair<std::string, std::string>, Score> scores;
+  const auto key = std::make_pair(scenario, detector);
+  if (const auto found = scores.find(key); found != scores.end()) return found->second;
+  for (const Scenario& s : standard_scenarios()) {
+    if (s.name != scenario) continue;
+    const Score result = evaluate(s, detector, {}, 2.0);
+    std::printf("%-24s %-14s recall %6.2f%% precision %6.2f%% rms %.3f px bias %+.3f px\n",
+                scenario.c_str(), detector.c_str(), 100 * result.recall(), 100 * result.precision(),
+                result.rms(), result.bias());
+    return scores.emplace(key, result).first->second;
+  }
+  ADD_FAILURE() << "no scenario " << scenario;
+  return scores[key];
+}
+
+// Lower bounds of recall and precision, in percent.
+struct Floor {
+  const char* scenario;
+  double recall, precision;
+};
+
+// The default detector. Daylight, dark and hover scenes were to reach 97 % recall and 99 %
+// precision; the scenes still short of it (their figures here are the floor, not the aim):
+// static-rig, caustics and pier (98.4 - 98.8 % precision), hover-daylight (a still camera in
+// daylight as bright as the laser: only the laser switching on and off separates it from
+// texture, see hover-daylight-alternate) and the red laser's colour scenes. Turbid scenes were
+// to come within 3 points of the best detector (checked below).
+constexpr Floor kBackground[] = {
+    {"clean", 99.5, 99.9},
+    {"ambient", 99.0, 99.3},
+    {"ambient-alternate", 99.0, 99.3},
+    {"pier", 96.5, 98.4},
+    {"backscatter", 99.0, 99.0},
+    {"clipped", 99.5, 99.5},
+    {"dark", 99.5, 99.9},
+    {"hover", 99.5, 99.9},
+    {"hover-daylight", 60.0, 62.0},
+    {"hover-daylight-alternate", 99.0, 99.3},
+    {"static-rig", 97.5, 98.5},
+    {"caustics", 97.5, 98.0},
+    {"marine-snow", 99.5, 99.5},
+    {"turbid-1", 99.5, 99.9},
+    {"turbid-2", 99.0, 99.3},
+    {"turbid-3", 94.0, 95.0},
+    {"checkerboard", 97.3, 99.2},
+    {"beside", 99.5, 99.9},
+    {"oblique", 99.5, 99.9},
+};
+
+TEST(Scenarios, DefaultDetectorReachesItsFloorInEveryScene) {
+  for (const Floor& f : kBackground) {
+    const Score& s = score(f.scenario, "background");
+    EXPECT_GE(100 * s.recall(), f.recall) << f.scenario;
+    EXPECT_GE(100 * s.precision(), f.precision) << f.scenario;
+  }
+  EXPECT_LE(score("clean", "background").rms(), 0.05);  // sub-pixel on the clean scene
+}
+
+TEST(Scenarios, BackprojectionKeepsThePrecisionOfBackgroundOrBetter) {
+  for (const Floor& f : kBackground) {
+    const Score& b = score(f.scenario, "background");
+    const Score& v = score(f.scenario, "backprojection");
+    EXPECT_GE(v.precision(), b.precision() - 0.002) << f.scenario;
+    // It never rejects a point only because the scene gave it nothing to validate with: in
+    // turbid water (and everywhere) it keeps recall within 2 points of background.
+    EXPECT_GE(v.recall(), b.recall() - 0.02) << f.scenario;
+  }
+  EXPECT_GE(score("pier", "backprojection").precision(), 0.99);
+}
+
+// `background` is never worse than `fir` (it searches the frame as it is when no earlier frame
+// helps), and in turbid water within 3 points of the best detector.
+TEST(Scenarios, BackgroundIsNeverWorseThanFir) {
+  for (const Floor& f : kBackground) {
+    const Score& b = score(f.scenario, "background");
+    const Score& fir = score(f.scenario, "fir");
+    EXPECT_GE(b.recall(), fir.recall() - 0.005) << f.scenario;
+    EXPECT_GE(b.precision(), fir.precision() - 0.005) << f.scenario;
+  }
+  for (const char* turbid : {"backscatter", "turbid-1", "turbid-2", "turbid-3"}) {
+    double best = 0;
+    for (const char* detector : {"maxvalue", "fir", "background", "backprojection"})
+      best = std::max(best, score(turbid, detector).recall());
+    EXPECT_GE(score(turbid, "background").recall(), best - 0.03) << turbid;
+  }
+}
+
+}  // namespace
+}  // namespace laserline::tools
