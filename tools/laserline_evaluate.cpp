@@ -20,12 +20,14 @@ void usage(std::FILE* out) {
                "usage: laserline-evaluate [--tolerance PX] [--frames N] [--size WxH] "
                "[--overlay-dir DIR] [--detector NAME]... [--scenario NAME]...\n"
                "                          [--validation chain_code|image_features] [--markdown]\n"
+               "       laserline-evaluate --list\n"
                "       laserline-evaluate --turbidity-plot FILE.png [--frames N]\n"
                "Scores detectors on simulated scenarios (ground truth exact): recall, precision\n"
                "within the tolerance (default 2 px), RMS error and bias of the found points.\n"
                "--validation: how backprojection associates segments between frames (default\n"
                "chain_code, the paper's; image_features tracks the segment's box in the image).\n"
                "--markdown: one row per scenario, recall / precision of each detector.\n"
+               "--list: the scenarios, one line each: name and description.\n"
                "--turbidity-plot: the paper's Fig. 7: the SNR of the detected line against\n"
                "turbidity (0 to 12 FTU, the wall 1.4 m away) for band-pass widths 2, 3, 4.5 and 6\n"
                "(passband_ratio), and each detector's recall, as FILE.png and FILE.csv.\n");
@@ -77,6 +79,10 @@ int main(int argc, char** argv) {
         }
       } else if (arg == "--markdown") {
         markdown = true;
+      } else if (arg == "--list") {
+        for (const tools::Scenario& s : tools::standard_scenarios(width, height))
+          std::printf("%s: %s\n", s.name.c_str(), s.description.c_str());
+        return 0;
       } else if (arg == "--turbidity-plot") {
         turbidity_plot = value();
       } else if (arg == "--scenario") {
