@@ -5,8 +5,9 @@
 //                                      then extractChannel (one colour) or transform (a weighted
 //                                      sum) to 8 bits
 // Counter `differ` is the fraction of pixels whose values differ between the two (OpenCV's
-// demosaic treats the frame's edges and rounds its YUV matrix its own way; inside, a single
-// colour on a mosaic is the same bilinear interpolation).
+// demosaic treats the frame's edges and rounds its YUV matrix its own way, and ours gives 255
+// where a positively weighted colour is clipped; inside, a single colour on a mosaic is the same
+// bilinear interpolation).
 // Run: build/default/bench/laserline_bench --benchmark_filter=pixel_
 #include <benchmark/benchmark.h>
 

@@ -3,6 +3,7 @@
 #include <bit>
 #include <cstring>
 #include <stdexcept>
+#include <type_traits>
 
 // The frame kernels are compiled for the baseline and for AVX2, and the loader picks the one the
 // CPU runs (GCC function multi-versioning), as in pipeline/frontend.cpp. Not under
@@ -70,32 +71,156 @@ LASERLINE_PIXEL_ROW int sample(const std::uint8_t* row, int x) {
   }
 }
 
+// Least and greatest by value (std::min and max return a reference, which here is the address of
+// one of two samples: a load GCC does not vectorise).
+template <typename T>
+LASERLINE_PIXEL_ROW T lo(T a, T b) {
+  return a < b ? a : b;
+}
+template <typename T>
+LASERLINE_PIXEL_ROW T hi(T a, T b) {
+  return a > b ? a : b;
+}
+
+// The clipping rule on a Bayer pixel: whether a positively weighted colour is at the top of the
+// sample range. A mean is at the top when its least sample is (samples above the top code count
+// as at it). Branch-free, in the samples' own width.
 template <int kBytes>
-LASERLINE_PIXEL_ROW float bayer_pixel(const std::uint8_t* up, const std::uint8_t* mid,
-                                      const std::uint8_t* down, int x, int left, int right,
-                                      const PixelConverter::Taps& t) {
+LASERLINE_PIXEL_ROW bool bayer_clipped(const std::uint8_t* up, const std::uint8_t* mid,
+                                       const std::uint8_t* down, int x, int left, int right,
+                                       const PixelConverter::ClipLevels& c) {
+  using S = std::conditional_t<kBytes == 1, std::uint8_t, std::uint16_t>;
+  const auto at = [](const std::uint8_t* row, int i) {
+    return static_cast<S>(sample<kBytes>(row, i));
+  };
+  const S own = static_cast<S>(c.own), h = static_cast<S>(c.horizontal);
+  const S v = static_cast<S>(c.vertical), both = static_cast<S>(c.both);
+  const S d = static_cast<S>(c.diagonal), top = static_cast<S>(c.top);
+  const S horizontal = lo(at(mid, left), at(mid, right));
+  const S vertical = lo(at(up, x), at(down, x));
+  const S diagonal = lo(lo(at(up, left), at(up, right)), lo(at(down, left), at(down, right)));
+  const S score = hi(hi(hi<S>(at(mid, x) & own, horizontal & h),
+                        hi<S>(vertical & v, lo(horizontal, vertical) & both)),
+                     static_cast<S>(diagonal & d));
+  return score >= top;
+}
+
+// One Bayer pixel. kClip: with the clipping rule, a select rather than a branch (8-bit mosaics
+// take the rule in a pass of their own instead, clip_lanes).
+template <int kBytes, bool kClip>
+LASERLINE_PIXEL_ROW std::uint8_t bayer_pixel(const std::uint8_t* up, const std::uint8_t* mid,
+                                             const std::uint8_t* down, int x, int left, int right,
+                                             const PixelConverter::Taps& t,
+                                             const PixelConverter::ClipLevels& c) {
   const int own = sample<kBytes>(mid, x);
-  const int horizontal = sample<kBytes>(mid, left) + sample<kBytes>(mid, right);
-  const int vertical = sample<kBytes>(up, x) + sample<kBytes>(down, x);
-  const int diagonal = sample<kBytes>(up, left) + sample<kBytes>(up, right) +
-                       sample<kBytes>(down, left) + sample<kBytes>(down, right);
-  return t.own * static_cast<float>(own) + t.horizontal * static_cast<float>(horizontal) +
-         t.vertical * static_cast<float>(vertical) + t.diagonal * static_cast<float>(diagonal);
+  const int h0 = sample<kBytes>(mid, left), h1 = sample<kBytes>(mid, right);
+  const int v0 = sample<kBytes>(up, x), v1 = sample<kBytes>(down, x);
+  const int d0 = sample<kBytes>(up, left), d1 = sample<kBytes>(up, right);
+  const int d2 = sample<kBytes>(down, left), d3 = sample<kBytes>(down, right);
+  const float value = t.own * static_cast<float>(own) + t.horizontal * static_cast<float>(h0 + h1) +
+                      t.vertical * static_cast<float>(v0 + v1) +
+                      t.diagonal * static_cast<float>(d0 + d1 + d2 + d3);
+  if constexpr (kClip) {
+    return bayer_clipped<kBytes>(up, mid, down, x, left, right, c) ? std::uint8_t{255}
+                                                                   : to_byte(value);
+  } else {
+    return to_byte(value);
+  }
 }
 
 // Pixels 1 .. 2 * pairs of a row away from the frame's left and right edges, two at a time so
 // that the taps alternate without a branch (GCC vectorises the pair as one group).
-template <int kBytes>
+template <int kBytes, bool kClip>
 LASERLINE_PIXEL_ROW void bayer_pairs(const std::uint8_t* __restrict up,
                                      const std::uint8_t* __restrict mid,
                                      const std::uint8_t* __restrict down, int pairs,
                                      PixelConverter::Taps odd, PixelConverter::Taps even,
+                                     PixelConverter::ClipLevels odd_clip,
+                                     PixelConverter::ClipLevels even_clip,
                                      std::uint8_t* __restrict out) {
   for (int i = 0; i < pairs; ++i) {
     const int x = 2 * i + 1;
-    out[x] = to_byte(bayer_pixel<kBytes>(up, mid, down, x, x - 1, x + 1, odd));
-    out[x + 1] = to_byte(bayer_pixel<kBytes>(up, mid, down, x + 1, x, x + 2, even));
+    out[x] = bayer_pixel<kBytes, kClip>(up, mid, down, x, x - 1, x + 1, odd, odd_clip);
+    out[x + 1] = bayer_pixel<kBytes, kClip>(up, mid, down, x + 1, x, x + 2, even, even_clip);
   }
+}
+
+// The clipping rule over an 8-bit row's pixels 1, 2, ... after bayer_pairs wrote them, 32 at a
+// time in GCC's vector extensions. Written as pairs (odd and even pixels' masks alternate),
+// GCC's vectoriser interleaves and de-interleaves every sample, and the rule inside bayer_pairs
+// runs it out of registers: at 2048x1536 each cost about twice this pass (0.6-0.9 ms against
+// 0.3-0.4 ms; 16-bit mosaics, in half the lanes, take the rule better inside bayer_pairs).
+// Lane i is pixel 1 + i + a multiple of 32: odd when i is even.
+struct ClipLanes {
+  static constexpr int kLanes = 32;
+  typedef std::uint8_t Vector __attribute__((vector_size(kLanes)));
+  typedef std::int8_t Mask __attribute__((vector_size(kLanes)));  // a compare's lanes: 0 or -1
+  Vector own, horizontal, vertical, both, diagonal;
+
+  ClipLanes(const PixelConverter::ClipLevels& odd, const PixelConverter::ClipLevels& even) {
+    for (int i = 0; i < kLanes; ++i) {
+      const PixelConverter::ClipLevels& c = i % 2 == 0 ? odd : even;
+      own[i] = static_cast<std::uint8_t>(c.own);
+      horizontal[i] = static_cast<std::uint8_t>(c.horizontal);
+      vertical[i] = static_cast<std::uint8_t>(c.vertical);
+      both[i] = static_cast<std::uint8_t>(c.both);
+      diagonal[i] = static_cast<std::uint8_t>(c.diagonal);
+    }
+  }
+};
+
+// In place, by reference: a function that takes or returns a 32-byte vector by value is an ABI
+// question in the baseline version (GCC's -Wpsabi), though all of these are inlined.
+template <typename Vector>
+LASERLINE_PIXEL_ROW void load_lanes(Vector& v, const std::uint8_t* at) {
+  std::memcpy(&v, at, sizeof v);
+}
+template <typename Vector>
+LASERLINE_PIXEL_ROW void lower_to(Vector& a, const Vector& b) {
+  a = a < b ? a : b;
+}
+template <typename Vector>
+LASERLINE_PIXEL_ROW void raise_to(Vector& a, const Vector& b) {
+  a = a > b ? a : b;
+}
+
+// Pixels 1 .. up to `end` (exclusive) in whole vectors; returns the first pixel not done.
+LASERLINE_PIXEL_ROW int clip_lanes(const std::uint8_t* __restrict up,
+                                   const std::uint8_t* __restrict mid,
+                                   const std::uint8_t* __restrict down, int end, const ClipLanes& m,
+                                   std::uint8_t* __restrict out) {
+  using Vector = ClipLanes::Vector;
+  const Vector top = Vector{} + 255;
+  int x = 1;
+  for (; x + ClipLanes::kLanes <= end; x += ClipLanes::kLanes) {
+    Vector own, horizontal, vertical, diagonal, other;
+    load_lanes(own, mid + x);
+    load_lanes(horizontal, mid + x - 1);
+    load_lanes(other, mid + x + 1);
+    lower_to(horizontal, other);
+    load_lanes(vertical, up + x);
+    load_lanes(other, down + x);
+    lower_to(vertical, other);
+    load_lanes(diagonal, up + x - 1);
+    load_lanes(other, up + x + 1);
+    lower_to(diagonal, other);
+    load_lanes(other, down + x - 1);
+    lower_to(diagonal, other);
+    load_lanes(other, down + x + 1);
+    lower_to(diagonal, other);
+    // The greatest of the sample and the least of each neighbours under their masks.
+    Vector score = own & m.own;
+    raise_to(score, Vector(horizontal & m.horizontal));
+    raise_to(score, Vector(vertical & m.vertical));
+    raise_to(score, Vector(diagonal & m.diagonal));
+    lower_to(horizontal, vertical);
+    raise_to(score, Vector(horizontal & m.both));
+    ClipLanes::Mask pixels;
+    load_lanes(pixels, out + x);
+    pixels |= score == top;
+    std::memcpy(out + x, &pixels, sizeof pixels);
+  }
+  return x;
 }
 
 // The same in 16-bit integers where the taps are whole quarters (a single colour, inside the
@@ -129,15 +254,18 @@ LASERLINE_PIXEL_ROW void quarter_pairs(const std::uint8_t* __restrict up,
 
 using BayerTaps = PixelConverter::Taps[3][3][2][2];
 using InnerQuarterTaps = PixelConverter::QuarterTaps[2][2];
+using BayerClipLevels = PixelConverter::ClipLevels[2][2];
 
-// `quarters`: the inner taps in quarters, or null where they are not whole quarters.
-template <int kBytes>
+// `quarters`: the inner taps in quarters, or null where they are not whole quarters (never with
+// kClip: the quarters are taken only where the rule changes nothing).
+template <int kBytes, bool kClip>
 LASERLINE_PIXEL_ROW void bayer_frame(const std::uint8_t* src, std::size_t src_stride, int width,
                                      int height, const BayerTaps& taps,
-                                     const InnerQuarterTaps* quarters, std::uint8_t* dst,
-                                     std::size_t dst_stride) {
+                                     const InnerQuarterTaps* quarters, const BayerClipLevels& clip,
+                                     std::uint8_t* dst, std::size_t dst_stride) {
   const int pairs = (width - 2) / 2;
   const int last = width - 1;
+  const ClipLanes lanes[2] = {{clip[0][1], clip[0][0]}, {clip[1][1], clip[1][0]}};
   for (int y = 0; y < height; ++y) {
     // Missing rows and columns are read from the other side, which has the same colours.
     const int kind = y == 0 ? 0 : y == height - 1 ? 2 : 1;
@@ -147,38 +275,73 @@ LASERLINE_PIXEL_ROW void bayer_frame(const std::uint8_t* src, std::size_t src_st
         src + static_cast<std::size_t>(y == height - 1 ? height - 2 : y + 1) * src_stride;
     const auto& t = taps[kind];
     const int p = y & 1;
+    const auto& c = clip[p];
     std::uint8_t* out = dst + static_cast<std::size_t>(y) * dst_stride;
-    out[0] = to_byte(bayer_pixel<kBytes>(up, mid, down, 0, 1, 1, t[0][p][0]));
+    out[0] = bayer_pixel<kBytes, kClip>(up, mid, down, 0, 1, 1, t[0][p][0], c[0]);
     if (kind == 1 && quarters != nullptr) {
       quarter_pairs(up, mid, down, pairs, (*quarters)[p][1], (*quarters)[p][0], out);
     } else {
-      bayer_pairs<kBytes>(up, mid, down, pairs, t[1][p][1], t[1][p][0], out);
+      constexpr bool kApart = kClip && kBytes == 1;  // the rule in clip_lanes
+      bayer_pairs<kBytes, kClip && !kApart>(up, mid, down, pairs, t[1][p][1], t[1][p][0], c[1],
+                                            c[0], out);
+      if constexpr (kApart) {
+        const int end = 2 * pairs + 1;
+        for (int x = clip_lanes(up, mid, down, end, lanes[p], out); x < end; ++x) {
+          out[x] = bayer_clipped<1>(up, mid, down, x, x - 1, x + 1, c[x & 1]) ? 255 : out[x];
+        }
+      }
     }
     for (int x = 2 * pairs + 1; x < last; ++x)  // one pixel when the width is odd
-      out[x] = to_byte(bayer_pixel<kBytes>(up, mid, down, x, x - 1, x + 1, t[1][p][x & 1]));
-    out[last] =
-        to_byte(bayer_pixel<kBytes>(up, mid, down, last, last - 1, last - 1, t[2][p][last & 1]));
+      out[x] = bayer_pixel<kBytes, kClip>(up, mid, down, x, x - 1, x + 1, t[1][p][x & 1], c[x & 1]);
+    out[last] = bayer_pixel<kBytes, kClip>(up, mid, down, last, last - 1, last - 1,
+                                           t[2][p][last & 1], c[last & 1]);
   }
 }
 
+// `clip`: the clipping rule's levels, or null where it changes nothing.
 LASERLINE_PIXEL_KERNEL void bayer8_frame(const std::uint8_t* src, std::size_t src_stride, int width,
                                          int height, const BayerTaps& taps,
-                                         const InnerQuarterTaps* quarters, std::uint8_t* dst,
+                                         const InnerQuarterTaps* quarters,
+                                         const BayerClipLevels* clip, std::uint8_t* dst,
                                          std::size_t dst_stride) {
-  bayer_frame<1>(src, src_stride, width, height, taps, quarters, dst, dst_stride);
+  if (clip != nullptr) {
+    bayer_frame<1, true>(src, src_stride, width, height, taps, nullptr, *clip, dst, dst_stride);
+  } else {
+    bayer_frame<1, false>(src, src_stride, width, height, taps, quarters, BayerClipLevels{}, dst,
+                          dst_stride);
+  }
 }
 
 LASERLINE_PIXEL_KERNEL void bayer16_frame(const std::uint8_t* src, std::size_t src_stride,
                                           int width, int height, const BayerTaps& taps,
-                                          std::uint8_t* dst, std::size_t dst_stride) {
-  bayer_frame<2>(src, src_stride, width, height, taps, nullptr, dst, dst_stride);
+                                          const BayerClipLevels* clip, std::uint8_t* dst,
+                                          std::size_t dst_stride) {
+  if (clip != nullptr) {
+    bayer_frame<2, true>(src, src_stride, width, height, taps, nullptr, *clip, dst, dst_stride);
+  } else {
+    bayer_frame<2, false>(src, src_stride, width, height, taps, nullptr, BayerClipLevels{}, dst,
+                          dst_stride);
+  }
 }
 
-LASERLINE_PIXEL_ROW void triple_row(const std::uint8_t* __restrict in, int width, float w0,
-                                    float w1, float w2, std::uint8_t* __restrict out) {
+// kClip: 255 where a sample under its mask (0xff: a positively weighted colour, else 0) is 255
+// (the clipping rule), in bytes.
+template <bool kClip>
+LASERLINE_PIXEL_ROW void triple_row(const std::uint8_t* __restrict in, int width, const float* w,
+                                    const std::uint8_t* clip, std::uint8_t* __restrict out) {
+  const float w0 = w[0], w1 = w[1], w2 = w[2];
+  const std::uint8_t m0 = clip[0], m1 = clip[1], m2 = clip[2];
   for (int x = 0; x < width; ++x) {
-    out[x] = to_byte(w0 * static_cast<float>(in[3 * x]) + w1 * static_cast<float>(in[3 * x + 1]) +
-                     w2 * static_cast<float>(in[3 * x + 2]));
+    const std::uint8_t s0 = in[3 * x], s1 = in[3 * x + 1], s2 = in[3 * x + 2];
+    const std::uint8_t value = to_byte(w0 * static_cast<float>(s0) + w1 * static_cast<float>(s1) +
+                                       w2 * static_cast<float>(s2));
+    if constexpr (kClip) {
+      const std::uint8_t score =
+          hi(hi<std::uint8_t>(s0 & m0, s1 & m1), static_cast<std::uint8_t>(s2 & m2));
+      out[x] = score == 255 ? std::uint8_t{255} : value;
+    } else {
+      out[x] = value;
+    }
   }
 }
 
@@ -198,13 +361,20 @@ LASERLINE_PIXEL_KERNEL void pick_frame(const std::uint8_t* src, std::size_t src_
   }
 }
 
-// RGB or BGR: w = the weights of a pixel's three samples in memory order.
+// RGB or BGR: w = the weights of a pixel's three samples in memory order; `clip` their clipping
+// levels, or null where the rule changes nothing.
 LASERLINE_PIXEL_KERNEL void triple_frame(const std::uint8_t* src, std::size_t src_stride, int width,
-                                         int height, const float* w, std::uint8_t* dst,
-                                         std::size_t dst_stride) {
+                                         int height, const float* w, const std::uint8_t* clip,
+                                         std::uint8_t* dst, std::size_t dst_stride) {
   for (int y = 0; y < height; ++y) {
-    triple_row(src + static_cast<std::size_t>(y) * src_stride, width, w[0], w[1], w[2],
-               dst + static_cast<std::size_t>(y) * dst_stride);
+    const std::uint8_t* in = src + static_cast<std::size_t>(y) * src_stride;
+    std::uint8_t* out = dst + static_cast<std::size_t>(y) * dst_stride;
+    if (clip != nullptr) {
+      triple_row<true>(in, width, w, clip, out);
+    } else {
+      static constexpr std::uint8_t kNoClip[3] = {0, 0, 0};
+      triple_row<false>(in, width, w, kNoClip, out);
+    }
   }
 }
 
@@ -385,6 +555,46 @@ PixelConverter::PixelConverter(const SourceFormat& format, int width, int height
       if (weights_[i] == 1.0f && others_zero) pick_ = i;
     }
   }
+  // The clipping rule changes a pixel only where a clipped colour's weighted sum can stay below
+  // 255: a positive weight below 1, or a positive and a negative weight. Elsewhere (single colours,
+  // red + green) it is left out, which keeps the quarters' exact integer path.
+  const float weights[3] = {channel.red, channel.green, channel.blue};
+  bool positive = false, negative = false, below_one = false;
+  for (const float weight : weights) {
+    positive = positive || weight > 0.0f;
+    negative = negative || weight < 0.0f;
+    below_one = below_one || (weight > 0.0f && weight < 1.0f);
+  }
+  const bool colour = format.layout != PixelLayout::kMono && format.layout != PixelLayout::kYuyv;
+  clips_ = colour && (below_one || (positive && negative));
+  if (!clips_) return;
+  quarters_exact_ = false;
+  auto mask = [&](Colour c) { return static_cast<std::uint16_t>(weights[c] > 0.0f ? 0xffff : 0); };
+  if (format.layout == PixelLayout::kRgb || format.layout == PixelLayout::kBgr) {
+    const bool bgr = format.layout == PixelLayout::kBgr;
+    const Colour order[3] = {bgr ? kBlue : kRed, kGreen, bgr ? kRed : kBlue};
+    for (int i = 0; i < 3; ++i)
+      sample_clip_[i] = static_cast<std::uint8_t>(mask(order[i]));
+    return;
+  }
+  // Bayer: a green site's horizontal and vertical neighbours are red and blue, one each, its
+  // diagonal ones green; a red or blue site's horizontal and vertical ones are all green, its
+  // diagonal ones the other of red and blue.
+  for (int py = 0; py < 2; ++py) {
+    for (int px = 0; px < 2; ++px) {
+      const Colour own = bayer_colour(format.layout, px, py);
+      ClipLevels& c = clip_[py][px];
+      c.top = static_cast<std::uint16_t>(format.bits > 8 ? (1 << format.bits) - 1 : 255);
+      c.own = mask(own);
+      if (own == kGreen) {
+        c.horizontal = mask(bayer_colour(format.layout, px ^ 1, py));
+        c.vertical = mask(bayer_colour(format.layout, px, py ^ 1));
+      } else {
+        c.both = mask(kGreen);
+        c.diagonal = mask(bayer_colour(format.layout, px ^ 1, py ^ 1));
+      }
+    }
+  }
 }
 
 std::size_t PixelConverter::row_bytes() const {
@@ -410,7 +620,8 @@ void PixelConverter::convert(const std::uint8_t* src, std::size_t src_stride, st
       if (pick_ >= 0) {
         pick_frame(src, src_stride, width_, height_, pick_, dst, dst_stride);
       } else {
-        triple_frame(src, src_stride, width_, height_, weights_, dst, dst_stride);
+        triple_frame(src, src_stride, width_, height_, weights_, clips_ ? sample_clip_ : nullptr,
+                     dst, dst_stride);
       }
       break;
     case PixelLayout::kYuyv:
@@ -418,10 +629,12 @@ void PixelConverter::convert(const std::uint8_t* src, std::size_t src_stride, st
       break;
     default:
       if (format_.bits > 8) {
-        bayer16_frame(src, src_stride, width_, height_, taps_, dst, dst_stride);
+        bayer16_frame(src, src_stride, width_, height_, taps_, clips_ ? &clip_ : nullptr, dst,
+                      dst_stride);
       } else {
         bayer8_frame(src, src_stride, width_, height_, taps_,
-                     quarters_exact_ ? &quarters_ : nullptr, dst, dst_stride);
+                     quarters_exact_ ? &quarters_ : nullptr, clips_ ? &clip_ : nullptr, dst,
+                     dst_stride);
       }
       break;
   }

@@ -55,6 +55,19 @@ std::string conversion_problem(const SourceFormat& format, int width, int height
 //            the frame). A single colour (red, green, blue) is thus that colour's sites kept and
 //            the other pixels filled bilinearly from the nearest sites of that colour only; a
 //            weighted sum costs the same (one pass, four products per pixel).
+// Clipped colours: a pixel whose value of a positively weighted colour is at the top of the
+// sample range (255; 16-bit samples: the top code of their bits, 4095 for 12 bit, or above)
+// gives 255, whatever the other colours say. The detectors take a run of 255 for a clipped laser
+// core and centre it from its flanks; without the rule, red - (green + blue) / 2 on a red line
+// that clips the red channel gives a flat top of 255 - (G + B) / 2 that follows the texture
+// under it. A colour's value is the one above: RGB/BGR the pixel's own sample; Bayer the own
+// sample for the own colour, else the mean of the neighbours of that colour, at the top when
+// every one of them is (a pixel between clipped red sites is clipped in red too, so a clipped
+// line gives 255 all along a mosaic, not every other pixel). Unchanged by the rule: mono frames
+// (a clipped sample is 255 already), single colours and sums whose positive weights are all 1 or
+// more (the sum reaches 255 by itself), and YUYV, whose R, G, B come from luma and chroma that a
+// pair of pixels shares and do not say whether the sensor clipped a colour. Sums with a positive
+// weight below 1 do change: grey gives 255 where any colour is clipped.
 // Thread context: constructed on the setup thread; convert() from any one thread at a time. It
 // allocates nothing, takes no lock and throws nothing: cameras call it in grab().
 class PixelConverter {
@@ -83,6 +96,13 @@ class PixelConverter {
   struct QuarterTaps {
     std::uint16_t own = 0, horizontal = 0, vertical = 0, diagonal = 0;
   };
+  // A Bayer pixel is clipped (gives 255) when its own sample, or the least of its horizontal,
+  // vertical, horizontal and vertical, or diagonal neighbours, is at least `top` under its mask:
+  // 0xffff where that is a positively weighted colour, else 0.
+  struct ClipLevels {
+    std::uint16_t top = 0xffff;
+    std::uint16_t own = 0, horizontal = 0, vertical = 0, both = 0, diagonal = 0;
+  };
 
  private:
   SourceFormat format_;
@@ -101,6 +121,12 @@ class PixelConverter {
   QuarterTaps quarters_[2][2] = {};
   bool quarters_exact_ = true;
   int pick_ = -1;  // RGB/BGR of a single colour: its sample's place in a pixel
+  // Whether the clipping rule can change a pixel (see above), and its levels: RGB/BGR per sample
+  // in memory order, Bayer by [y % 2][x % 2] (a pixel's neighbours have the same colours on the
+  // frame's edges, read from the other side).
+  bool clips_ = false;
+  std::uint8_t sample_clip_[3] = {0, 0, 0};  // masks, as in ClipLevels
+  ClipLevels clip_[2][2] = {};
 };
 
 }  // namespace laserline::hal

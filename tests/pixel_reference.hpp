@@ -1,8 +1,9 @@
 #pragma once
 // What hal::PixelConverter must produce, written the straightforward way, pixel by pixel in
 // double (tests only): the colours of each pixel by the textbook definition of its layout, then
-// the laser channel's weighted sum. Shared by the kernels' unit test and the camera backends'
-// end-to-end tests, which apply it to the frames their stand-in cameras send.
+// the laser channel's weighted sum, or 255 where a positively weighted colour is clipped (at the
+// top of the sample range; RGB, BGR and Bayer, not YUYV). Shared by the kernels' unit test and the
+// camera backends' end-to-end tests, which apply it to the frames their stand-in cameras send.
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
@@ -39,9 +40,13 @@ inline const char* reference_mosaic(hal::PixelLayout layout) {
 
 // A pixel's exact output value before rounding and clipping. `thirds`: it takes a mean over three
 // neighbours (a mosaic's edge), or a YUV matrix, which float arithmetic cannot hold exactly.
+// `clipped`: a positively weighted colour is at the top of the sample range, so `value` is 255
+// and `weighted` the sum it replaces (otherwise the two are equal).
 struct ReferenceValue {
   double value = 0;
   bool thirds = false;
+  bool clipped = false;
+  double weighted = 0;
 };
 
 // Every pixel's, row-major.
@@ -51,13 +56,17 @@ inline std::vector<ReferenceValue> reference_values(const std::uint8_t* src, std
                                                     const hal::LaserChannel& channel) {
   std::vector<ReferenceValue> out(static_cast<std::size_t>(width) *
                                   static_cast<std::size_t>(height));
-  const double unit = std::ldexp(1.0, format.bits - 8);  // one 8-bit step in sample units
+  const double unit = std::ldexp(1.0, format.bits - 8);            // one 8-bit step in sample units
+  const int top = format.bits > 8 ? (1 << format.bits) - 1 : 255;  // the sample range's top
   const double weights[3] = {channel.red, channel.green, channel.blue};
   auto row = [&](int y) { return src + static_cast<std::size_t>(y) * stride; };
   const char* mosaic = reference_mosaic(format.layout);
   for (int y = 0; y < height; ++y) {
     for (int x = 0; x < width; ++x) {
       double rgb[3] = {0, 0, 0};
+      // Per colour: at the top of the sample range (a sample at or above it; a mean when every
+      // sample in it is).
+      bool top_of_range[3] = {false, false, false};
       double value = 0;
       bool thirds = format.layout == hal::PixelLayout::kYuyv;
       if (format.layout == hal::PixelLayout::kMono) {
@@ -69,6 +78,8 @@ inline std::vector<ReferenceValue> reference_values(const std::uint8_t* src, std
         rgb[0] = row(y)[3 * x + (bgr ? 2 : 0)];
         rgb[1] = row(y)[3 * x + 1];
         rgb[2] = row(y)[3 * x + (bgr ? 0 : 2)];
+        for (int c = 0; c < 3; ++c)
+          top_of_range[c] = rgb[c] >= top;
       } else if (format.layout == hal::PixelLayout::kYuyv) {
         // Pixel x: its own luma, its pair's chroma. Y' in 0..1, Pb and Pr in -0.5..0.5.
         const bool full = format.yuv_range == hal::YuvRange::kFull;
@@ -93,23 +104,32 @@ inline std::vector<ReferenceValue> reference_values(const std::uint8_t* src, std
         const int own = colour(x, y);
         double sum[3] = {0, 0, 0};
         int count[3] = {0, 0, 0};
+        int at_top[3] = {0, 0, 0};
         for (int ny = y - 1; ny <= y + 1; ++ny) {
           for (int nx = x - 1; nx <= x + 1; ++nx) {
             if (nx < 0 || ny < 0 || nx >= width || ny >= height || (nx == x && ny == y)) continue;
-            sum[colour(nx, ny)] += reference_sample(row(ny), nx, format.bits);
+            const int s = reference_sample(row(ny), nx, format.bits);
+            sum[colour(nx, ny)] += s;
             ++count[colour(nx, ny)];
+            at_top[colour(nx, ny)] += s >= top ? 1 : 0;
           }
         }
         for (int c = 0; c < 3; ++c) {
-          rgb[c] = (c == own ? reference_sample(row(y), x, format.bits) : sum[c] / count[c]) / unit;
+          const int own_sample = reference_sample(row(y), x, format.bits);
+          rgb[c] = (c == own ? own_sample : sum[c] / count[c]) / unit;
           thirds = thirds || (c != own && count[c] == 3);
+          top_of_range[c] = c == own ? own_sample >= top : at_top[c] == count[c];
         }
       }
       if (format.layout != hal::PixelLayout::kMono) {
         value = weights[0] * rgb[0] + weights[1] * rgb[1] + weights[2] * rgb[2];
       }
+      bool clipped = false;
+      for (int c = 0; c < 3; ++c)
+        clipped = clipped || (weights[c] > 0 && top_of_range[c]);
       out[static_cast<std::size_t>(y) * static_cast<std::size_t>(width) +
-          static_cast<std::size_t>(x)] = {value, thirds};
+          static_cast<std::size_t>(x)] = {clipped ? 255.0 : value, thirds && !clipped, clipped,
+                                          value};
     }
   }
   return out;

@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <random>
 #include <stdexcept>
@@ -90,6 +92,7 @@ TEST(PixelConversion, EveryLayoutChannelAndSizeMatchesTheReference) {
                                        {8, 3}, {66, 9}, {67, 10}, {131, 5}, {40, 40}};
   std::mt19937 rng(7);
   int checked = 0;
+  int changed_by_clipping = 0;  // pixels the clipping rule set to 255 where the sum was below
   for (const Case& c : all_formats()) {
     for (const char* channel_text : kChannels) {
       const LaserChannel channel = parse_laser_channel(channel_text);
@@ -115,11 +118,14 @@ TEST(PixelConversion, EveryLayoutChannelAndSizeMatchesTheReference) {
         ASSERT_EQ(test::compare_with_reference(packed, reference, width, channel), "")
             << c.name << ", channel " << channel_text << ", " << width << "x" << height;
         ++checked;
+        for (const auto& r : reference)
+          changed_by_clipping += r.clipped && r.weighted < 254.5 ? 1 : 0;
       }
     }
   }
   // 21 formats by 11 sizes, less the 5 odd widths of the 4 YUYV formats, by 9 channels.
   EXPECT_EQ(checked, (21 * 11 - 4 * 5) * 9);
+  EXPECT_GT(changed_by_clipping, 1000) << "the frames hardly test the clipping rule";
 }
 
 // The definition on a small mosaic, computed by hand: red on RGGB keeps the red sites and fills
@@ -170,6 +176,161 @@ TEST(PixelConversion, WeightedDifferenceCancelsWhiteLightOnAMosaic) {
       } else {
         EXPECT_EQ(v, 0) << x << ", " << y;
       }
+    }
+  }
+}
+
+// The clipping rule by hand: a positively weighted colour at the top of the sample range gives
+// 255, whatever the others say; one step below it, or a negatively weighted colour, does not.
+TEST(PixelConversion, ClippedColourGives255ByHand) {
+  const LaserChannel red_laser = parse_laser_channel("red - (green + blue) / 2");
+  std::vector<std::uint8_t> out(4);
+  // RGB8 and BGR8: red 255 gives 255 (the sum is 255 - 200 = 55), red 254 gives 54.
+  const std::vector<std::uint8_t> rgb = {255, 200, 200, 254, 200, 200, 255, 255, 255, 0, 0, 0};
+  PixelConverter({PixelLayout::kRgb, 8}, 4, 1, red_laser).convert(rgb.data(), 12, out.data(), 4);
+  EXPECT_EQ(out, (std::vector<std::uint8_t>{255, 54, 255, 0}));
+  const std::vector<std::uint8_t> bgr = {200, 200, 255, 200, 200, 254, 255, 255, 255, 0, 0, 0};
+  PixelConverter({PixelLayout::kBgr, 8}, 4, 1, red_laser).convert(bgr.data(), 12, out.data(), 4);
+  EXPECT_EQ(out, (std::vector<std::uint8_t>{255, 54, 255, 0}));
+  // A negatively weighted colour clipped changes nothing: green - red of (255, 100, 0) is 0.
+  const PixelConverter green_laser({PixelLayout::kRgb, 8}, 4, 1,
+                                   parse_laser_channel("green - red"));
+  green_laser.convert(rgb.data(), 12, out.data(), 4);  // green 200, 200, 255, 0
+  EXPECT_EQ(out, (std::vector<std::uint8_t>{0, 0, 255, 0}));
+  // Grey weighs every colour positively: a clipped blue alone gives 255.
+  const std::vector<std::uint8_t> blue = {0, 0, 255, 0, 0, 254, 10, 10, 10, 0, 0, 0};
+  PixelConverter({PixelLayout::kRgb, 8}, 4, 1, parse_laser_channel("grey"))
+      .convert(blue.data(), 12, out.data(), 4);
+  EXPECT_EQ(out, (std::vector<std::uint8_t>{255, 29, 10, 0}));
+
+  // RGGB, 4x3: red sites 255, 255 / 255, 100; green and blue sites 60. A pixel is clipped in red
+  // when all its red neighbours are 255: the blue site at (1, 1) has three of four, so it is
+  // (255 * 3 + 100) / 4 - (60 + 60) / 2 = 156.25.
+  const std::vector<std::uint8_t> mosaic = {
+      255, 60, 255, 60,  //
+      60,  60, 60,  60,  //
+      255, 60, 100, 60,  //
+  };
+  std::vector<std::uint8_t> frame(12);
+  PixelConverter({PixelLayout::kBayerRggb, 8}, 4, 3, red_laser)
+      .convert(mosaic.data(), 4, frame.data(), 4);
+  const std::vector<std::uint8_t> expected = {
+      255, 255, 255, 255,  // red 255 at each pixel (the right edge: its one red neighbour)
+      255, 156, 118, 118,  // (0, 1): red above and below 255; the others see the 100
+      255, 118, 40,  40,   // (255 + 100) / 2 - 60 = 117.5; 100 - 60
+  };
+  EXPECT_EQ(frame, expected);
+
+  // 12 bit: the top code is 4095; 4094 is a value like any other (4094 / 16 - 60 = 195.875).
+  for (const int top_red : {4095, 4094}) {
+    std::vector<std::uint8_t> words;
+    for (const int v : {top_red, 960, 960, 960}) {  // RGGB 2x2, green and blue 60 in 8-bit units
+      words.push_back(static_cast<std::uint8_t>(v & 0xff));
+      words.push_back(static_cast<std::uint8_t>(v >> 8));
+    }
+    PixelConverter({PixelLayout::kBayerRggb, 12}, 2, 2, red_laser)
+        .convert(words.data(), 4, out.data(), 2);
+    const int clipped = top_red == 4095 ? 255 : 196;
+    EXPECT_EQ(out, (std::vector<std::uint8_t>{
+                       static_cast<std::uint8_t>(clipped), static_cast<std::uint8_t>(clipped),
+                       static_cast<std::uint8_t>(clipped), static_cast<std::uint8_t>(clipped)}))
+        << top_red;
+  }
+}
+
+// A red laser line that clips the camera's red channel, across bright and dark white-lit
+// texture, through red - (green + blue) / 2: its core must be a run of 255 in every column (what
+// the detectors centre from its flanks), the same rows along the whole line on every mosaic
+// phase (no 255 on every other pixel), and every pixel off the clipped run the weighted sum as
+// before. Without the rule the core is 255 - (G + B) / 2, a flat top that follows the texture.
+TEST(PixelConversion, ClippedLaserLineIsARunOf255AcrossTexture) {
+  constexpr int kWidth = 64, kHeight = 33, kBlock = 8;  // texture: blocks of 8 columns
+  const LaserChannel channel = parse_laser_channel("red - (green + blue) / 2");
+  std::vector<Case> cases = {{"RGB8", {PixelLayout::kRgb, 8}}, {"BGR8", {PixelLayout::kBgr, 8}}};
+  for (const Case& c : all_formats()) {
+    if (c.format.layout != PixelLayout::kMono && c.format.layout != PixelLayout::kRgb &&
+        c.format.layout != PixelLayout::kBgr && c.format.layout != PixelLayout::kYuyv &&
+        c.format.bits != 16) {
+      cases.push_back(c);  // every Bayer phase, 8 and 12 bit
+    }
+  }
+  ASSERT_EQ(cases.size(), 10u);
+  for (const int centre : {16, 17}) {  // the line's centre row on both row parities
+    for (const Case& c : cases) {
+      SCOPED_TRACE(std::string(c.name) + ", line at row " + std::to_string(centre));
+      const int unit = 1 << (c.format.bits - 8), top = c.format.bits > 8 ? unit * 256 - 1 : 255;
+      // The scene in 8-bit units: white light of texture t (bright 180 + a little, dark 30 + a
+      // little) on every colour, and the laser's red, 400 at its centre (a Gaussian of sigma 2
+      // rows): red clips, within a row of the centre whatever the texture.
+      auto texture = [&](int x, int y) {
+        return ((x / kBlock) % 2 == 0 ? 180 : 30) + (x * 7 + y * 13) % 11;
+      };
+      auto colour = [&](int x, int y, int k) {  // k: 0 red, 1 green, 2 blue; in sample units
+        const double d = y - centre;
+        const double laser = k == 0 ? 400.0 * std::exp(-d * d / 8.0) : 0.0;
+        return std::min(top, static_cast<int>(unit * (texture(x, y) + laser)));
+      };
+      const PixelConverter converter(c.format, kWidth, kHeight, channel);
+      const std::size_t stride = converter.row_bytes();
+      std::vector<std::uint8_t> buffer(stride * kHeight);
+      const char* mosaic = test::reference_mosaic(c.format.layout);
+      for (int y = 0; y < kHeight; ++y) {
+        for (int x = 0; x < kWidth; ++x) {
+          std::uint8_t* row = buffer.data() + static_cast<std::size_t>(y) * stride;
+          if (mosaic == nullptr) {  // RGB or BGR
+            const bool bgr = c.format.layout == PixelLayout::kBgr;
+            for (int k = 0; k < 3; ++k)
+              row[3 * x + (bgr ? 2 - k : k)] = static_cast<std::uint8_t>(colour(x, y, k));
+          } else {
+            const char site = mosaic[2 * (y % 2) + x % 2];
+            const int v = colour(x, y, site == 'R' ? 0 : site == 'G' ? 1 : 2);
+            if (c.format.bits == 8) {
+              row[x] = static_cast<std::uint8_t>(v);
+            } else {
+              row[2 * x] = static_cast<std::uint8_t>(v & 0xff);
+              row[2 * x + 1] = static_cast<std::uint8_t>(v >> 8);
+            }
+          }
+        }
+      }
+      std::vector<std::uint8_t> out(static_cast<std::size_t>(kWidth) * kHeight);
+      converter.convert(buffer.data(), stride, out.data(), kWidth);
+      const auto reference =
+          test::reference_values(buffer.data(), stride, kWidth, kHeight, c.format, channel);
+      ASSERT_EQ(test::compare_with_reference(out, reference, kWidth, channel), "");
+      auto at = [&](int x, int y) { return out[static_cast<std::size_t>(y * kWidth + x)]; };
+      for (int x = 0; x < kWidth; ++x) {
+        // The core: 255 on the three rows about the centre, in every column.
+        for (int y = centre - 1; y <= centre + 1; ++y)
+          ASSERT_EQ(at(x, y), 255) << x << ", " << y;
+        // One run of 255 in each column; off it no clipped colour, so (compared above) the
+        // weighted sum as before, and below 255.
+        int first = centre, last = centre;
+        while (first > 0 && at(x, first - 1) == 255)
+          --first;
+        while (last < kHeight - 1 && at(x, last + 1) == 255)
+          ++last;
+        for (int y = 0; y < kHeight; ++y) {
+          if (y >= first && y <= last) continue;
+          const auto& r = reference[static_cast<std::size_t>(y * kWidth + x)];
+          ASSERT_FALSE(r.clipped) << x << ", " << y;
+          ASSERT_LT(r.weighted, 254.5) << x << ", " << y;
+        }
+      }
+      // Along the line, inside each block of texture (away from its edges, where neighbours
+      // mix two textures): a row is 255 in every column or in none, on every mosaic phase.
+      for (int y = 0; y < kHeight; ++y) {
+        for (int block = 0; block < kWidth / kBlock; ++block) {
+          const int x0 = block * kBlock + 1, x1 = block * kBlock + kBlock - 2;
+          for (int x = x0 + 1; x <= x1; ++x) {
+            ASSERT_EQ(at(x, y) == 255, at(x0, y) == 255) << x << ", " << y;
+          }
+        }
+      }
+      // The rule is what makes the core 255: on bright texture the weighted sum there is low.
+      const auto& bright_core = reference[static_cast<std::size_t>(centre * kWidth + 3)];
+      EXPECT_TRUE(bright_core.clipped);
+      EXPECT_LT(bright_core.weighted, 100.0);
     }
   }
 }
