@@ -10,11 +10,17 @@
 //                      the pier scenario (segments, chain codes or image patches, matching,
 //                      back-projection), 0 = chain_code, 1 = image_features
 //   frontend_backprojection_detector: the whole `backprojection` detector on the pier
+//   frontend_search_image/<axes>, naive_search_image/<axes>: the search image of a laser beside
+//                      the camera (rows: transposed) or turned (oblique: resampled), ours and
+//                      OpenCV's (transpose, warpAffine)
+//   frontend_made_detector/<axes>: `background` as the daemon makes it, the laser across the
+//                      image (columns), beside the camera (rows) and turned 30 degrees (oblique)
 // Run: build/default/bench/laserline_bench --benchmark_filter='frontend|naive'
 #include <benchmark/benchmark.h>
 
 #include <cmath>
 #include <cstdlib>
+#include <memory>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 #include <vector>
@@ -22,8 +28,10 @@
 #include "daemon/config.hpp"
 #include "hal/sim/sim_scene.hpp"
 #include "pipeline/backprojection_detector.hpp"
+#include "pipeline/detector.hpp"
 #include "pipeline/frontend.hpp"
 #include "pipeline/frontend_detectors.hpp"
+#include "pipeline/search_axes.hpp"
 #include "pipeline/subpixel.hpp"
 #include "tools/evaluation.hpp"
 
@@ -205,6 +213,85 @@ void BM_frontend_fir_detector(benchmark::State& state) {
   state.counters["points"] = static_cast<double>(profile.size());
 }
 BENCHMARK(BM_frontend_fir_detector)->Unit(benchmark::kMillisecond);
+
+// The search image alone for the mountings below (the frame transposed, or resampled on a grid
+// turned 30 degrees that holds the whole frame), beside OpenCV's transpose and warpAffine
+// (bilinear, edge replicated) making the same image.
+hal::SimSceneOptions scenario_scene(const char* scenario) {
+  for (const tools::Scenario& s : tools::standard_scenarios(kWidth, kHeight))
+    if (s.name == scenario) return s.scene;
+  std::abort();
+}
+
+void BM_frontend_search_image(benchmark::State& state, const char* scenario) {
+  const pipeline::ScannerGeometry geometry =
+      daemon::scanner_geometry(scenario_scene(scenario).calibration);
+  const pipeline::SearchAxes axes = pipeline::choose_search_axes(geometry);
+  pipeline::SearchImage search;
+  search.reset(axes, kWidth, kHeight);
+  const Frames& f = frames();
+  for (auto _ : state) {
+    const pipeline::ImageView image = search.make(view(f.current));
+    benchmark::DoNotOptimize(image.data);
+    benchmark::ClobberMemory();
+  }
+  state.counters["pixels"] = static_cast<double>(axes.lines) * axes.length;
+}
+BENCHMARK_CAPTURE(BM_frontend_search_image, rows, "beside")->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_frontend_search_image, oblique, "oblique")->Unit(benchmark::kMillisecond);
+
+void BM_naive_search_image(benchmark::State& state, const char* scenario) {
+  const pipeline::ScannerGeometry geometry =
+      daemon::scanner_geometry(scenario_scene(scenario).calibration);
+  const pipeline::SearchAxes axes = pipeline::choose_search_axes(geometry);
+  const Frames& f = frames();
+  const cv::Mat frame(kHeight, kWidth, CV_8UC1, const_cast<std::uint8_t*>(f.current.data()));
+  cv::Mat out(axes.length, axes.lines, CV_8UC1);
+  const int threads = cv::getNumThreads();
+  cv::setNumThreads(1);  // one thread, as ours
+  // Search (line, position) -> image: x = origin + line * line_step + position * along.
+  const cv::Matx23d search_to_image(axes.line_step[0], axes.along[0], axes.origin[0],
+                                    axes.line_step[1], axes.along[1], axes.origin[1]);
+  for (auto _ : state) {
+    if (axes.axis == pipeline::SearchAxis::kRows)
+      cv::transpose(frame, out);
+    else
+      cv::warpAffine(frame, out, cv::Mat(search_to_image), out.size(),
+                     cv::INTER_LINEAR | cv::WARP_INVERSE_MAP, cv::BORDER_REPLICATE);
+    benchmark::DoNotOptimize(out.data);
+    benchmark::ClobberMemory();
+  }
+  cv::setNumThreads(threads);
+}
+BENCHMARK_CAPTURE(BM_naive_search_image, rows, "beside")->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_naive_search_image, oblique, "oblique")->Unit(benchmark::kMillisecond);
+
+// The whole detector as the daemon makes it (make_detector: search axes, triangulation) on a
+// scenario's consecutive frames, so that a laser across the image (`clean`: epipolar lines along
+// the columns), beside the camera (`beside`: along the rows, the frame transposed) and turned
+// (`oblique`: sampled along slanted lines) can be compared.
+void BM_frontend_made_detector(benchmark::State& state, const char* scenario) {
+  const hal::SimSceneOptions scene = scenario_scene(scenario);
+  hal::SimScene sim(scene);
+  std::vector<std::uint8_t> a(sim.format().bytes()), b(sim.format().bytes());
+  sim.render(10, true, a);
+  sim.render(11, true, b);
+  pipeline::DetectorOptions o;
+  o.geometry = daemon::scanner_geometry(scene.calibration);
+  const std::unique_ptr<pipeline::Detector> detector = pipeline::make_detector("background", o);
+  detector->reset(kWidth, kHeight);
+  pipeline::Profile profile(detector->max_points(kWidth, kHeight));
+  std::uint64_t sequence = 0;
+  for (auto _ : state) {
+    detector->detect(view(sequence % 2 == 0 ? a : b), {sequence, true}, profile);
+    ++sequence;
+    benchmark::DoNotOptimize(profile.points().data());
+  }
+  state.counters["points"] = static_cast<double>(profile.size());
+}
+BENCHMARK_CAPTURE(BM_frontend_made_detector, columns, "clean")->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_frontend_made_detector, rows, "beside")->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_frontend_made_detector, oblique, "oblique")->Unit(benchmark::kMillisecond);
 
 // The `pier` scenario of laserline-evaluate at 2048x1536: relief whose parallax leaves `background`
 // many false candidates, so the validation has work to do.

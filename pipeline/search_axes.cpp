@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <numbers>
+#include <utility>
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -179,36 +181,131 @@ void transpose(const ImageView& frame, std::uint8_t* dst, std::ptrdiff_t dst_str
                    dst_stride);
 }
 
-// Bilinear samples of the frame along the rotated grid, the frame's edge continued outside it.
-void resample(const ImageView& frame, const SearchAxes& axes, std::uint8_t* dst) {
-  const float last_x = static_cast<float>(frame.width - 1);
-  const float last_y = static_cast<float>(frame.height - 1);
-  const auto lx = static_cast<float>(axes.line_step[0]), ly = static_cast<float>(axes.line_step[1]);
-  for (int v = 0; v < axes.length; ++v) {
-    const auto [x0, y0] = axes.to_image(0.0, v);
-    std::uint8_t* out = dst + static_cast<std::ptrdiff_t>(v) * axes.lines;
-    for (int u = 0; u < axes.lines; ++u) {
-      const float x = std::clamp(static_cast<float>(x0) + static_cast<float>(u) * lx, 0.0f, last_x);
-      const float y = std::clamp(static_cast<float>(y0) + static_cast<float>(u) * ly, 0.0f, last_y);
-      const int ix = std::min(static_cast<int>(x), frame.width - 2);
-      const int iy = std::min(static_cast<int>(y), frame.height - 2);
-      const float fx = x - static_cast<float>(ix), fy = y - static_cast<float>(iy);
-      const std::uint8_t* p = frame.row(iy) + ix;
-      const float top = p[0] + fx * (static_cast<float>(p[1]) - p[0]);
-      const float bottom =
-          p[frame.stride] + fx * (static_cast<float>(p[frame.stride + 1]) - p[frame.stride]);
-      out[u] = static_cast<std::uint8_t>(top + fy * (bottom - top) + 0.5f);
-    }
+// floor(a / b) for b != 0.
+std::int64_t floor_div(std::int64_t a, std::int64_t b) {
+  const std::int64_t q = a / b;
+  return (a % b != 0 && (a < 0) != (b < 0)) ? q - 1 : q;
+}
+
+// The integers t with lo <= start + t * step <= hi, intersected with [first, last].
+std::pair<std::int64_t, std::int64_t> solve_range(std::int64_t start, std::int64_t step,
+                                                  std::int64_t lo, std::int64_t hi,
+                                                  std::int64_t first, std::int64_t last) {
+  if (step == 0) {
+    if (start >= lo && start <= hi) return {first, last};
+    return {1, 0};
   }
+  std::int64_t t_lo, t_hi;
+  if (step > 0) {
+    t_lo = -floor_div(start - lo, step);  // ceil((lo - start) / step)
+    t_hi = floor_div(hi - start, step);
+  } else {
+    t_lo = -floor_div(hi - start, -step);  // ceil((start - hi) / -step)
+    t_hi = floor_div(start - lo, -step);
+  }
+  return {std::max(t_lo, first), std::min(t_hi, last)};
 }
 
 }  // namespace
+
+// The rotated grid in 32.32 fixed point, so that whether a sample lies inside the frame is one
+// exact predicate: its rows' and its lines' ranges inside agree to the sample.
+SearchImage::Grid SearchImage::grid() const {
+  constexpr double kOne = 4294967296.0;  // 2^32
+  Grid g;
+  g.x0 = std::llround(axes_.origin[0] * kOne);
+  g.y0 = std::llround(axes_.origin[1] * kOne);
+  g.x_line = std::llround(axes_.line_step[0] * kOne);
+  g.y_line = std::llround(axes_.line_step[1] * kOne);
+  g.x_along = std::llround(axes_.along[0] * kOne);
+  g.y_along = std::llround(axes_.along[1] * kOne);
+  // Inside: both bilinear neighbours exist (integer part at most width - 2, height - 2).
+  g.x_max = (static_cast<std::int64_t>(width_ - 1) << 32) - 1;
+  g.y_max = (static_cast<std::int64_t>(height_ - 1) << 32) - 1;
+  return g;
+}
+
+// One bilinear sample in 8-bit fixed-point weights at (x, y) in 32.32 fixed point, both bilinear
+// neighbours inside the frame.
+inline std::uint8_t bilinear(const ImageView& frame, std::int64_t x, std::int64_t y) {
+  const std::uint8_t* p = frame.row(static_cast<int>(y >> 32)) + (x >> 32);
+  const int fx = static_cast<int>((x >> 24) & 0xff), fy = static_cast<int>((y >> 24) & 0xff);
+  const int top = (p[0] << 8) + fx * (p[1] - p[0]);
+  const int bottom = (p[frame.stride] << 8) + fx * (p[frame.stride + 1] - p[frame.stride]);
+  return static_cast<std::uint8_t>(((top << 8) + fy * (bottom - top) + (1 << 15)) >> 16);
+}
+
+// Bilinear samples of the frame on the rotated grid. Outside the frame a sample takes the
+// frame's nearest edge (its position clamped, linear along the edge): continuous across the border,
+// so that the border is no edge along a line, and what lies there is texture like the frame's, not
+// a flat run whose small noise would make any bump stand out.
+void SearchImage::resample(const ImageView& frame) {
+  const Grid g = grid();
+  const int lines = axes_.lines, length = axes_.length;
+  std::uint8_t* const dst = pixels_.data();
+  // Inside, in tiles, so that the frame pixels a tile reads (a rotated square) stay in the L1
+  // cache.
+  constexpr int kTileLines = 64, kTileRows = 32;
+  for (int v0 = 0; v0 < length; v0 += kTileRows) {
+    const int v1 = std::min(v0 + kTileRows, length);
+    for (int u0 = 0; u0 < lines; u0 += kTileLines) {
+      const int u1 = std::min(u0 + kTileLines, lines) - 1;
+      for (int v = v0; v < v1; ++v) {
+        const std::int64_t x_row = g.x0 + v * g.x_along, y_row = g.y0 + v * g.y_along;
+        const auto [x_first, x_last] = solve_range(x_row, g.x_line, 0, g.x_max, u0, u1);
+        const auto [first, last] = solve_range(y_row, g.y_line, 0, g.y_max, x_first, x_last);
+        std::uint8_t* out = dst + static_cast<std::ptrdiff_t>(v) * lines;
+        std::int64_t x = x_row + first * g.x_line, y = y_row + first * g.y_line;
+        for (std::int64_t u = first; u <= last; ++u, x += g.x_line, y += g.y_line)
+          out[u] = bilinear(frame, x, y);
+      }
+    }
+  }
+  // Outside: each row's samples before and after its range inside, from the frame's border (its
+  // first and last columns copied out, so that they are read along, not across, the rows).
+  for (int y = 0; y < height_; ++y) {
+    first_column_[y] = frame.row(y)[0];
+    last_column_[y] = frame.row(y)[width_ - 1];
+  }
+  const std::uint8_t* const top_row = frame.row(0);
+  const std::uint8_t* const bottom_row = frame.row(height_ - 1);
+  const auto linear = [](const std::uint8_t* p, std::int64_t t) {
+    const int i = static_cast<int>(t >> 32), f = static_cast<int>((t >> 24) & 0xff);
+    return static_cast<std::uint8_t>(((p[i] << 8) + f * (p[i + 1] - p[i]) + (1 << 7)) >> 8);
+  };
+  for (int v = 0; v < length; ++v) {
+    std::uint8_t* out = dst + static_cast<std::ptrdiff_t>(v) * lines;
+    const std::int64_t x_row = g.x0 + v * g.x_along, y_row = g.y0 + v * g.y_along;
+    const auto [x_first, x_last] = solve_range(x_row, g.x_line, 0, g.x_max, 0, lines - 1);
+    const auto [first, last] = solve_range(y_row, g.y_line, 0, g.y_max, x_first, x_last);
+    const auto clamped = [&](std::int64_t from, std::int64_t to) {
+      std::int64_t x = x_row + from * g.x_line, y = y_row + from * g.y_line;
+      for (std::int64_t u = from; u < to; ++u, x += g.x_line, y += g.y_line) {
+        if (x < 0 || x > g.x_max) {
+          out[u] = linear(x < 0 ? first_column_.data() : last_column_.data(),
+                          std::clamp<std::int64_t>(y, 0, g.y_max));
+        } else {
+          out[u] = linear(y < 0 ? top_row : bottom_row, x);
+        }
+      }
+    };
+    if (first > last) {
+      clamped(0, lines);
+    } else {
+      clamped(0, first);
+      clamped(last + 1, lines);
+    }
+  }
+}
 
 void SearchImage::reset(const SearchAxes& axes, int width, int height) {
   axes_ = axes;
   width_ = width;
   height_ = height;
   pixels_.assign(axes.identity() ? 0 : static_cast<std::size_t>(axes.lines) * axes.length, 0);
+  const std::size_t border = axes.axis == SearchAxis::kOblique ? height : 0;
+  first_column_.assign(border, 0);
+  last_column_.assign(border, 0);
 }
 
 ImageView SearchImage::make(const ImageView& frame) {
@@ -219,7 +316,7 @@ ImageView SearchImage::make(const ImageView& frame) {
       transpose(frame, pixels_.data(), axes_.lines);
       break;
     case SearchAxis::kOblique:
-      resample(frame, axes_, pixels_.data());
+      resample(frame);
       break;
   }
   return {pixels_.data(), axes_.lines, axes_.length, axes_.lines};

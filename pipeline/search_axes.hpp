@@ -62,7 +62,7 @@ ScannerGeometry search_geometry(const ScannerGeometry& geometry, const SearchAxe
 
 // Makes the search image of a frame: the frame itself (columns), its transpose (rows, 16 x 16
 // blocks) or its bilinear resampling on the rotated grid (oblique; positions outside the frame
-// take its nearest edge pixel, so that its border is no edge). reset() allocates; make() does not.
+// take its nearest edge, so that its border is no edge). reset() allocates; make() does not.
 // Thread context: one thread at a time per instance.
 class SearchImage {
  public:
@@ -71,9 +71,16 @@ class SearchImage {
   ImageView make(const ImageView& frame);
 
  private:
+  struct Grid {
+    std::int64_t x0, y0, x_line, y_line, x_along, y_along, x_max, y_max;
+  };
+  Grid grid() const;
+  void resample(const ImageView& frame);
+
   SearchAxes axes_;
   int width_ = 0, height_ = 0;
   std::vector<std::uint8_t> pixels_;
+  std::vector<std::uint8_t> first_column_, last_column_;  // oblique: the frame's side edges
 };
 
 }  // namespace laserline::pipeline
