@@ -62,22 +62,12 @@ void sleep_ns(std::int64_t ns) {
 }  // namespace
 
 const std::vector<std::string>& aravis_pixel_formats() {
-  static const std::vector<std::string> names = [] {
-    std::vector<std::string> list;
-    for (const auto& f : kPixelFormats)
-      list.emplace_back(f.name);
-    return list;
-  }();
+  static const std::vector<std::string> names = pixel_format_names(kPixelFormats);
   return names;
 }
 
 std::string aravis_pixel_format_problem(const AravisCameraOptions& options) {
-  for (const auto& f : kPixelFormats) {
-    if (options.pixel_format == f.name) {
-      return conversion_problem(f.source, options.width, options.height);
-    }
-  }
-  return "not a format this backend takes";
+  return pixel_format_problem(kPixelFormats, options.pixel_format, options.width, options.height);
 }
 
 AravisCamera::AravisCamera(AravisCameraOptions options) : options_(std::move(options)) {

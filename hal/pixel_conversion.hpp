@@ -3,6 +3,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "hal/laser_channel.hpp"
 
@@ -40,6 +41,24 @@ struct SourceFormat {
 
 // Empty when `format` frames of width x height can be converted; otherwise why not, one line.
 std::string conversion_problem(const SourceFormat& format, int width, int height);
+
+// A camera backend's table of the pixel formats it takes (entries with a `name` and a `source`
+// SourceFormat): their names, and why `name` cannot give width x height frames (empty if it can).
+template <typename Entry, std::size_t N>
+std::vector<std::string> pixel_format_names(const Entry (&table)[N]) {
+  std::vector<std::string> names;
+  for (const Entry& entry : table)
+    names.emplace_back(entry.name);
+  return names;
+}
+template <typename Entry, std::size_t N>
+std::string pixel_format_problem(const Entry (&table)[N], const std::string& name, int width,
+                                 int height) {
+  for (const Entry& entry : table) {
+    if (name == entry.name) return conversion_problem(entry.source, width, height);
+  }
+  return "not a format this backend takes";
+}
 
 // Turns a camera buffer into the mono8 frame the pipeline takes: the laser's channel of colour
 // frames, mono frames as they are (whatever the channel). Colour frames give

@@ -98,22 +98,12 @@ bool read_yuv_encoding(const v4l2_pix_format& pix, SourceFormat& source, std::st
 }  // namespace
 
 const std::vector<std::string>& v4l2_pixel_formats() {
-  static const std::vector<std::string> names = [] {
-    std::vector<std::string> list;
-    for (const auto& f : kPixelFormats)
-      list.emplace_back(f.name);
-    return list;
-  }();
+  static const std::vector<std::string> names = pixel_format_names(kPixelFormats);
   return names;
 }
 
 std::string v4l2_pixel_format_problem(const V4l2CameraOptions& options) {
-  for (const auto& f : kPixelFormats) {
-    if (options.pixel_format == f.name) {
-      return conversion_problem(f.source, options.width, options.height);
-    }
-  }
-  return "not a format this backend takes";
+  return pixel_format_problem(kPixelFormats, options.pixel_format, options.width, options.height);
 }
 
 V4l2Camera::V4l2Camera(V4l2CameraOptions options) : options_(std::move(options)) {

@@ -15,6 +15,8 @@
 #include <utility>
 #include <vector>
 
+#include "sim_scene_reference.hpp"
+
 // Every allocation through the global operator new is counted, so that a test can check that a
 // section of code allocates nothing (also under ASan, which intercepts the malloc underneath). The
 // array and nothrow forms forward to this one. Not inlined, or GCC sees malloc paired with operator
@@ -52,25 +54,7 @@ constexpr bool kSanitized = false;
 constexpr bool kSanitized = false;
 #endif
 
-struct Image {
-  int width = 0;
-  int height = 0;
-  std::vector<std::uint8_t> data;
-  std::uint8_t at(int u, int v) const { return data[static_cast<std::size_t>(v) * width + u]; }
-};
-
-Image render(SimScene& scene, std::uint64_t sequence, bool laser_on) {
-  const FrameFormat f = scene.format();
-  Image img{f.width, f.height, std::vector<std::uint8_t>(f.bytes())};
-  scene.render(sequence, laser_on, img.data);
-  return img;
-}
-
-SimGroundTruth truth_of(const SimScene& scene, std::uint64_t sequence, bool laser_on) {
-  SimGroundTruth truth;
-  scene.ground_truth(sequence, laser_on, truth);
-  return truth;
-}
+using namespace sim_reference;
 
 // A small scene keeps the tests quick.
 SimSceneOptions small_options() {
@@ -80,16 +64,6 @@ SimSceneOptions small_options() {
   o.calibration.camera.fx = o.calibration.camera.fy = 350;
   o.calibration.camera.cx = 159.5;
   o.calibration.camera.cy = 127.5;
-  return o;
-}
-
-// Only the laser, noiseless: the profile is the exact Gaussian quantised to 8 bit.
-SimSceneOptions laser_only(SimSceneOptions o) {
-  o.noise_sigma = 0;
-  o.texture_contrast = 0;
-  o.ambient = 0;
-  o.backscatter = 0;
-  o.laser_peak = 200;
   return o;
 }
 
@@ -125,11 +99,6 @@ double mean_abs_diff(const Image& a, const Image& b) {
   for (std::size_t i = 0; i < a.data.size(); ++i)
     sum += std::abs(a.data[i] - b.data[i]);
   return sum / static_cast<double>(a.data.size());
-}
-
-int finite_count(const std::vector<float>& v) {
-  return static_cast<int>(
-      std::count_if(v.begin(), v.end(), [](float x) { return std::isfinite(x); }));
 }
 
 // Checks the fitted peak against the truth in every column that has one; returns the columns used.
@@ -520,8 +489,6 @@ TEST(SimScene, SaturatesAt255) {
 
 // ---- Relief, vehicle motion and camera pose -------------------------------------------------
 
-using Vec3 = std::array<double, 3>;
-
 // A pier-like scene at small size: bumps and piles of 5-30 cm, the vehicle moving, the PTU
 // scanning (the same field of view as the 1280 x 1024 scenarios).
 SimSceneOptions relief_options() {
@@ -535,46 +502,6 @@ SimSceneOptions relief_options() {
   o.vehicle_speed_m_s = 0.4;
   o.seed = 5;
   return o;
-}
-
-double dot3(const Vec3& a, const Vec3& b) {
-  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-
-// The surface's frame in the world, from the options as the header documents them: the base
-// plane through (0, 0, distance_m), axes the world's x and y turned by tilt_y then tilt_x.
-struct SurfaceFrame {
-  Vec3 e1, e2, normal;  // normal toward the camera
-  Vec3 origin;
-};
-
-SurfaceFrame surface_frame(const SimSceneOptions& o) {
-  const double ax = o.tilt_x_deg * std::numbers::pi / 180,
-               ay = o.tilt_y_deg * std::numbers::pi / 180;
-  const double rx[9] = {1, 0, 0, 0, std::cos(ax), -std::sin(ax), 0, std::sin(ax), std::cos(ax)};
-  const double ry[9] = {std::cos(ay), 0, std::sin(ay), 0, 1, 0, -std::sin(ay), 0, std::cos(ay)};
-  double b[9];
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j)
-      b[i * 3 + j] = rx[i * 3] * ry[j] + rx[i * 3 + 1] * ry[3 + j] + rx[i * 3 + 2] * ry[6 + j];
-  }
-  return {{b[0], b[3], b[6]}, {b[1], b[4], b[7]}, {-b[2], -b[5], -b[8]}, {0, 0, o.distance_m}};
-}
-
-Vec3 to_camera(const SimCameraPose& pose, const Vec3& x) {
-  Vec3 out{};
-  for (int i = 0; i < 3; ++i)
-    out[i] = dot3({pose.rotation[i * 3], pose.rotation[i * 3 + 1], pose.rotation[i * 3 + 2]}, x) +
-             pose.translation[i];
-  return out;
-}
-
-Vec3 to_world(const SimCameraPose& pose, const Vec3& x) {
-  const Vec3 d{x[0] - pose.translation[0], x[1] - pose.translation[1], x[2] - pose.translation[2]};
-  Vec3 out{};
-  for (int i = 0; i < 3; ++i)
-    out[i] = pose.rotation[i] * d[0] + pose.rotation[3 + i] * d[1] + pose.rotation[6 + i] * d[2];
-  return out;
 }
 
 // Where the ray of pixel (u, v) first meets the relieved surface, by brute force: marched in
@@ -924,7 +851,7 @@ TEST(SimScene, LargeFramesRenderWithoutHeapAllocation) {
   const int u = 1024;
   ASSERT_TRUE(std::isfinite(truth.position[u]));
   const int v = static_cast<int>(std::lround(truth.position[u]));
-  const double fit = gaussian_peak(Image{2048, 1536, buffer}, u);
+  const double fit = gaussian_peak(Image{2048, 1536, 1, buffer}, u);
   EXPECT_NEAR(fit, truth.position[u], 1.0);
   EXPECT_GT(buffer[static_cast<std::size_t>(v) * 2048 + u], 120);
 

@@ -17,39 +17,14 @@
 #include <vector>
 
 #include "hal/sim/sim_scene.hpp"
+#include "sim_scene_reference.hpp"
 
 namespace laserline::hal {
 namespace {
 
 constexpr double kPi = std::numbers::pi;
 constexpr double kDegree = kPi / 180.0;
-using Vec3 = std::array<double, 3>;
-
-// A frame as render() writes it: `channels` interleaved samples a pixel (1 for mono and Bayer).
-struct Image {
-  int width = 0;
-  int height = 0;
-  int channels = 1;
-  std::vector<std::uint8_t> data;
-  int at(int u, int v, int c = 0) const {
-    return data[(static_cast<std::size_t>(v) * width + u) * channels + c];
-  }
-};
-
-Image render(SimScene& scene, std::uint64_t sequence, bool laser_on) {
-  const FrameFormat f = scene.format();
-  const auto pixels = static_cast<std::size_t>(f.width) * f.height;
-  Image img{f.width, f.height, static_cast<int>(scene.raw_bytes() / pixels),
-            std::vector<std::uint8_t>(scene.raw_bytes())};
-  scene.render(sequence, laser_on, img.data);
-  return img;
-}
-
-SimGroundTruth truth_of(const SimScene& scene, std::uint64_t sequence, bool laser_on) {
-  SimGroundTruth truth;
-  scene.ground_truth(sequence, laser_on, truth);
-  return truth;
-}
+using namespace sim_reference;
 
 SimGroundTruth truth_along(const SimScene& scene, std::uint64_t sequence, bool laser_on,
                            const SimLineFamily& lines) {
@@ -71,26 +46,11 @@ SimSceneOptions still_options() {
   return o;
 }
 
-// Only the laser, noiseless, on a surface of albedo 1: the line is the exact Gaussian, rounded.
-SimSceneOptions laser_only(SimSceneOptions o) {
-  o.noise_sigma = 0;
-  o.texture_contrast = 0;
-  o.ambient = 0;
-  o.backscatter = 0;
-  o.laser_peak = 200;
-  return o;
-}
-
 // The paper's sheet (projector above the camera) turned by `angle` about the optical axis: its
 // normal (0, 1, -tan(90 deg - beta)) rotated in the x-y plane.
 std::array<double, 4> turned_sheet(const LaserMount& mount, double angle) {
   const double t = std::tan(kPi / 2 - mount.angle_deg * kDegree);
   return {-std::sin(angle), std::cos(angle), -t, mount.baseline_m};
-}
-
-int finite_count(const std::vector<float>& v) {
-  return static_cast<int>(
-      std::count_if(v.begin(), v.end(), [](float x) { return std::isfinite(x); }));
 }
 
 bool same_floats(const std::vector<float>& a, const std::vector<float>& b) {
@@ -108,52 +68,12 @@ bool same_truth(const SimGroundTruth& a, const SimGroundTruth& b) {
 
 // ---- Geometry, from the options as the header documents them -----------------------------
 
-double dot3(const Vec3& a, const Vec3& b) {
-  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-
 // The ray (X/Z, Y/Z, 1) of image point (x, y).
 Vec3 ray_of(const CameraIntrinsics& cam, double x, double y) {
   return {(x - cam.cx) / cam.fx, (y - cam.cy) / cam.fy, 1.0};
 }
 
-// The surface's frame in the world: the base plane through (0, 0, distance_m), axes the world's
-// x and y turned by tilt_y then tilt_x, the normal toward the camera.
-struct SurfaceFrame {
-  Vec3 e1, e2, normal;
-  Vec3 origin;
-};
-
-SurfaceFrame surface_frame(const SimSceneOptions& o) {
-  const double ax = o.tilt_x_deg * kDegree, ay = o.tilt_y_deg * kDegree;
-  const double rx[9] = {1, 0, 0, 0, std::cos(ax), -std::sin(ax), 0, std::sin(ax), std::cos(ax)};
-  const double ry[9] = {std::cos(ay), 0, std::sin(ay), 0, 1, 0, -std::sin(ay), 0, std::cos(ay)};
-  double b[9];
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j)
-      b[i * 3 + j] = rx[i * 3] * ry[j] + rx[i * 3 + 1] * ry[3 + j] + rx[i * 3 + 2] * ry[6 + j];
-  }
-  return {{b[0], b[3], b[6]}, {b[1], b[4], b[7]}, {-b[2], -b[5], -b[8]}, {0, 0, o.distance_m}};
-}
-
-Vec3 to_camera(const SimCameraPose& pose, const Vec3& x) {
-  Vec3 out{};
-  for (int i = 0; i < 3; ++i)
-    out[i] = dot3({pose.rotation[i * 3], pose.rotation[i * 3 + 1], pose.rotation[i * 3 + 2]}, x) +
-             pose.translation[i];
-  return out;
-}
-
-Vec3 to_world(const SimCameraPose& pose, const Vec3& x) {
-  const Vec3 d{x[0] - pose.translation[0], x[1] - pose.translation[1], x[2] - pose.translation[2]};
-  Vec3 out{};
-  for (int i = 0; i < 3; ++i)
-    out[i] = pose.rotation[i] * d[0] + pose.rotation[3 + i] * d[1] + pose.rotation[6 + i] * d[2];
-  return out;
-}
-
-// Surface coordinates (x, y along e1, e2; height along the normal toward the camera) of a world
-// point.
+// A world point in the surface's frame: along e1, along e2, height toward the camera.
 Vec3 surface_coordinates(const SurfaceFrame& f, const Vec3& world) {
   const Vec3 d{world[0] - f.origin[0], world[1] - f.origin[1], world[2] - f.origin[2]};
   return {dot3(f.e1, d), dot3(f.e2, d), dot3(f.normal, d)};
