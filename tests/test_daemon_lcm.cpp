@@ -337,6 +337,64 @@ TEST_F(DaemonOverLcm, BackgroundDetectorFindsTheLineUnderStrongAmbientLight) {
   EXPECT_GE(subtracted, static_cast<int>(rx.profiles.size()) - 3);
 }
 
+// A projector beside the camera (`side: left`): the line runs down the image, the epipolar lines
+// are the rows, and every profile says so; its points, mapped to pixels as the message documents,
+// lie on the simulator's exact line and triangulate to the lit surface.
+TEST_F(DaemonOverLcm, ProjectorBesideTheCameraSearchesAlongTheRows) {
+  std::string config_text = test_config();
+  config_text.replace(config_text.find("angle_deg: 80,"), 14, "angle_deg: 80, side: left,");
+  config_text.replace(config_text.find("detector: {name: maxvalue, maxvalue: {threshold: 60}}"), 53,
+                      "detector: {name: background}");
+  const Received rx = run_daemon(config_text, 2.5, SIGTERM);
+  ASSERT_GE(rx.profiles.size(), 40u / kSlowdown) << daemon_log();
+
+  laserline::hal::SimScene scene = scene_of(config_text);
+  // The simulator draws the line along the same rows: its truth is the column on each row.
+  ASSERT_EQ(scene.lines().line_step, (std::array<double, 2>{0.0, 1.0}));
+  ASSERT_EQ(scene.lines().count, 480);
+  laserline::hal::SimGroundTruth truth;
+  std::int64_t valid = 0, correct = 0, truth_rows = 0, not_triangulated = 0;
+  double worst_depth_m = 0;
+  for (const auto& p : rx.profiles) {
+    EXPECT_EQ(p.search_axis, static_cast<int>(laserline::profile_t::SEARCH_ROWS));
+    EXPECT_EQ(p.search_line_step[0], 0.0);
+    EXPECT_EQ(p.search_line_step[1], 1.0);
+    EXPECT_EQ(p.search_along[0], 1.0);
+    EXPECT_EQ(p.search_along[1], 0.0);
+    scene.ground_truth(static_cast<std::uint64_t>(p.sequence), true, truth);
+    ASSERT_EQ(truth.position.size(), 480u);
+    for (float column : truth.position)
+      truth_rows += std::isfinite(column) ? 1 : 0;
+    for (const auto& pt : p.points) {
+      if (!pt.valid) continue;
+      ++valid;
+      // pixel = origin + u * line_step + v * along: row u, column v.
+      const double x = p.search_origin[0] + pt.u * p.search_line_step[0] + pt.v * p.search_along[0];
+      const double y = p.search_origin[1] + pt.u * p.search_line_step[1] + pt.v * p.search_along[1];
+      ASSERT_GE(y, 0);
+      ASSERT_LT(y, 480);
+      const auto row = static_cast<std::size_t>(std::lround(y));
+      const float expected = truth.position[row];
+      if (!std::isfinite(expected) || std::abs(x - expected) > 2.0) continue;
+      ++correct;
+      if (std::isfinite(pt.xyz[2])) {
+        worst_depth_m =
+            std::max(worst_depth_m, std::abs(static_cast<double>(pt.xyz[2]) - truth.depth_m[row]));
+      } else {
+        ++not_triangulated;
+      }
+    }
+  }
+  EXPECT_GE(static_cast<double>(correct), 0.95 * static_cast<double>(truth_rows));
+  EXPECT_GE(static_cast<double>(correct), 0.98 * static_cast<double>(valid));
+  EXPECT_EQ(not_triangulated, 0);
+  EXPECT_LT(worst_depth_m, 0.01);
+  RecordProperty(
+      "correct_of_valid_of_truth",
+      std::to_string(correct) + " / " + std::to_string(valid) + " / " + std::to_string(truth_rows));
+  RecordProperty("worst_depth_error_m", std::to_string(worst_depth_m));
+}
+
 TEST_F(DaemonOverLcm, AlternatingLaserSwitchesPerFrameAndSigintStops) {
   const Received rx = run_daemon(test_config("mode: alternate"), 2.0, SIGINT);
   ASSERT_GE(rx.profiles.size(), 40u / kSlowdown);
