@@ -3,11 +3,13 @@
 // aravis backend receives simulated laser frames over the real GVCP/GVSP network path.
 //
 //   fake_gige_scanner --serial LL01 --width 640 --height 480 [--pins FILE]
+//                     [--lost-per-thousand N]
 //
 // The laser in each frame is the level the stand-in GPIO chip (tests/gpiochip_shim.cpp) logged
 // last for line 0 in FILE when the frame is filled (its exposure): the image shows what the pin
 // really did, not what the daemon meant, so a test can check the daemon's per-frame laser state
-// against the light. Without --pins the laser is always on. Runs until SIGTERM/SIGINT.
+// against the light. Without --pins the laser is always on. --lost-per-thousand: stream packets
+// the camera leaves out, as arv-fake-gv-camera's -r. Runs until SIGTERM/SIGINT.
 #include <arv.h>
 #include <signal.h>
 
@@ -85,6 +87,7 @@ void on_signal(int) {
 int main(int argc, char** argv) {
   std::string serial = "LL01";
   Scanner scanner;
+  double lost_per_thousand = 0;
   scanner.width = 640;
   scanner.height = 480;
   for (int i = 1; i + 1 < argc; i += 2) {
@@ -97,6 +100,8 @@ int main(int argc, char** argv) {
       scanner.height = std::atoi(argv[i + 1]);
     } else if (key == "--pins") {
       scanner.pins = argv[i + 1];
+    } else if (key == "--lost-per-thousand") {
+      lost_per_thousand = std::atof(argv[i + 1]);
     } else {
       std::fprintf(stderr, "fake_gige_scanner: unknown argument '%s'\n", key.c_str());
       return 2;
@@ -117,6 +122,9 @@ int main(int argc, char** argv) {
   if (camera == nullptr || !arv_gv_fake_camera_is_running(camera)) {
     std::fprintf(stderr, "fake_gige_scanner: cannot serve on 127.0.0.1\n");
     return 1;
+  }
+  if (lost_per_thousand > 0) {
+    g_object_set(camera, "gvsp-lost-ratio", lost_per_thousand / 1000.0, nullptr);
   }
   scanner.camera = arv_gv_fake_camera_get_fake_camera(camera);
   arv_fake_camera_set_fill_pattern(scanner.camera, fill, &scanner);
