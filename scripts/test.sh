@@ -9,3 +9,5 @@ scripts/build.sh default
 # A test that fails runs once more: on a shared host a process can be stalled for a quarter of
 # a second, which those timing judgements see; a real fault fails both times.
 ctest --preset default --timeout 300 --repeat until-pass:2
+# The code that takes outside input again under ASan+UBSan, the threaded code under TSan.
+scripts/sanitize.sh
