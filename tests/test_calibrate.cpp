@@ -498,8 +498,56 @@ TEST_F(Calibrate, WritesACalibrationFileTheDaemonReads) {
   for (double z : {0.5, 1.0, 2.0}) {
     EXPECT_NEAR(-(m[2] * z + m[3]) / m[1], -(want[2] * z + want[3]) / want[1], 1e-9) << z;
   }
-  EXPECT_DOUBLE_EQ(back.laser.sheet_width_m, 0.003);
+  ASSERT_TRUE(r.sheet_width_measured);
+  EXPECT_NEAR(back.laser.sheet_width_m, r.calibration.laser.sheet_width_m, 1e-12);
   fs::remove(path);
+}
+
+// The sheet width written is the one the camera sees: the line's full width at half maximum
+// across it, times its depth over f. The simulator draws the sheet (3 mm, projected f w / Z) as
+// a Gaussian and blurs it by a Gaussian of blur_px more (sigmas add in squares); at the views'
+// depths of 0.8 - 1.4 m that is 3 % - 6 % wider than the sheet.
+TEST_F(Calibrate, MeasuresTheSheetWidthTheCameraSees) {
+  tools::PlaneCalibrationOptions o = board_options();
+  o.intrinsics = true_calibration().camera;
+  const auto r = tools::calibrate_laser_plane(*views_, o);
+  ASSERT_TRUE(r.sheet_width_measured);
+  const hal::SimSceneOptions sim;
+  const double f = o.intrinsics->fy, sheet = sim.calibration.laser.sheet_width_m;
+  const double blur_m =
+      2.3548200450309493 * sim.blur_px * 0.5 * (r.depth_min_m + r.depth_max_m) / f;
+  const double seen = std::hypot(sheet, blur_m);
+  std::printf(
+      "sheet width measured %.3f mm over %d points (drawn %.3f mm, seen %.3f mm), depths "
+      "%.3f - %.3f m\n",
+      1000 * r.calibration.laser.sheet_width_m, r.width_points, 1000 * sheet, 1000 * seen,
+      r.depth_min_m, r.depth_max_m);
+  EXPECT_NEAR(r.calibration.laser.sheet_width_m, seen, 0.05 * seen);
+  EXPECT_GT(r.width_points, r.inliers / 2);
+  EXPECT_GT(r.depth_min_m, 0.7);
+  EXPECT_LT(r.depth_max_m, 1.6);
+
+  // A thinner sheet, as a desktop scanner's: measured as thin (blur included), not the prior's.
+  std::vector<tools::CalibrationView> thin;
+  for (std::size_t i = 0; i < kLineViews; ++i) {
+    hal::SimSceneOptions so = view_options(kPoses[i]);
+    so.calibration.laser.sheet_width_m = 0.0012;
+    hal::SimScene scene(so);
+    thin.push_back({"thin" + std::to_string(i), render(scene, true), render(scene, false)});
+  }
+  const auto t = tools::calibrate_laser_plane(thin, o);
+  ASSERT_TRUE(t.sheet_width_measured);
+  const double thin_seen = std::hypot(0.0012, blur_m);
+  std::printf("thin sheet: measured %.3f mm (drawn 1.2 mm, seen %.3f mm)\n",
+              1000 * t.calibration.laser.sheet_width_m, 1000 * thin_seen);
+  EXPECT_NEAR(t.calibration.laser.sheet_width_m, thin_seen, 0.1 * thin_seen);
+
+  // Not measured when the user gives the width.
+  o.measure_sheet_width = false;
+  o.laser_prior.sheet_width_m = 0.004;
+  const auto given = tools::calibrate_laser_plane(*views_, o);
+  EXPECT_FALSE(given.sheet_width_measured);
+  EXPECT_DOUBLE_EQ(given.calibration.laser.sheet_width_m, 0.004);
 }
 
 TEST_F(Calibrate, BadViewsGiveOneLineErrors) {

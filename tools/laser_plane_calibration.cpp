@@ -90,6 +90,9 @@ struct BoardView {
   double offset = 0;
   std::vector<cv::Point2d> laser_px;  // undistorted pixel coordinates of the line's points
   std::vector<cv::Vec3d> laser_xyz;   // on the board plane, camera frame, metres
+  // Per point: the sheet width its line's full width at half maximum gives at its depth
+  // (metres; NaN where it could not be measured, e.g. a clipped core).
+  std::vector<double> sheet_width_m;
   // Without a laser-off image: where the line was found and taken out before the corner search
   // (empty: no line found). The detector's points are kept there only.
   bool gated = false;
@@ -296,6 +299,63 @@ double sample(const cv::Mat& image, double x, double y) {
   return (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
 }
 
+// The line's full width at half maximum across it at `p`, in pixels, along the unit `normal`:
+// its peak within a pixel of `p`, its floor the lower of the two sides where the profile stops
+// falling. NaN where the core is clipped (at or above `saturation`: the width at half of a
+// clipped height is too wide), or where the profile does not fall to half on both sides within
+// kMaxHalfWidthPx.
+double full_width_at_half_maximum(const cv::Mat& image, cv::Point2d p, cv::Point2d normal,
+                                  double saturation) {
+  constexpr double kStep = 0.25;
+  constexpr int kReach = static_cast<int>(kMaxHalfWidthPx / kStep);
+  auto at = [&](int k) {
+    const cv::Point2d q = p + normal * (k * kStep);
+    if (q.x < 0 || q.y < 0 || q.x > image.cols - 2 || q.y > image.rows - 2) {
+      return std::numeric_limits<double>::quiet_NaN();
+    }
+    return sample(image, q.x, q.y);
+  };
+  int centre = 0;
+  double peak = -1;
+  for (int k = -static_cast<int>(1 / kStep); k <= static_cast<int>(1 / kStep); ++k) {
+    const double v = at(k);
+    if (v > peak) {
+      peak = v;
+      centre = k;
+    }
+  }
+  if (!(peak >= 0) || peak >= saturation) return std::numeric_limits<double>::quiet_NaN();
+  // Each side's floor: where the profile stops falling (beyond lies other light).
+  double floor_level = peak;
+  for (const int sign : {-1, 1}) {
+    double lowest = peak;
+    for (int k = 1; k <= kReach; ++k) {
+      const double v = at(centre + sign * k);
+      if (!(v <= lowest + 0.5)) break;  // rising again, or off the image
+      lowest = std::min(lowest, v);
+    }
+    floor_level = std::min(floor_level, lowest);
+  }
+  if (!(peak - floor_level >= kMinRise)) return std::numeric_limits<double>::quiet_NaN();
+  const double half = 0.5 * (peak + floor_level);
+  double width = 0;
+  for (const int sign : {-1, 1}) {
+    double previous = peak, crossing = std::numeric_limits<double>::quiet_NaN();
+    for (int k = 1; k <= kReach; ++k) {
+      const double v = at(centre + sign * k);
+      if (std::isnan(v)) break;
+      if (v <= half) {
+        crossing = (k - 1 + (previous - half) / std::max(previous - v, 1e-9)) * kStep;
+        break;
+      }
+      previous = v;
+    }
+    if (std::isnan(crossing)) return crossing;
+    width += crossing;
+  }
+  return width;
+}
+
 void find_laser(BoardView& bv, const ViewImages& images, const PlaneCalibrationOptions& o,
                 const hal::CameraIntrinsics& cam, LineFinder& finder, ViewReport& report) {
   // The board's squares' outline in the (distorted) image.
@@ -359,6 +419,16 @@ void find_laser(BoardView& bv, const ViewImages& images, const PlaneCalibrationO
   cv::undistortPoints(raw, undistorted, k, dist, cv::noArray(), k);
 
   const std::vector<std::size_t> in = line_inliers(undistorted, kLineInlierPx);
+  // The line's direction in the image, for its width across it.
+  cv::Point2d across(0, 1);
+  if (in.size() >= 2) {
+    std::vector<cv::Point2f> on_line;
+    for (std::size_t i : in)
+      on_line.emplace_back(static_cast<float>(raw[i].x), static_cast<float>(raw[i].y));
+    cv::Vec4f fitted;
+    cv::fitLine(on_line, fitted, cv::DIST_L2, 0, 0.01, 0.01);
+    across = cv::Point2d(-fitted[1], fitted[0]);
+  }
   for (std::size_t i : in) {
     const cv::Point2d& u = undistorted[i];
     const cv::Vec3d ray((u.x - cam.cx) / cam.fx, (u.y - cam.cy) / cam.fy, 1.0);
@@ -366,6 +436,10 @@ void find_laser(BoardView& bv, const ViewImages& images, const PlaneCalibrationO
     if (!(z > 0)) continue;
     bv.laser_px.push_back(u);
     bv.laser_xyz.push_back(ray * z);
+    // The sheet's projected width is f l_w / Z (pipeline/geometry.hpp), f along the normal.
+    const double f = std::hypot(cam.fx * across.x, cam.fy * across.y);
+    bv.sheet_width_m.push_back(
+        full_width_at_half_maximum(image, raw[i], across, o.frontend.saturation_level) * z / f);
   }
   report.laser_points = static_cast<int>(bv.laser_px.size());
 }
@@ -1160,6 +1234,9 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
   double sq_mm = 0, sq_px = 0;
   int inliers = 0;
   std::vector<double> view_sq(boards.size(), 0.0);
+  std::vector<double> widths;  // of the inliers whose width could be measured
+  result.depth_min_m = std::numeric_limits<double>::infinity();
+  result.depth_max_m = 0;
   for (std::size_t i = 0, at = 0; i < boards.size(); ++i) {
     const BoardView& b = boards[i];
     // The plane through the camera centre containing the 3-D line (laser plane x board plane).
@@ -1171,6 +1248,9 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
       const double mm = 1000.0 * std::abs(plane.normal.dot(b.laser_xyz[j]) + plane.e);
       const cv::Point2d& u = b.laser_px[j];
       const double px = std::abs(m_px[0] * u.x + m_px[1] * u.y + m_px[2]) / m_norm;
+      if (std::isfinite(b.sheet_width_m[j])) widths.push_back(b.sheet_width_m[j]);
+      result.depth_min_m = std::min(result.depth_min_m, b.laser_xyz[j][2]);
+      result.depth_max_m = std::max(result.depth_max_m, b.laser_xyz[j][2]);
       sq_mm += mm * mm;
       sq_px += px * px;
       view_sq[i] += mm * mm;
@@ -1193,6 +1273,13 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
   hal::LaserMount& laser = result.calibration.laser;
   laser = o.laser_prior;
   laser.plane = std::array<double, 4>{plane.normal[0], plane.normal[1], plane.normal[2], plane.e};
+  // The sheet's width as the camera sees it (its thickness, blurred by the optics): the
+  // front-end's band-pass is made for it. A third of the inliers must give it.
+  result.width_points = static_cast<int>(widths.size());
+  if (o.measure_sheet_width && 3 * widths.size() >= static_cast<std::size_t>(inliers)) {
+    result.sheet_width_measured = true;
+    laser.sheet_width_m = std::clamp(median(widths), 1e-5, 0.1);
+  }
   // The paper's model Y = -d + tan(90 deg - beta) Z with the sheet along x, turned to the side
   // of the camera the projector is on: the axis the plane's normal leans to most (y above or
   // below, x left or right; e > 0 gives the sign). d where the plane crosses that axis, beta
@@ -1234,6 +1321,10 @@ void write_calibration_file(const std::string& path, const PlaneCalibrationResul
                "%.3f px, max %.3f px\n",
                r.inliers, r.points, r.plane_rms_mm, r.plane_max_mm, r.plane_rms_px, r.plane_max_px);
   std::fprintf(f,
+               "# the line was seen at depths %.3f to %.3f m: detector.frontend.min_depth_m and "
+               "max_depth_m must cover the working range\n",
+               r.depth_min_m, r.depth_max_m);
+  std::fprintf(f,
                "camera: {width: %d, height: %d, fx: %.10g, fy: %.10g, cx: %.10g, cy: %.10g, "
                "distortion: [%.10g, %.10g, %.10g, %.10g, %.10g]}\n",
                c.width, c.height, c.fx, c.fy, c.cx, c.cy, c.distortion[0], c.distortion[1],
@@ -1243,6 +1334,12 @@ void write_calibration_file(const std::string& path, const PlaneCalibrationResul
                r.fits_baseline_model ? "" : " (clamped: the plane does not fit that model)");
   std::fprintf(f, "  baseline_m: %.10g\n  angle_deg: %.10g\n  side: %s\n", l.baseline_m,
                l.angle_deg, hal::to_string(l.side));
+  if (r.sheet_width_measured) {
+    std::fprintf(f,
+                 "  # measured: the line's full width at half maximum times its depth over f, "
+                 "median of %d points\n",
+                 r.width_points);
+  }
   std::fprintf(f, "  sheet_width_m: %.10g\n", l.sheet_width_m);
   std::fprintf(f, "  # a*X + b*Y + c*Z + e = 0, camera frame, metres; (a, b, c) a unit vector\n");
   std::fprintf(f, "  plane: [%.12g, %.12g, %.12g, %.12g]\n", p[0], p[1], p[2], p[3]);

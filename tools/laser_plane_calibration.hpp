@@ -46,9 +46,13 @@ struct PlaneCalibrationOptions {
   // Distortion terms estimated with the intrinsics: 0 (none), 2 (k1 k2), 4 (k1 k2 p1 p2) or
   // 5 (k1 k2 p1 p2 k3).
   int distortion_terms = 5;
-  // The nominal mount (design values): tells the detector where on the image the line can be,
-  // and gives sheet_width_m for the output. The calibrated plane replaces its plane.
+  // The nominal mount (design values): tells the detector where on the image the line can be.
+  // The calibrated plane replaces its plane; its sheet_width_m is kept only when
+  // measure_sheet_width is false (or too few points give a width).
   hal::LaserMount laser_prior;
+  // The sheet width written is measured on the views: the line's full width at half maximum
+  // across it, times its depth over the focal length, the median over the plane's inliers.
+  bool measure_sheet_width = true;
   std::string detector = "fir";
   pipeline::FrontendOptions frontend = wide_search();
   // Which light of colour images is the laser's: the line is searched there, the board in luma.
@@ -105,6 +109,11 @@ struct PlaneCalibrationResult {
   // calibration.laser); false when the plane cannot be written that way within the calibration
   // file's limits (then clamped).
   bool fits_baseline_model = true;
+  // The sheet width in calibration.laser is the median of width_points measurements (see
+  // PlaneCalibrationOptions::measure_sheet_width); false: the prior's.
+  bool sheet_width_measured = false;
+  int width_points = 0;
+  double depth_min_m = 0, depth_max_m = 0;  // where the inliers lie (their Z)
 };
 
 // Runs the whole calibration. Views that cannot contribute (no board, no line on it, ...) are

@@ -43,7 +43,9 @@ constexpr const char* kUsage =
     "                        section, else 0.25 m, 80 deg, 0.003 m, above): where the detector\n"
     "                        looks for the line. SIDE: above, below, left or right of the\n"
     "                        camera (left and right: the line runs down the image).\n"
-    "                        sheet_width_m is written to the output as is.\n"
+    "                        The sheet width written is measured on the views (the line's\n"
+    "                        width at half maximum times its depth over f) unless\n"
+    "                        --sheet-width-m is given.\n"
     "  --output FILE         the calibration file to write (camera + laser with `plane`)\n"
     "  INPUT                 laser-on images, files or folders (sorted by name), one per pose\n"
     "\n"
@@ -69,7 +71,7 @@ double parse_number(const std::string& option, const char* text, double min, dou
   return value;
 }
 
-void print_report(const laserline::tools::PlaneCalibrationResult& r) {
+void print_report(const laserline::tools::PlaneCalibrationResult& r, bool width_given) {
   const auto& c = r.calibration.camera;
   std::printf("views:\n");
   std::printf("  %-40s %8s %8s %8s %7s %7s %7s %8s  %s\n", "view", "corn.px", "dist.m", "tilt.deg",
@@ -115,6 +117,21 @@ void print_report(const laserline::tools::PlaneCalibrationResult& r) {
               1000.0 * r.calibration.laser.baseline_m, r.calibration.laser.angle_deg,
               laserline::hal::to_string(r.calibration.laser.side),
               r.fits_baseline_model ? "" : " (clamped: the plane does not fit that model)");
+  if (r.sheet_width_measured) {
+    std::printf("  sheet width %.3f mm (the line's width at half maximum, median of %d points)\n",
+                1000.0 * r.calibration.laser.sheet_width_m, r.width_points);
+  } else if (width_given) {
+    std::printf("  sheet width %.3f mm as given\n", 1000.0 * r.calibration.laser.sheet_width_m);
+  } else {
+    std::printf(
+        "  sheet width %.3f mm, the nominal one: only %d of the %d points gave a width (clipped "
+        "or blurred into their surroundings)\n",
+        1000.0 * r.calibration.laser.sheet_width_m, r.width_points, r.inliers);
+  }
+  std::printf(
+      "  the line was seen at depths %.3f to %.3f m: detector.frontend.min_depth_m and "
+      "max_depth_m must cover the working range\n",
+      r.depth_min_m, r.depth_max_m);
   std::printf("residuals over %d of %d laser points (views' lines):\n", r.inliers, r.points);
   std::printf("  distance to the plane: RMS %.3f mm, max %.3f mm\n", r.plane_rms_mm,
               r.plane_max_mm);
@@ -222,7 +239,10 @@ int main(int argc, char** argv) {
   }
   if (baseline) options.laser_prior.baseline_m = *baseline;
   if (angle) options.laser_prior.angle_deg = *angle;
-  if (sheet_width) options.laser_prior.sheet_width_m = *sheet_width;
+  if (sheet_width) {
+    options.laser_prior.sheet_width_m = *sheet_width;
+    options.measure_sheet_width = false;
+  }
   if (side_given) options.laser_prior.side = side;
   options.on_skip = [](const std::string& message) {
     std::fprintf(stderr, "laserline-calibrate: left out %s\n", message.c_str());
@@ -250,7 +270,7 @@ int main(int argc, char** argv) {
       views.push_back(std::move(v));
     }
     const auto result = laserline::tools::calibrate_laser_plane(views, options);
-    print_report(result);
+    print_report(result, sheet_width.has_value());
     std::string provenance = std::to_string(views.size()) + " views, board " +
                              std::to_string(options.board_columns) + "x" +
                              std::to_string(options.board_rows) + " inner corners, square " +
