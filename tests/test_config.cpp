@@ -175,8 +175,23 @@ TEST(Config, RawFrameOptions) {
   EXPECT_EQ(error_of("lcm:\n  image_roi: [0, 0, 0, 10]\n"),
             "test.yaml:2: lcm.image_roi: width and height must be > 0");
   EXPECT_EQ(error_of("lcm:\n  image_roi: [1000, 0, 400, 10]\n"),
-            "test.yaml: lcm.image_roi: [1000, 0, 400, 10] is not inside the camera's "
+            "test.yaml:2: lcm.image_roi: [1000, 0, 400, 10] is not inside the calibration's "
             "1280x1024 frame");
+  // x + width overflowed a 32-bit int and passed: the encoder then read far outside the frame
+  // (a crash) or allocated 8 GB.
+  EXPECT_EQ(error_of("lcm:\n  image_roi: [2147483647, 0, 16, 16]\n"),
+            "test.yaml:2: lcm.image_roi: [2147483647, 0, 16, 16] is not inside the calibration's "
+            "1280x1024 frame");
+  EXPECT_EQ(error_of("lcm:\n  image_roi: [1, 0, 2147483647, 16]\n"),
+            "test.yaml:2: lcm.image_roi: [1, 0, 2147483647, 16] is not inside the calibration's "
+            "1280x1024 frame");
+  EXPECT_EQ(error_of("lcm:\n  image_roi: [1e300, 0, 16, 16]\n"),
+            "test.yaml:2: lcm.image_roi: [1e+300, 0, 16, 16] is not inside the calibration's "
+            "1280x1024 frame");
+  EXPECT_EQ(error_of("lcm:\n  image_roi: [1272, 1020, 8, 4]\n  image_downscale: 4\n"), "")
+      << "the last pixels of the frame, one downscaled row";
+  EXPECT_EQ(error_of("lcm:\n  image_roi: [1272, 1020, 8, 3]\n  image_downscale: 4\n"),
+            "test.yaml: lcm.image_downscale: 4 leaves no pixel of a 8x3 region");
   DaemonConfig c = parse_config(
       hal::load_yaml_text("lcm: {image_every_n: 1, image_max_rate_hz: 10, image_compression: "
                           "zlib, image_roi: [8, 4, 640, 480], image_downscale: 2}\n",
@@ -188,6 +203,66 @@ TEST(Config, RawFrameOptions) {
   EXPECT_EQ(c.raw_frames.roi_x, 8);
   EXPECT_EQ(c.raw_frames.roi_height, 480);
   EXPECT_EQ(c.raw_frames.downscale, 2);
+}
+
+// --check-config runs what the start runs: a configuration it passes must start.
+TEST(Config, CalibrationTooSmallForTheDetectorIsRefusedAtTheCheck) {
+  const std::string small = "calibration: {camera: {width: 16, height: 16, fx: 20, fy: 20}}\n";
+  EXPECT_EQ(error_of(small),
+            "test.yaml: detector background: frames of 16x16 (calibration.camera): frame smaller "
+            "than 64x4 pixels");
+  EXPECT_EQ(error_of("calibration: {camera: {width: 64, height: 48, fx: 80, fy: 80}}\n")
+                .rfind("test.yaml: detector background: frames of 64x48 (calibration.camera): "
+                       "MotionEstimator::reset: image 64x48 is too small for 4 pyramid levels",
+                       0),
+            0u);
+  EXPECT_EQ(error_of(small + "detector: {name: maxvalue}\n"), "") << "maxvalue takes any size";
+}
+
+TEST(Config, FrameMemoryIsWithinTheStatedLimit) {
+  const std::string huge =
+      "calibration: {camera: {width: 16384, height: 16384, fx: 20000, fy: "
+      "20000}}\npipeline: {frame_slots: 1024}\n";
+  EXPECT_EQ(error_of(huge),
+            "test.yaml: pipeline.frame_memory_limit_mb: frames of 16384x16384 need 276741.3 MB "
+            "(pipeline.frame_slots 1024, image_slots 2, profile_slots 16 and the raw-frame "
+            "buffers), more than the limit of 1024 MB: fewer slots, a smaller camera or a higher "
+            "limit");
+  EXPECT_EQ(error_of("pipeline: {frame_memory_limit_mb: 8}\n"),
+            "test.yaml:1: pipeline.frame_memory_limit_mb: must be between 16 and 1048576, got 8");
+
+  // The default configuration's frame path, then limits just below and above what it needs.
+  DaemonConfig config = builtin_config();
+  Backends backends = create_backends(config);
+  const hal::FrameFormat format = backends.camera->format();
+  const std::uint64_t buffers = frame_path_memory_bytes(
+      config, format, backends.detector->max_points(format.width, format.height));
+  const std::uint64_t frame = format.bytes();
+  EXPECT_GT(buffers, (config.frame_slots + config.image_slots + 2) * frame);
+  EXPECT_LT(buffers, (config.frame_slots + config.image_slots + 10) * frame);
+  // A detector as create_backends() makes it, not yet sized.
+  auto fresh_detector = [&] {
+    return pipeline::make_detector(config.detector, config.detector_options);
+  };
+  config.frame_memory_limit_mb = static_cast<std::int64_t>(buffers / 1'000'000);
+  try {
+    check_frame_path(config, format, *fresh_detector());
+    FAIL() << "frame buffers of " << buffers << " bytes above the limit";
+  } catch (const hal::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("more than the limit of"), std::string::npos);
+  }
+  // The detector's buffers count too: the background detector's are several megabytes.
+  config.frame_memory_limit_mb = static_cast<std::int64_t>(buffers / 1'000'000) + 1;
+  try {
+    check_frame_path(config, format, *fresh_detector());
+    FAIL() << "the detector's buffers must count";
+  } catch (const hal::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find(" for the detector background, more than the limit of"),
+              std::string::npos)
+        << e.what();
+  }
+  config.frame_memory_limit_mb = static_cast<std::int64_t>(buffers / 1'000'000) + 64;
+  EXPECT_NO_THROW(check_frame_path(config, format, *fresh_detector()));
 }
 
 TEST(Config, LcmChannelsAndUrl) {
