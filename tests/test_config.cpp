@@ -647,7 +647,8 @@ TEST(Config, LaserSheetOutOfViewIsOneLine) {
 TEST(Config, LaserSheetOutOfViewNamesTheCalibrationFile) {
   const auto dir = std::filesystem::temp_directory_path() / "laserline_test_config_sheet";
   std::filesystem::create_directories(dir);
-  std::ofstream(dir / "calib.yaml") << "laser: {angle_deg: 150}\n";
+  std::ofstream(dir / "calib.yaml") << "camera: {width: 1280, height: 1024, fx: 1400, fy: 1400}\n"
+                                       "laser: {angle_deg: 150}\n";
   std::ofstream(dir / "daemon.yaml") << "calibration: calib.yaml\n";
   try {
     DaemonConfig config = load_config_file((dir / "daemon.yaml").string());

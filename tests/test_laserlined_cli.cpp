@@ -104,7 +104,9 @@ TEST_F(LaserlinedCli, CheckConfigValidatesWithoutRunning) {
   EXPECT_EQ(builtin.exit_code, 0) << builtin.out;
 
   // A calibration whose laser sheet lies behind the camera is refused, naming its file.
-  const std::string calib = file("calib.yaml", "laser: {plane: [0, 0.5, 0.866, 0.25]}\n");
+  const std::string calib = file("calib.yaml",
+                                 "camera: {width: 1280, height: 1024, fx: 1400, fy: 1400}\n"
+                                 "laser: {plane: [0, 0.5, 0.866, 0.25]}\n");
   const CliResult behind =
       run("--check-config --config " + file("behind.yaml", "calibration: " + calib + "\n"));
   EXPECT_EQ(behind.exit_code, 2) << behind.out;
