@@ -11,6 +11,12 @@
 #include "daemon/raw_frame_encoder.hpp"
 #include "pipeline/profile.hpp"
 
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+// The sanitizer runtime's count (declared in <sanitizer/allocator_interface.h>, which GCC 12 on
+// Debian does not install).
+extern "C" std::size_t __sanitizer_get_current_allocated_bytes();
+#endif
+
 namespace laserline::daemon {
 
 namespace {
@@ -71,10 +77,15 @@ std::string megabytes(std::uint64_t bytes) {
   return text;
 }
 
-// Bytes the heap holds now (mmap'ed blocks included).
+// Bytes the heap holds now (mmap'ed blocks included). A sanitizer's allocator replaces glibc's,
+// whose counts then stay still: ask the sanitizer.
 std::uint64_t heap_in_use() {
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+  return __sanitizer_get_current_allocated_bytes();
+#else
   const struct mallinfo2 info = mallinfo2();
   return info.uordblks + info.hblkhd;
+#endif
 }
 
 // The sheet as the calibration gives it: the plane, or the mount it is computed from.

@@ -840,6 +840,24 @@ TEST_F(LaserlineExtract, BadArgumentsAndConfiguration) {
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_EQ(r.out, "laserline-extract: " + path("badcalib.yaml") +
                        ":1: camera.fx: must be between 1 and 1e+06, got -1\n");
+
+  // A directory, a device or an empty file is no calibration or configuration: before, --calib
+  // on a directory extracted with the default camera.
+  std::ofstream(path("empty.yaml")) << "";
+  for (const auto& [args, line] : std::vector<std::pair<std::string, std::string>>{
+           {"--calib " + dir_.string(),
+            dir_.string() +
+                ": is a directory, not a file: give a configuration or calibration file"},
+           {"--calib " + path("empty.yaml"),
+            path("empty.yaml") + ": has no keys (empty, or only comments)"},
+           {"--calib " + calib_ + " --config /dev/null",
+            "/dev/null: is a character device, not a file: give a configuration or calibration "
+            "file"}}) {
+    r = run_command(std::string(LASERLINE_EXTRACT_PATH) + " " + args +
+                    " --detector maxvalue --output " + path("p.csv") + " x.png");
+    EXPECT_EQ(r.exit_code, 2) << args;
+    EXPECT_EQ(r.out, "laserline-extract: " + line + "\n");
+  }
 }
 
 // The configuration's detector options reach the detector: a threshold above the laser's peak
