@@ -259,14 +259,16 @@ std::string YamlMap::location(const YAML::Node& at) const {
 }
 
 void YamlMap::fail(const std::string& key, const std::string& problem) const {
-  YAML::Node at = has(key) ? node_[key] : node_;
   if (!has(key) && node_.IsMap()) {
-    // A value left empty is marked where the next token is: name the key's line instead.
+    // A value left empty is marked where the next token is: name the key's line instead. (A
+    // YAML::Node is a reference: assigning one to another would write into the document.)
     for (const auto& entry : node_) {
-      if (entry.first.IsScalar() && entry.first.Scalar() == key) at = entry.first;
+      if (entry.first.IsScalar() && entry.first.Scalar() == key) {
+        throw ConfigError(location(entry.first) + key_path(key) + ": " + problem);
+      }
     }
   }
-  throw ConfigError(location(at) + key_path(key) + ": " + problem);
+  throw ConfigError(location(has(key) ? node_[key] : node_) + key_path(key) + ": " + problem);
 }
 
 bool YamlMap::has(const std::string& key) const {
