@@ -36,38 +36,12 @@ Backends create_backends(DaemonConfig& config) {
   }
   config.camera_options.finish();
 
-  const hal::FrameFormat format = b.camera->format();
-  if (format.width != config.calibration.camera.width ||
-      format.height != config.calibration.camera.height) {
-    throw hal::ConfigError(config.source + ": calibration.camera: size " +
-                           std::to_string(config.calibration.camera.width) + "x" +
-                           std::to_string(config.calibration.camera.height) +
-                           " differs from the camera's " + std::to_string(format.width) + "x" +
-                           std::to_string(format.height));
-  }
-
-  const RawFrameOptions& raw = config.raw_frames;
-  if (raw.roi_width > 0 &&
-      (raw.roi_x + raw.roi_width > format.width || raw.roi_y + raw.roi_height > format.height)) {
-    throw hal::ConfigError(config.source + ": lcm.image_roi: [" + std::to_string(raw.roi_x) + ", " +
-                           std::to_string(raw.roi_y) + ", " + std::to_string(raw.roi_width) + ", " +
-                           std::to_string(raw.roi_height) + "] is not inside the camera's " +
-                           std::to_string(format.width) + "x" + std::to_string(format.height) +
-                           " frame");
-  }
-  const int roi_w = raw.roi_width > 0 ? raw.roi_width : format.width;
-  const int roi_h = raw.roi_height > 0 ? raw.roi_height : format.height;
-  if (roi_w < raw.downscale || roi_h < raw.downscale) {
-    throw hal::ConfigError(
-        config.source + ": lcm.image_downscale: " + std::to_string(raw.downscale) +
-        " leaves no pixel of a " + std::to_string(roi_w) + "x" + std::to_string(roi_h) + " region");
-  }
-
   check_laser_sheet_in_view(
       config.calibration, config.calibration_source,
       searches_depth_range(config.detector) ? &config.detector_options.frontend : nullptr,
       config.source);
   b.detector = pipeline::make_detector(config.detector, config.detector_options);
+  check_frame_path(config, b.camera->format(), *b.detector);
   return b;
 }
 

@@ -1,10 +1,21 @@
 #include "daemon/config.hpp"
 
+#include <malloc.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <stdexcept>
+
+#include "daemon/raw_frame_encoder.hpp"
+#include "pipeline/profile.hpp"
+
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+// The sanitizer runtime's count (declared in <sanitizer/allocator_interface.h>, which GCC 12 on
+// Debian does not install).
+extern "C" std::size_t __sanitizer_get_current_allocated_bytes();
+#endif
 
 namespace laserline::daemon {
 
@@ -42,6 +53,39 @@ std::string format_number(double value) {
   char text[32];
   std::snprintf(text, sizeof text, "%.3g", value);
   return text;
+}
+
+std::string format_whole(double value) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.15g", value);
+  return text;
+}
+
+// Saturating arithmetic for sizes: a hostile configuration must give "too large", not a wrap.
+std::uint64_t times(std::uint64_t a, std::uint64_t b) {
+  std::uint64_t product = 0;
+  return __builtin_mul_overflow(a, b, &product) ? UINT64_MAX : product;
+}
+std::uint64_t plus(std::uint64_t a, std::uint64_t b) {
+  std::uint64_t sum = 0;
+  return __builtin_add_overflow(a, b, &sum) ? UINT64_MAX : sum;
+}
+
+std::string megabytes(std::uint64_t bytes) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.1f MB", static_cast<double>(bytes) / 1e6);
+  return text;
+}
+
+// Bytes the heap holds now (mmap'ed blocks included). A sanitizer's allocator replaces glibc's,
+// whose counts then stay still: ask the sanitizer.
+std::uint64_t heap_in_use() {
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+  return __sanitizer_get_current_allocated_bytes();
+#else
+  const struct mallinfo2 info = mallinfo2();
+  return info.uordblks + info.hblkhd;
+#endif
 }
 
 // The sheet as the calibration gives it: the plane, or the mount it is computed from.
@@ -213,6 +257,72 @@ void check_laser_sheet_in_view(const hal::Calibration& calibration,
   }
 }
 
+std::uint64_t frame_path_memory_bytes(const DaemonConfig& config, const hal::FrameFormat& format,
+                                      std::size_t max_points) {
+  const std::uint64_t frame = format.bytes();
+  // The frame and raw-frame rings, each with the prototype its slots are copied from.
+  std::uint64_t total = times(frame, static_cast<std::uint64_t>(config.frame_slots) + 1);
+  total = plus(total, times(frame, static_cast<std::uint64_t>(config.image_slots) + 1));
+  // The publisher's raw-frame message and its encoding buffer, each a frame and an eighth.
+  total = plus(total, times(plus(plus(frame, frame / 8), 4096), 2));
+  // Profiles: the ring, its prototype and the worker's unpublished one; the publisher's message.
+  const std::uint64_t profile = times(max_points, sizeof(pipeline::ProfilePoint));
+  total = plus(total, times(profile, static_cast<std::uint64_t>(config.profile_slots) + 3));
+  total = plus(total, raw_frame_encoder_bytes(config.raw_frames, format));
+  // Two latency windows of a status period at 4x the frame rate, and their histograms.
+  const auto window = static_cast<std::uint64_t>(
+      std::ceil(config.frame_rate_hz * config.status_period_s * 4.0) + 64);
+  total = plus(total, times(plus(window, 200'001), 2 * sizeof(std::int64_t)));
+  return total;
+}
+
+void check_frame_path(const DaemonConfig& config, const hal::FrameFormat& format,
+                      pipeline::Detector& detector) {
+  const std::string size = std::to_string(format.width) + "x" + std::to_string(format.height);
+  if (format.width != config.calibration.camera.width ||
+      format.height != config.calibration.camera.height) {
+    throw hal::ConfigError(config.source + ": calibration.camera: size " +
+                           std::to_string(config.calibration.camera.width) + "x" +
+                           std::to_string(config.calibration.camera.height) +
+                           " differs from the camera's " + size);
+  }
+  if (const std::string problem = raw_frame_region_problem(config.raw_frames, format);
+      !problem.empty()) {
+    throw hal::ConfigError(config.source + ": " + problem);
+  }
+  const std::uint64_t limit =
+      times(static_cast<std::uint64_t>(config.frame_memory_limit_mb), 1'000'000);
+  const std::string limit_text = config.source + ": pipeline.frame_memory_limit_mb: ";
+  const std::uint64_t buffers =
+      frame_path_memory_bytes(config, format, detector.max_points(format.width, format.height));
+  if (buffers > limit) {
+    throw hal::ConfigError(limit_text + "frames of " + size + " need " + megabytes(buffers) +
+                           " (pipeline.frame_slots " + std::to_string(config.frame_slots) +
+                           ", image_slots " + std::to_string(config.image_slots) +
+                           ", profile_slots " + std::to_string(config.profile_slots) +
+                           " and the raw-frame buffers), more than the limit of " +
+                           std::to_string(config.frame_memory_limit_mb) +
+                           " MB: fewer slots, a smaller camera or a higher limit");
+  }
+  // The detector's own refusal (e.g. a frame smaller than its filters), as the start meets it.
+  const std::uint64_t before = heap_in_use();
+  try {
+    detector.reset(format.width, format.height);
+  } catch (const std::exception& e) {
+    throw hal::ConfigError(config.source + ": detector " + detector.name() + ": frames of " + size +
+                           " (calibration.camera): " + e.what());
+  }
+  const std::uint64_t after = heap_in_use();
+  const std::uint64_t detector_bytes = after > before ? after - before : 0;
+  if (plus(buffers, detector_bytes) > limit) {
+    throw hal::ConfigError(limit_text + "frames of " + size + " need " + megabytes(buffers) +
+                           " for the frame path and " + megabytes(detector_bytes) +
+                           " for the detector " + detector.name() + ", more than the limit of " +
+                           std::to_string(config.frame_memory_limit_mb) +
+                           " MB: fewer slots, a smaller camera or a higher limit");
+  }
+}
+
 bool searches_depth_range(const std::string& detector) {
   return detector != "maxvalue";
 }
@@ -282,6 +392,8 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
   c.frame_slots = power_of_two(pipe, "frame_slots", c.frame_slots);
   c.profile_slots = power_of_two(pipe, "profile_slots", c.profile_slots);
   c.image_slots = power_of_two(pipe, "image_slots", c.image_slots);
+  c.frame_memory_limit_mb =
+      pipe.integer("frame_memory_limit_mb", c.frame_memory_limit_mb, 16, 1 << 20);
   pipe.finish();
 
   hal::YamlMap lcm = root.map("lcm");
@@ -303,20 +415,26 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
   RawFrameOptions& raw = c.raw_frames;
   raw.every_n = c.image_every_n;
   raw.max_rate_hz = lcm.number("image_max_rate_hz", 0.0, 0.0, 1000.0);
-  if (lcm.has("image_roi")) {
-    const std::vector<double> roi = lcm.numbers("image_roi", {4});
+  const std::vector<double> roi = lcm.numbers("image_roi", {4});
+  if (!roi.empty()) {
+    // Compared as doubles before any conversion: x + width cannot overflow there.
+    const hal::CameraIntrinsics& frame = c.calibration.camera;
     for (double v : roi) {
-      if (v < 0 || v != static_cast<int>(v)) {
+      if (v < 0 || v != std::floor(v)) {
         lcm.fail("image_roi", "expected [x, y, width, height] in whole pixels >= 0");
       }
+    }
+    if (roi[2] == 0 || roi[3] == 0) lcm.fail("image_roi", "width and height must be > 0");
+    if (roi[0] + roi[2] > frame.width || roi[1] + roi[3] > frame.height) {
+      lcm.fail("image_roi", "[" + format_whole(roi[0]) + ", " + format_whole(roi[1]) + ", " +
+                                format_whole(roi[2]) + ", " + format_whole(roi[3]) +
+                                "] is not inside the calibration's " + std::to_string(frame.width) +
+                                "x" + std::to_string(frame.height) + " frame");
     }
     raw.roi_x = static_cast<int>(roi[0]);
     raw.roi_y = static_cast<int>(roi[1]);
     raw.roi_width = static_cast<int>(roi[2]);
     raw.roi_height = static_cast<int>(roi[3]);
-    if (raw.roi_width == 0 || raw.roi_height == 0) {
-      lcm.fail("image_roi", "width and height must be > 0");
-    }
   }
   raw.downscale = static_cast<int>(lcm.integer("image_downscale", raw.downscale, 1, 4));
   if (raw.downscale == 3) lcm.fail("image_downscale", "must be 1, 2 or 4, got 3");

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "hal/calibration.hpp"
+#include "hal/frame.hpp"
 #include "hal/laser_channel.hpp"
 #include "hal/yaml_reader.hpp"
 #include "pipeline/detector.hpp"
@@ -67,6 +68,9 @@ struct DaemonConfig {
   int frame_slots = 8;
   int profile_slots = 16;
   int image_slots = 2;
+  // What the frame path may allocate at start (rings, raw-frame and publishing buffers, the
+  // detector's own); a configuration needing more is refused before anything starts.
+  std::int64_t frame_memory_limit_mb = 1024;
 
   std::string lcm_url = "udpm://239.255.76.67:7667?ttl=0";
   std::string profile_channel = "LASERLINE_PROFILE";
@@ -94,6 +98,22 @@ void check_laser_sheet_in_view(const hal::Calibration& calibration,
 // Whether a detector searches only where the sheet lies within the front-end's depth range (all
 // but maxvalue, which takes each line's brightest pixel wherever it is).
 bool searches_depth_range(const std::string& detector);
+
+// Memory the frame path allocates at start for frames of `format` with at most `max_points` points
+// each: the frame, profile and raw-frame rings, the publisher's and the raw-frame encoder's
+// buffers and the latency windows; the detector's own buffers not included. Saturates at the
+// largest value instead of overflowing.
+std::uint64_t frame_path_memory_bytes(const DaemonConfig& config, const hal::FrameFormat& format,
+                                      std::size_t max_points);
+
+// Everything the start checks once the camera's format is known, run by create_backends() so that
+// a configuration --check-config passes starts: the camera's frames have the calibration's size
+// and hold lcm.image_roi at lcm.image_downscale, the frame path's memory fits
+// pipeline.frame_memory_limit_mb, and the detector takes frames of that size (its reset(), which
+// refuses a frame too small for it and sizes its buffers, whose memory is counted in the limit
+// too). Throws hal::ConfigError naming the configuration and the key.
+void check_frame_path(const DaemonConfig& config, const hal::FrameFormat& format,
+                      pipeline::Detector& detector);
 
 // The configuration compiled into the daemon (config/laserline.yaml).
 const char* builtin_config_text();

@@ -4,6 +4,7 @@
 #include <laserline/image_t.hpp>
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "daemon/config.hpp"
@@ -19,6 +20,7 @@ namespace laserline::daemon {
 // the frame path). Thread context: the image thread only.
 class RawFrameEncoder {
  public:
+  // Throws std::invalid_argument when raw_frame_region_problem() is not empty.
   RawFrameEncoder(const RawFrameOptions& options, const hal::FrameFormat& format);
   ~RawFrameEncoder();
   RawFrameEncoder(const RawFrameEncoder&) = delete;
@@ -42,6 +44,15 @@ class RawFrameEncoder {
   z_stream zlib_{};
   bool zlib_ready_ = false;
 };
+
+// Why `options` cannot be applied to frames of `format` ("lcm.image_roi: ..." or
+// "lcm.image_downscale: ..."), or "" when they can: the region must lie inside the frame (in
+// 64-bit arithmetic) and hold at least one downscaled pixel.
+std::string raw_frame_region_problem(const RawFrameOptions& options,
+                                     const hal::FrameFormat& format);
+// Bytes a RawFrameEncoder for `options` and `format` allocates.
+std::uint64_t raw_frame_encoder_bytes(const RawFrameOptions& options,
+                                      const hal::FrameFormat& format);
 
 // The message's compression constant for an option.
 std::int8_t image_compression_code(ImageCompression c);

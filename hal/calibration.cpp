@@ -201,10 +201,31 @@ Calibration read_calibration(YamlMap& map) {
   return cal;
 }
 
-Calibration load_calibration_file(const std::string& path) {
+Calibration load_calibration_file(const std::string& path, CalibrationParts required) {
   YamlMap root(load_yaml_file(path), path, "");
   Calibration cal = read_calibration(root);
   root.finish();
+  // Checked after every given value was: a wrong value is named before a missing one.
+  if (!root.has("camera_matrix")) {
+    if (!root.has("camera")) {
+      root.fail("camera",
+                "is required: the camera's width, height, fx and fy (cx, cy, distortion "
+                "optional), or OpenCV's image_width, image_height and camera_matrix");
+    }
+    YamlMap camera = root.map("camera");
+    if (!camera.has("camera_matrix")) {
+      for (const char* key : {"width", "height", "fx", "fy"}) {
+        if (!camera.has(key)) {
+          camera.fail(key, "is required in a calibration file (the defaults are another camera's)");
+        }
+      }
+    }
+  }
+  if (required == CalibrationParts::kCameraAndLaser && !root.has("laser")) {
+    root.fail("laser",
+              "is required: the laser sheet's plane [a, b, c, e] (laserline-calibrate writes it), "
+              "or the mount's baseline_m and angle_deg");
+  }
   return cal;
 }
 

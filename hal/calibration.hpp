@@ -51,7 +51,16 @@ struct Calibration {
 // distortion_coefficients as cv::FileStorage writes them), either inside `camera:` or at the top
 // of the mapping, so that the output of OpenCV's calibration sample is a calibration file as is
 // (its `%YAML:1.0` header included) once a `laser:` section is added.
+// Keys left out take laserline's defaults (the simulated camera), as in a configuration's inline
+// calibration section.
 Calibration read_calibration(YamlMap& map);
-Calibration load_calibration_file(const std::string& path);
+
+// What a calibration file must give besides being a valid YAML file (hal/yaml_reader.hpp): the
+// camera always, with its width, height, fx and fy (or OpenCV's layout), as defaults would belong
+// to another camera; the laser section (its plane, or baseline_m and angle_deg) where the sheet is
+// used, not where it is what is being calibrated (laserline-calibrate --calib).
+enum class CalibrationParts : std::uint8_t { kCameraAndLaser, kCamera };
+Calibration load_calibration_file(const std::string& path,
+                                  CalibrationParts required = CalibrationParts::kCameraAndLaser);
 
 }  // namespace laserline::hal

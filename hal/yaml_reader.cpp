@@ -1,7 +1,15 @@
 #include "hal/yaml_reader.hpp"
 
+#include <yaml-cpp/depthguard.h>
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
 #include <cmath>
-#include <fstream>
+#include <cstring>
 #include <map>
 #include <sstream>
 
@@ -15,30 +23,205 @@ std::string format_number(double value) {
   return out.str();
 }
 
+std::string line_prefix(const std::string& source, const YAML::Mark& mark) {
+  return mark.line >= 0 ? source + ":" + std::to_string(mark.line + 1) + ": " : source + ": ";
+}
+
+// A raw NUL byte is not text: yaml-cpp reads it as the end of the stream or as an odd escape.
+void refuse_nul_bytes(const std::string& text, const std::string& source_name) {
+  const std::size_t at = text.find('\0');
+  if (at == std::string::npos) return;
+  const auto line =
+      1 + std::count(text.begin(), text.begin() + static_cast<std::ptrdiff_t>(at), '\n');
+  const std::size_t line_start = text.rfind('\n', at);
+  const std::size_t column = at - (line_start == std::string::npos ? 0 : line_start + 1) + 1;
+  throw ConfigError(source_name + ":" + std::to_string(line) + ": a NUL byte (\\0) at column " +
+                    std::to_string(column) + " (byte offset " + std::to_string(at) +
+                    "): not a text file");
+}
+
+// Walks a parsed document once: depth, number of values, keys that are plain scalars, no NUL
+// in any key or value. Aliases are walked each time they are used, so a few lines that refer to
+// each other many times cannot hide a huge document; the walk stops at kMaxYamlValues.
+class DocumentCheck {
+ public:
+  explicit DocumentCheck(std::string source) : source_(std::move(source)) {}
+
+  void walk(const YAML::Node& node, int depth) {
+    if (++values_ > kMaxYamlValues) {
+      fail(node, "more than " + std::to_string(kMaxYamlValues) +
+                     " keys and values (aliases counted each time they are used)");
+    }
+    if (node.IsScalar()) {
+      if (node.Scalar().find('\0') != std::string::npos) {
+        fail(node, "contains a NUL byte: \"" + node.Scalar() + "\"");
+      }
+      return;
+    }
+    if (!node.IsMap() && !node.IsSequence()) return;
+    if (depth >= kMaxYamlDepth) {
+      fail(node, "nested more than " + std::to_string(kMaxYamlDepth) + " levels deep");
+    }
+    if (node.IsSequence()) {
+      std::size_t index = 0;
+      for (const auto& element : node) {
+        path_.push_back("[" + std::to_string(index++) + "]");
+        walk(element, depth + 1);
+        path_.pop_back();
+      }
+      return;
+    }
+    for (const auto& entry : node) {
+      if (!entry.first.IsScalar()) {
+        fail(entry.first, "a key must be a plain name, not a list, a mapping or empty");
+      }
+      const std::string& key = entry.first.Scalar();
+      if (key.find('\0') != std::string::npos) {
+        fail(entry.first, "the key \"" + key + "\" contains a NUL byte");
+      }
+      path_.push_back(key);
+      ++values_;
+      walk(entry.second, depth + 1);
+      path_.pop_back();
+    }
+  }
+
+ private:
+  [[noreturn]] void fail(const YAML::Node& at, const std::string& problem) const {
+    std::string path;
+    for (const auto& part : path_)
+      path += (path.empty() || part[0] == '[' ? "" : ".") + part;
+    throw ConfigError(line_prefix(source_, at.Mark()) + (path.empty() ? "top level" : path) + ": " +
+                      problem);
+  }
+
+  std::string source_;
+  std::vector<std::string> path_;
+  std::size_t values_ = 0;
+};
+
+const char* file_type(mode_t mode) {
+  if (S_ISDIR(mode)) return "a directory";
+  if (S_ISFIFO(mode)) return "a named pipe (FIFO)";
+  if (S_ISCHR(mode)) return "a character device";
+  if (S_ISBLK(mode)) return "a block device";
+  if (S_ISSOCK(mode)) return "a socket";
+  return "not a regular file";
+}
+
+std::string mebibytes(std::size_t bytes) {
+  return format_number(static_cast<double>(bytes) / (1 << 20)) + " MiB";
+}
+
 }  // namespace
 
-YAML::Node load_yaml_text(const std::string& text, const std::string& source_name) {
-  try {
-    YAML::Node root = YAML::Load(text);
-    if (root.IsNull()) return YAML::Node(YAML::NodeType::Map);
-    if (!root.IsMap()) {
-      throw ConfigError(source_name + ":" + std::to_string(root.Mark().line + 1) +
-                        ": the top level must be a mapping of keys");
+std::string escape_control_characters(const std::string& text) {
+  std::string out;
+  out.reserve(text.size());
+  for (const char c : text) {
+    const auto byte = static_cast<unsigned char>(c);
+    if (byte >= 0x20 && byte != 0x7f) {
+      out += c;
+      continue;
     }
-    return root;
-  } catch (const YAML::ParserException& e) {
-    throw ConfigError(source_name + ":" + std::to_string(e.mark.line + 1) +
-                      ": not valid YAML: " + e.msg);
+    switch (c) {
+      case '\0':
+        out += "\\0";
+        break;
+      case '\t':
+        out += "\\t";
+        break;
+      case '\n':
+        out += "\\n";
+        break;
+      case '\r':
+        out += "\\r";
+        break;
+      default: {
+        static const char kHex[] = "0123456789abcdef";
+        out += "\\x";
+        out += kHex[byte >> 4];
+        out += kHex[byte & 15];
+      }
+    }
   }
+  return out;
+}
+
+ConfigError::ConfigError(const std::string& message)
+    : std::runtime_error(escape_control_characters(message)) {}
+
+YAML::Node load_yaml_text(const std::string& text, const std::string& source_name) {
+  if (text.size() > kMaxYamlFileBytes) {
+    throw ConfigError(source_name + ": larger than " + mebibytes(kMaxYamlFileBytes) +
+                      ": not a configuration or calibration");
+  }
+  refuse_nul_bytes(text, source_name);
+  std::vector<YAML::Node> documents;
+  try {
+    documents = YAML::LoadAll(text);
+  } catch (const YAML::DeepRecursion& e) {
+    // yaml-cpp's own guard against overflowing the stack, far beyond kMaxYamlDepth.
+    throw ConfigError(line_prefix(source_name, e.mark) + "nested more than " +
+                      std::to_string(kMaxYamlDepth) + " levels deep");
+  } catch (const YAML::ParserException& e) {
+    throw ConfigError(line_prefix(source_name, e.mark) + "not valid YAML: " + e.msg);
+  }
+  if (documents.size() > 1) {
+    // A second document would be ignored, and with it whatever the user meant by it.
+    throw ConfigError(line_prefix(source_name, documents[1].Mark()) +
+                      "a second YAML document (after '---'): only one is read, give all keys in "
+                      "one");
+  }
+  if (documents.empty() || documents[0].IsNull()) {
+    throw ConfigError(source_name + ": has no keys (empty, or only comments)");
+  }
+  const YAML::Node& root = documents[0];
+  if (!root.IsMap()) {
+    throw ConfigError(line_prefix(source_name, root.Mark()) +
+                      "the top level must be a mapping of keys");
+  }
+  DocumentCheck(source_name).walk(root, 0);
+  return root;
 }
 
 YAML::Node load_yaml_file(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw ConfigError(path + ": cannot be opened for reading");
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (in.bad()) throw ConfigError(path + ": read error");
-  return load_yaml_text(text.str(), path);
+  // Non-blocking: opening a named pipe must not wait for a writer.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK | O_NOCTTY);
+  if (fd < 0) throw ConfigError(path + ": cannot be opened for reading: " + std::strerror(errno));
+  struct Closer {
+    int fd;
+    ~Closer() { ::close(fd); }
+  } closer{fd};
+  struct stat info {};
+  if (::fstat(fd, &info) != 0) {
+    throw ConfigError(path + ": cannot be read: " + std::strerror(errno));
+  }
+  if (!S_ISREG(info.st_mode)) {
+    throw ConfigError(path + ": is " + file_type(info.st_mode) +
+                      ", not a file: give a configuration or calibration file");
+  }
+  if (static_cast<std::uintmax_t>(info.st_size) > kMaxYamlFileBytes) {
+    throw ConfigError(path + ": is " + std::to_string(info.st_size) + " bytes, more than the " +
+                      std::to_string(kMaxYamlFileBytes) + " (" + mebibytes(kMaxYamlFileBytes) +
+                      ") a configuration or calibration may have");
+  }
+  // Read one byte past the limit: a file growing while it is read is caught too.
+  std::string text(kMaxYamlFileBytes + 1, '\0');
+  std::size_t size = 0;
+  while (size < text.size()) {
+    const ssize_t n = ::read(fd, text.data() + size, text.size() - size);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) throw ConfigError(path + ": read error: " + std::strerror(errno));
+    if (n == 0) break;
+    size += static_cast<std::size_t>(n);
+  }
+  if (size > kMaxYamlFileBytes) {
+    throw ConfigError(path + ": grew past " + mebibytes(kMaxYamlFileBytes) +
+                      " while it was read: not a configuration or calibration");
+  }
+  text.resize(size);
+  return load_yaml_text(text, path);
 }
 
 YamlMap::YamlMap(YAML::Node node, std::string source, std::string path)
@@ -76,12 +259,29 @@ std::string YamlMap::location(const YAML::Node& at) const {
 }
 
 void YamlMap::fail(const std::string& key, const std::string& problem) const {
-  YAML::Node at = has(key) ? node_[key] : node_;
-  throw ConfigError(location(at) + key_path(key) + ": " + problem);
+  if (!has(key) && node_.IsMap()) {
+    // A value left empty is marked where the next token is: name the key's line instead. (A
+    // YAML::Node is a reference: assigning one to another would write into the document.)
+    for (const auto& entry : node_) {
+      if (entry.first.IsScalar() && entry.first.Scalar() == key) {
+        throw ConfigError(location(entry.first) + key_path(key) + ": " + problem);
+      }
+    }
+  }
+  throw ConfigError(location(has(key) ? node_[key] : node_) + key_path(key) + ": " + problem);
 }
 
 bool YamlMap::has(const std::string& key) const {
   return node_.IsMap() && node_[key].IsDefined() && !node_[key].IsNull();
+}
+
+bool YamlMap::given(const std::string& key) const {
+  if (has(key)) return true;
+  // `key:` with nothing after it: most likely a value forgotten or indented wrongly, not a wish
+  // for the default.
+  if (node_.IsMap() && node_[key].IsDefined())
+    fail(key, "has no value (give one or leave the key out)");
+  return false;
 }
 
 YAML::Node YamlMap::scalar(const std::string& key) const {
@@ -92,13 +292,13 @@ YAML::Node YamlMap::scalar(const std::string& key) const {
 
 double YamlMap::number(const std::string& key, double fallback, double min, double max) {
   known_.insert(key);
-  if (!has(key)) return fallback;
+  if (!given(key)) return fallback;
   return required_number(key, min, max);
 }
 
 double YamlMap::required_number(const std::string& key, double min, double max) {
   known_.insert(key);
-  if (!has(key)) fail(key, "is required");
+  if (!given(key)) fail(key, "is required");
   YAML::Node value = scalar(key);
   double result = 0;
   if (!YAML::convert<double>::decode(value, result) || !std::isfinite(result)) {
@@ -114,13 +314,13 @@ double YamlMap::required_number(const std::string& key, double min, double max) 
 std::int64_t YamlMap::integer(const std::string& key, std::int64_t fallback, std::int64_t min,
                               std::int64_t max) {
   known_.insert(key);
-  if (!has(key)) return fallback;
+  if (!given(key)) return fallback;
   return required_integer(key, min, max);
 }
 
 std::int64_t YamlMap::required_integer(const std::string& key, std::int64_t min, std::int64_t max) {
   known_.insert(key);
-  if (!has(key)) fail(key, "is required");
+  if (!given(key)) fail(key, "is required");
   YAML::Node value = scalar(key);
   std::int64_t result = 0;
   if (!YAML::convert<std::int64_t>::decode(value, result)) {
@@ -135,7 +335,7 @@ std::int64_t YamlMap::required_integer(const std::string& key, std::int64_t min,
 
 bool YamlMap::boolean(const std::string& key, bool fallback) {
   known_.insert(key);
-  if (!has(key)) return fallback;
+  if (!given(key)) return fallback;
   YAML::Node value = scalar(key);
   bool result = false;
   if (!YAML::convert<bool>::decode(value, result)) {
@@ -146,7 +346,7 @@ bool YamlMap::boolean(const std::string& key, bool fallback) {
 
 std::string YamlMap::string(const std::string& key, const std::string& fallback) {
   known_.insert(key);
-  if (!has(key)) return fallback;
+  if (!given(key)) return fallback;
   return scalar(key).Scalar();
 }
 
@@ -165,7 +365,7 @@ std::string YamlMap::choice(const std::string& key, const std::string& fallback,
 std::vector<double> YamlMap::numbers(const std::string& key,
                                      const std::vector<std::size_t>& sizes) {
   known_.insert(key);
-  if (!has(key)) return {};
+  if (!given(key)) return {};
   YAML::Node list = node_[key];
   std::string expected;
   for (auto s : sizes)
@@ -190,6 +390,9 @@ std::vector<double> YamlMap::numbers(const std::string& key,
 
 YamlMap YamlMap::map(const std::string& key) {
   known_.insert(key);
+  if (!has(key) && node_.IsMap() && node_[key].IsDefined()) {
+    fail(key, "is empty (give its keys, or leave the section out for the defaults)");
+  }
   return YamlMap(has(key) ? node_[key] : YAML::Node(), source_, key_path(key));
 }
 

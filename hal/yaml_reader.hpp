@@ -10,15 +10,29 @@
 
 namespace laserline::hal {
 
-// A configuration or calibration problem. what() is one line: "FILE:LINE: KEY: problem".
+// A configuration or calibration problem. what() is one line: "FILE:LINE: KEY: problem"; control
+// characters in it (a NUL or a line break in a value, a file name) are shown escaped (\0, \n,
+// \x1b), so that nothing cuts or splits the line.
 class ConfigError : public std::runtime_error {
  public:
-  using std::runtime_error::runtime_error;
+  explicit ConfigError(const std::string& message);
 };
 
-// Loads a YAML file; throws ConfigError naming the file (and line) when it cannot be read or
-// parsed.
+// `text` with its control characters escaped as C writes them (\0 \t \n \r, else \xNN).
+std::string escape_control_characters(const std::string& text);
+
+// What a configuration or calibration file may be: larger or deeper files are refused before or
+// while they are read (a file grown by mistake, /dev/zero, a hostile file).
+inline constexpr std::size_t kMaxYamlFileBytes = 1 << 20;
+inline constexpr int kMaxYamlDepth = 32;               // nested mappings and lists
+inline constexpr std::size_t kMaxYamlValues = 100000;  // keys and values, aliases each time used
+
+// Loads a YAML file: only a regular file (not a directory, a device or a named pipe, which could
+// block or never end) of at most kMaxYamlFileBytes, holding one YAML document whose top level is
+// a mapping with at least one key, nested at most kMaxYamlDepth deep, without NUL bytes and with
+// plain keys. Throws ConfigError naming the file (and line, and key) otherwise.
 YAML::Node load_yaml_file(const std::string& path);
+// The same checks on text already in memory, named `source_name` in messages.
 YAML::Node load_yaml_text(const std::string& text, const std::string& source_name);
 
 // Strict, typed reading of one YAML mapping. Every key read is remembered so that finish() can
@@ -57,6 +71,8 @@ class YamlMap {
 
  private:
   YAML::Node scalar(const std::string& key) const;
+  // has(), but a key given without a value is an error rather than absent.
+  bool given(const std::string& key) const;
   std::string location(const YAML::Node& at) const;
 
   YAML::Node node_;

@@ -68,8 +68,11 @@ TEST_F(CalibrationFile, LaserSides) {
   const std::map<std::string, std::array<double, 3>> projector = {
       {"above", {0, -d, 0}}, {"below", {0, d, 0}}, {"left", {-d, 0, 0}}, {"right", {d, 0, 0}}};
   for (const auto& [side, at] : projector) {
-    const Calibration c = load_calibration_file(
-        write(side + ".yaml", "laser: {baseline_m: 0.2, angle_deg: 75, side: " + side + "}\n"));
+    const Calibration c =
+        load_calibration_file(write(side + ".yaml",
+                                    "camera: {width: 640, height: 480, fx: 700, fy: 700}\nlaser: "
+                                    "{baseline_m: 0.2, angle_deg: 75, side: " +
+                                        side + "}\n"));
     EXPECT_STREQ(to_string(c.laser.side), side.c_str());
     const auto [a, b, cc, e] = c.laser.plane_coefficients();
     EXPECT_NEAR(a * at[0] + b * at[1] + cc * at[2] + e, 0.0, 1e-12) << side;
@@ -132,7 +135,9 @@ TEST_F(CalibrationFile, OpenCvFloatMatrixAndEightZeroTailedCoefficients) {
     fs << "distortion_coefficients"
        << cv::Mat((cv::Mat_<float>(1, 8) << 0.5f, -0.25f, 0, 0, 0.125f, 0, 0, 0));
   }
-  const Calibration c = load_calibration_file(path);
+  // Without a laser section: where the sheet is what is being calibrated (laserline-calibrate
+  // --calib).
+  const Calibration c = load_calibration_file(path, CalibrationParts::kCamera);
   EXPECT_EQ(c.camera.width, 640);
   EXPECT_DOUBLE_EQ(c.camera.fx, 700);
   EXPECT_DOUBLE_EQ(c.camera.cy, 240);
@@ -169,7 +174,7 @@ TEST_F(CalibrationFile, OpenCvLayoutErrorsNameFileLineAndKey) {
       "  camera_matrix: {rows: 3, cols: 3, dt: d, data: [1400, 0, 639.5, 0, "
       "1400, 511.5, 0, 0, 1]}\n";
   const std::string size = "  image_width: 1280\n  image_height: 1024\n";
-  EXPECT_EQ(error_of("camera:\n" + size + k), "");
+  EXPECT_EQ(error_of("camera:\n" + size + k + "laser: {angle_deg: 80}\n"), "");
   EXPECT_EQ(error_of("camera:\n  image_width: 1280\n" + k),
             "calib.yaml:2: camera.image_height: is required");
   EXPECT_EQ(error_of("camera:\n" + size +
@@ -219,6 +224,41 @@ TEST_F(CalibrationFile, OpenCvLayoutErrorsNameFileLineAndKey) {
                                           "1]}\ncamera: {fx: 1}\n"),
             "calib.yaml:4: camera: give the camera either as a camera section or in OpenCV's "
             "layout (camera_matrix, ...), not both");
+}
+
+// A calibration file gives its camera (and, where the sheet is used, its laser): defaults belong
+// to another camera. Files that are not calibrations are named as such.
+TEST_F(CalibrationFile, RequiredPartsAreNamed) {
+  const std::string camera = "camera: {width: 640, height: 480, fx: 700, fy: 700}\n";
+  const std::string laser = "laser: {baseline_m: 0.2, angle_deg: 75}\n";
+  EXPECT_EQ(error_of(camera + laser), "");
+  EXPECT_EQ(error_of(laser),
+            "calib.yaml:1: camera: is required: the camera's width, height, fx and fy (cx, cy, "
+            "distortion optional), or OpenCV's image_width, image_height and camera_matrix");
+  EXPECT_EQ(error_of("camera: {width: 640, height: 480, fx: 700}\n" + laser),
+            "calib.yaml:1: camera.fy: is required in a calibration file (the defaults are another "
+            "camera's)");
+  EXPECT_EQ(error_of("camera:\n" + laser),
+            "calib.yaml:1: camera: is empty (give its keys, or leave the section out for the "
+            "defaults)");
+  EXPECT_EQ(error_of(camera),
+            "calib.yaml:1: laser: is required: the laser sheet's plane [a, b, c, e] "
+            "(laserline-calibrate writes it), or the mount's baseline_m and angle_deg");
+  EXPECT_EQ(
+      load_calibration_file(write("camera_only.yaml", camera), CalibrationParts::kCamera).camera.fx,
+      700.0);
+  EXPECT_EQ(error_of(""), "calib.yaml: has no keys (empty, or only comments)");
+  for (const std::string& not_a_file : {dir_.string(), std::string("/dev/null")}) {
+    try {
+      load_calibration_file(not_a_file);
+      ADD_FAILURE() << not_a_file;
+    } catch (const ConfigError& e) {
+      EXPECT_EQ(std::string(e.what()),
+                not_a_file + ": is " +
+                    (not_a_file == "/dev/null" ? "a character device" : "a directory") +
+                    ", not a file: give a configuration or calibration file");
+    }
+  }
 }
 
 TEST_F(CalibrationFile, NativeErrorsUnchanged) {

@@ -2,6 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -40,8 +44,11 @@ TEST(Config, BuiltInDefaultIsValidAndRunsTheSimulator) {
   EXPECT_FALSE(backends.laser->is_on()) << "the laser is off until the frame path switches it";
 }
 
-TEST(Config, EmptyFileTakesDefaults) {
-  EXPECT_EQ(error_of(""), "");
+TEST(Config, EmptyFileIsRefusedAnExplicitEmptyMappingTakesDefaults) {
+  EXPECT_EQ(error_of(""), "test.yaml: has no keys (empty, or only comments)");
+  EXPECT_EQ(error_of("# nothing but a comment\n\n"),
+            "test.yaml: has no keys (empty, or only comments)");
+  EXPECT_EQ(error_of("{}\n"), "") << "all defaults, said on purpose";
 }
 
 TEST(Config, ShippedConfigFileEqualsTheBuiltIn) {
@@ -168,8 +175,23 @@ TEST(Config, RawFrameOptions) {
   EXPECT_EQ(error_of("lcm:\n  image_roi: [0, 0, 0, 10]\n"),
             "test.yaml:2: lcm.image_roi: width and height must be > 0");
   EXPECT_EQ(error_of("lcm:\n  image_roi: [1000, 0, 400, 10]\n"),
-            "test.yaml: lcm.image_roi: [1000, 0, 400, 10] is not inside the camera's "
+            "test.yaml:2: lcm.image_roi: [1000, 0, 400, 10] is not inside the calibration's "
             "1280x1024 frame");
+  // x + width overflowed a 32-bit int and passed: the encoder then read far outside the frame
+  // (a crash) or allocated 8 GB.
+  EXPECT_EQ(error_of("lcm:\n  image_roi: [2147483647, 0, 16, 16]\n"),
+            "test.yaml:2: lcm.image_roi: [2147483647, 0, 16, 16] is not inside the calibration's "
+            "1280x1024 frame");
+  EXPECT_EQ(error_of("lcm:\n  image_roi: [1, 0, 2147483647, 16]\n"),
+            "test.yaml:2: lcm.image_roi: [1, 0, 2147483647, 16] is not inside the calibration's "
+            "1280x1024 frame");
+  EXPECT_EQ(error_of("lcm:\n  image_roi: [1e300, 0, 16, 16]\n"),
+            "test.yaml:2: lcm.image_roi: [1e+300, 0, 16, 16] is not inside the calibration's "
+            "1280x1024 frame");
+  EXPECT_EQ(error_of("lcm:\n  image_roi: [1272, 1020, 8, 4]\n  image_downscale: 4\n"), "")
+      << "the last pixels of the frame, one downscaled row";
+  EXPECT_EQ(error_of("lcm:\n  image_roi: [1272, 1020, 8, 3]\n  image_downscale: 4\n"),
+            "test.yaml: lcm.image_downscale: 4 leaves no pixel of a 8x3 region");
   DaemonConfig c = parse_config(
       hal::load_yaml_text("lcm: {image_every_n: 1, image_max_rate_hz: 10, image_compression: "
                           "zlib, image_roi: [8, 4, 640, 480], image_downscale: 2}\n",
@@ -181,6 +203,66 @@ TEST(Config, RawFrameOptions) {
   EXPECT_EQ(c.raw_frames.roi_x, 8);
   EXPECT_EQ(c.raw_frames.roi_height, 480);
   EXPECT_EQ(c.raw_frames.downscale, 2);
+}
+
+// --check-config runs what the start runs: a configuration it passes must start.
+TEST(Config, CalibrationTooSmallForTheDetectorIsRefusedAtTheCheck) {
+  const std::string small = "calibration: {camera: {width: 16, height: 16, fx: 20, fy: 20}}\n";
+  EXPECT_EQ(error_of(small),
+            "test.yaml: detector background: frames of 16x16 (calibration.camera): frame smaller "
+            "than 64x4 pixels");
+  EXPECT_EQ(error_of("calibration: {camera: {width: 64, height: 48, fx: 80, fy: 80}}\n")
+                .rfind("test.yaml: detector background: frames of 64x48 (calibration.camera): "
+                       "MotionEstimator::reset: image 64x48 is too small for 4 pyramid levels",
+                       0),
+            0u);
+  EXPECT_EQ(error_of(small + "detector: {name: maxvalue}\n"), "") << "maxvalue takes any size";
+}
+
+TEST(Config, FrameMemoryIsWithinTheStatedLimit) {
+  const std::string huge =
+      "calibration: {camera: {width: 16384, height: 16384, fx: 20000, fy: "
+      "20000}}\npipeline: {frame_slots: 1024}\n";
+  EXPECT_EQ(error_of(huge),
+            "test.yaml: pipeline.frame_memory_limit_mb: frames of 16384x16384 need 276741.3 MB "
+            "(pipeline.frame_slots 1024, image_slots 2, profile_slots 16 and the raw-frame "
+            "buffers), more than the limit of 1024 MB: fewer slots, a smaller camera or a higher "
+            "limit");
+  EXPECT_EQ(error_of("pipeline: {frame_memory_limit_mb: 8}\n"),
+            "test.yaml:1: pipeline.frame_memory_limit_mb: must be between 16 and 1048576, got 8");
+
+  // The default configuration's frame path, then limits just below and above what it needs.
+  DaemonConfig config = builtin_config();
+  Backends backends = create_backends(config);
+  const hal::FrameFormat format = backends.camera->format();
+  const std::uint64_t buffers = frame_path_memory_bytes(
+      config, format, backends.detector->max_points(format.width, format.height));
+  const std::uint64_t frame = format.bytes();
+  EXPECT_GT(buffers, (config.frame_slots + config.image_slots + 2) * frame);
+  EXPECT_LT(buffers, (config.frame_slots + config.image_slots + 10) * frame);
+  // A detector as create_backends() makes it, not yet sized.
+  auto fresh_detector = [&] {
+    return pipeline::make_detector(config.detector, config.detector_options);
+  };
+  config.frame_memory_limit_mb = static_cast<std::int64_t>(buffers / 1'000'000);
+  try {
+    check_frame_path(config, format, *fresh_detector());
+    FAIL() << "frame buffers of " << buffers << " bytes above the limit";
+  } catch (const hal::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("more than the limit of"), std::string::npos);
+  }
+  // The detector's buffers count too: the background detector's are several megabytes.
+  config.frame_memory_limit_mb = static_cast<std::int64_t>(buffers / 1'000'000) + 1;
+  try {
+    check_frame_path(config, format, *fresh_detector());
+    FAIL() << "the detector's buffers must count";
+  } catch (const hal::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find(" for the detector background, more than the limit of"),
+              std::string::npos)
+        << e.what();
+  }
+  config.frame_memory_limit_mb = static_cast<std::int64_t>(buffers / 1'000'000) + 64;
+  EXPECT_NO_THROW(check_frame_path(config, format, *fresh_detector()));
 }
 
 TEST(Config, LcmChannelsAndUrl) {
@@ -269,12 +351,142 @@ TEST(Config, UnreadableAndInvalidYaml) {
     load_config_file("/nonexistent/laserline.yaml");
     FAIL();
   } catch (const hal::ConfigError& e) {
-    EXPECT_STREQ(e.what(), "/nonexistent/laserline.yaml: cannot be opened for reading");
+    EXPECT_STREQ(e.what(),
+                 "/nonexistent/laserline.yaml: cannot be opened for reading: No such file or "
+                 "directory");
   }
   const std::string bad = error_of("camera: {backend: sim\nlcm: 1\n");
   EXPECT_EQ(bad.rfind("test.yaml:", 0), 0u) << bad;
   EXPECT_NE(bad.find("not valid YAML"), std::string::npos) << bad;
   EXPECT_EQ(error_of("- a\n- b\n"), "test.yaml:1: the top level must be a mapping of keys");
+}
+
+// What an outside tester gave laserlined as a configuration: each is one line naming the file,
+// the place and what is wrong, and none takes long or much memory.
+class HostileConfigFile : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           ("laserline_hostile_config_" + std::to_string(getpid()));
+    std::filesystem::create_directories(dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+
+  std::string write(const std::string& name, const std::string& bytes) {
+    const std::string path = (dir_ / name).string();
+    std::ofstream(path, std::ios::binary) << bytes;
+    return path;
+  }
+  // The error of loading `path` as laserlined does, with the directory left out; "" when valid.
+  std::string error_of_file(const std::string& path) {
+    try {
+      DaemonConfig config = load_config_file(path);
+      create_backends(config);
+    } catch (const hal::ConfigError& e) {
+      std::string what = e.what();
+      EXPECT_EQ(what.find('\n'), std::string::npos) << what;
+      const std::string prefix = dir_.string() + "/";
+      return what.rfind(prefix, 0) == 0 ? what.substr(prefix.size()) : what;
+    }
+    return "";
+  }
+
+  std::filesystem::path dir_;
+};
+
+TEST_F(HostileConfigFile, OnlyRegularFilesAreRead) {
+  EXPECT_EQ(
+      error_of_file(dir_.string()),
+      dir_.string() + ": is a directory, not a file: give a configuration or calibration file");
+  EXPECT_EQ(error_of_file("/dev/null"),
+            "/dev/null: is a character device, not a file: give a configuration or calibration "
+            "file");
+  EXPECT_EQ(error_of_file("/dev/zero"),
+            "/dev/zero: is a character device, not a file: give a configuration or calibration "
+            "file");
+  // A named pipe without a writer: refused at once instead of waiting for one forever.
+  const std::string fifo = (dir_ / "pipe.yaml").string();
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  EXPECT_EQ(error_of_file(fifo),
+            "pipe.yaml: is a named pipe (FIFO), not a file: give a configuration or calibration "
+            "file");
+  EXPECT_EQ(error_of_file(write("empty.yaml", "")),
+            "empty.yaml: has no keys (empty, or only comments)");
+}
+
+TEST_F(HostileConfigFile, SizeIsLimitedBeforeParsing) {
+  // Three million keys took 3 GB and 22 s before the unknown-key error; now the size decides.
+  std::string keys;
+  for (int i = 0; keys.size() <= hal::kMaxYamlFileBytes; ++i)
+    keys += "k" + std::to_string(i) + ": 1\n";
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_EQ(error_of_file(write("huge.yaml", keys)),
+            "huge.yaml: is " + std::to_string(keys.size()) +
+                " bytes, more than the 1048576 (1 MiB) a configuration or calibration may have");
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(1));
+  std::string just_fits = "lcm: {url: 'memq://'}\n";
+  just_fits += std::string(hal::kMaxYamlFileBytes - just_fits.size() - 1, '#') + "\n";
+  EXPECT_EQ(error_of_file(write("fits.yaml", just_fits)), "");
+}
+
+TEST_F(HostileConfigFile, NestingIsLimitedWithAClearMessage) {
+  // yaml-cpp's own guard said "not valid YAML: bad file".
+  EXPECT_EQ(error_of_file(write("deep.yaml",
+                                "a: " + std::string(10000, '[') + std::string(10000, ']') + "\n")),
+            "deep.yaml:1: nested more than 32 levels deep");
+  std::string block = "camera:\n";
+  for (int level = 1; level <= 40; ++level)
+    block +=
+        std::string(static_cast<std::size_t>(2 * level), ' ') + "k" + std::to_string(level) + ":\n";
+  block += std::string(82, ' ') + "x: 1\n";
+  EXPECT_EQ(error_of_file(write("block.yaml", block)),
+            "block.yaml:33: camera.k1.k2.k3.k4.k5.k6.k7.k8.k9.k10.k11.k12.k13.k14.k15.k16.k17.k18."
+            "k19.k20.k21.k22.k23.k24.k25.k26.k27.k28.k29.k30.k31: nested more than 32 levels deep");
+  // A few aliases used many times (a "billion laughs") are counted as what they expand to.
+  std::string laughs = "a: &a [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]\n";
+  for (char name = 'b'; name <= 'i'; ++name) {
+    const std::string prev(1, static_cast<char>(name - 1));
+    laughs += std::string(1, name) + ": &" + name + " [*" + prev + ", *" + prev + ", *" + prev +
+              ", *" + prev + ", *" + prev + ", *" + prev + ", *" + prev + ", *" + prev + ", *" +
+              prev + ", *" + prev + "]\n";
+  }
+  const std::string error = error_of_file(write("laughs.yaml", laughs));
+  EXPECT_NE(error.find(": more than 100000 keys and values (aliases counted each time they are "
+                       "used)"),
+            std::string::npos)
+      << error;
+}
+
+TEST_F(HostileConfigFile, OneDocumentOnly) {
+  EXPECT_EQ(
+      error_of_file(write("two.yaml", "lcm: {url: 'memq://'}\n---\nlcm: {url: 'file://x'}\n")),
+      "two.yaml:3: a second YAML document (after '---'): only one is read, give all keys in "
+      "one");
+}
+
+TEST_F(HostileConfigFile, NulBytesAreRefusedAndShownEscaped) {
+  EXPECT_EQ(
+      error_of_file(write("raw.yaml", std::string("lcm:\n  profile_channel: LASER\0X\n", 31))),
+      "raw.yaml:2: a NUL byte (\\0) at column 25 (byte offset 29): not a text file");
+  // Escaped in a double-quoted string: the channel name was cut at the NUL.
+  EXPECT_EQ(error_of_file(write("value.yaml", "lcm:\n  profile_channel: \"LASER\\0X\"\n")),
+            "value.yaml:2: lcm.profile_channel: contains a NUL byte: \"LASER\\0X\"");
+  EXPECT_EQ(error_of_file(write("key.yaml", "lcm:\n  \"url\\0x\": 'memq://'\n")),
+            "key.yaml:2: lcm: the key \"url\\0x\" contains a NUL byte");
+  // Other control characters in a value stay on the one line, escaped.
+  EXPECT_EQ(error_of_file(write("newline.yaml", "laser: {mode: \"o\\nn\\x1b\"}\n")),
+            "newline.yaml:1: laser.mode: must be one of on, alternate, off, pattern, got "
+            "'o\\nn\\x1b'");
+}
+
+TEST_F(HostileConfigFile, KeysWithoutValueAndEmptySectionsAreNamed) {
+  EXPECT_EQ(error_of_file(write("novalue.yaml", "camera:\n  frame_rate_hz:\n")),
+            "novalue.yaml:2: camera.frame_rate_hz: has no value (give one or leave the key out)");
+  EXPECT_EQ(error_of_file(write("nosection.yaml", "camera:\nlcm: {url: 'memq://'}\n")),
+            "nosection.yaml:1: camera: is empty (give its keys, or leave the section out for the "
+            "defaults)");
+  EXPECT_EQ(error_of_file(write("listkey.yaml", "lcm:\n  ? [a, b]\n  : 1\n")),
+            "listkey.yaml:2: lcm: a key must be a plain name, not a list, a mapping or empty");
 }
 
 TEST(Config, ErrorsAreOneLine) {
@@ -435,7 +647,8 @@ TEST(Config, LaserSheetOutOfViewIsOneLine) {
 TEST(Config, LaserSheetOutOfViewNamesTheCalibrationFile) {
   const auto dir = std::filesystem::temp_directory_path() / "laserline_test_config_sheet";
   std::filesystem::create_directories(dir);
-  std::ofstream(dir / "calib.yaml") << "laser: {angle_deg: 150}\n";
+  std::ofstream(dir / "calib.yaml") << "camera: {width: 1280, height: 1024, fx: 1400, fy: 1400}\n"
+                                       "laser: {angle_deg: 150}\n";
   std::ofstream(dir / "daemon.yaml") << "calibration: calib.yaml\n";
   try {
     DaemonConfig config = load_config_file((dir / "daemon.yaml").string());

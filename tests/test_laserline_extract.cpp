@@ -534,6 +534,34 @@ TEST_F(LaserlineExtract, LcmLogOfImageMessages) {
   EXPECT_EQ(csv.sources.at(4), log_path + " event 6 (LASERLINE_IMAGE)");
 }
 
+// Whether `line` is `before`, a whole number, then `after` (a byte offset that depends on how
+// OpenCV splits its PNG data into chunks).
+bool is_with_number(const std::string& line, const std::string& before, const std::string& after) {
+  if (line.size() <= before.size() + after.size() || line.rfind(before, 0) != 0 ||
+      line.compare(line.size() - after.size(), after.size(), after) != 0) {
+    return false;
+  }
+  const std::string number = line.substr(before.size(), line.size() - before.size() - after.size());
+  return number.find_first_not_of("0123456789") == std::string::npos;
+}
+
+// The line of `out` that begins with `start` ("" when none).
+std::string line_starting(const std::string& out, const std::string& start) {
+  const std::size_t at = out.find(start);
+  return at == std::string::npos ? "" : out.substr(at, out.find('\n', at) - at);
+}
+
+// Bytes of a file, written or read whole.
+void write_bytes(const std::string& path, const std::vector<std::uint8_t>& bytes) {
+  std::ofstream(path, std::ios::binary)
+      .write(reinterpret_cast<const char*>(bytes.data()),
+             static_cast<std::streamsize>(bytes.size()));
+}
+std::vector<std::uint8_t> read_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
 TEST_F(LaserlineExtract, CorruptImageBetweenGoodOnesKeepsTheOthers) {
   hal::SimScene scene(options_);
   fs::create_directories(dir_ / "seq");
@@ -547,13 +575,122 @@ TEST_F(LaserlineExtract, CorruptImageBetweenGoodOnesKeepsTheOthers) {
 
   const RunResult r = extract(path("seq"));
   EXPECT_EQ(r.exit_code, 1) << r.out;
-  EXPECT_NE(r.out.find("laserline-extract: " + path("seq/a1.png") +
-                       ": not a readable image (corrupt or unsupported format); skipped\n"),
-            std::string::npos)
+  const std::string a1 = "laserline-extract: " + path("seq/a1.png") + ": ";
+  EXPECT_TRUE(is_with_number(line_starting(r.out, a1),
+                             a1 + "damaged image (cut short: chunk IDAT at byte ",
+                             " runs past the end); skipped"))
       << r.out;
   const Csv csv = read_csv(path("points.csv"));
   EXPECT_EQ(csv.frames.count(1), 0u);
   expect_frames_match(csv, {{0, 0}, {2, 2}}, scene);
+}
+
+// An image cut short or damaged decodes without an error in OpenCV (a JPEG cut in half gave 60 of
+// 320 columns off by up to 219 px, exit 0): each is named and skipped, the run ends with status
+// 1, and the good frames around them are all written.
+TEST_F(LaserlineExtract, DamagedImagesAreNamedAndSkippedTheGoodOnesKept) {
+  hal::SimScene scene(options_);
+  fs::create_directories(dir_ / "seq");
+  auto encoded = [&](const char* ext, std::uint64_t sequence) {
+    std::vector<std::uint8_t> bytes;
+    EXPECT_TRUE(cv::imencode(ext, render(scene, sequence), bytes, {cv::IMWRITE_JPEG_QUALITY, 100}));
+    return bytes;
+  };
+  write_bytes(path("seq/f0.png"), encoded(".png", 0));
+  std::vector<std::uint8_t> jpeg = encoded(".jpg", 1);
+  jpeg.resize(jpeg.size() / 2);
+  write_bytes(path("seq/f1.jpg"), jpeg);
+  write_bytes(path("seq/f2.jpg"), encoded(".jpg", 2));
+  std::vector<std::uint8_t> png = encoded(".png", 3);
+  png.resize(png.size() - 12);  // the IEND chunk only
+  write_bytes(path("seq/f3.png"), png);
+  png = encoded(".png", 4);
+  png[png.size() / 2] ^= 0x40;  // one bit inside the image data
+  write_bytes(path("seq/f4.png"), png);
+  // Zeros after the end-of-image marker (some cameras pad files) are not damage; an
+  // end-of-image marker inside a metadata segment (as in an EXIF thumbnail) is not the end.
+  jpeg = encoded(".jpg", 5);
+  jpeg.insert(jpeg.end(), 64, 0);
+  write_bytes(path("seq/f5.jpg"), jpeg);
+  jpeg = encoded(".jpg", 6);
+  const std::vector<std::uint8_t> app1 = {0xFF, 0xE1, 0x00, 0x08, 'E', 'x', 0xFF, 0xD8, 0xFF, 0xD9};
+  jpeg.insert(jpeg.begin() + 2, app1.begin(), app1.end());
+  jpeg.resize(jpeg.size() * 3 / 5);
+  write_bytes(path("seq/f6.jpg"), jpeg);
+  write_bytes(path("seq/f7.png"), encoded(".png", 7));
+
+  const RunResult r = extract(path("seq"));
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  for (const char* line :
+       {"f1.jpg: damaged image (cut short in the image data: no end-of-image marker (FF D9)); "
+        "skipped",
+        "f3.png: damaged image (cut short: no IEND chunk); skipped",
+        "f6.jpg: damaged image (cut short in the image data: no end-of-image marker (FF D9)); "
+        "skipped"}) {
+    EXPECT_NE(r.out.find("laserline-extract: " + path("seq/") + line + "\n"), std::string::npos)
+        << line << "\n"
+        << r.out;
+  }
+  const std::string f4 = "laserline-extract: " + path("seq/f4.png") + ": ";
+  EXPECT_TRUE(is_with_number(line_starting(r.out, f4),
+                             f4 + "damaged image (damaged: chunk IDAT at byte ",
+                             " fails its CRC); skipped"))
+      << r.out;
+  EXPECT_NE(r.out.find("8 frames from 1 inputs, 4 processed with maxvalue"), std::string::npos)
+      << r.out;
+  const Csv csv = read_csv(path("points.csv"));
+  for (long damaged : {1, 3, 4, 6})
+    EXPECT_EQ(csv.frames.count(damaged), 0u) << "frame " << damaged;
+  expect_frames_match(csv, {{0, 0}, {7, 7}}, scene);
+  // JPEG at quality 100: within the tolerance of the lossless frames on this scene.
+  expect_frames_match(csv, {{2, 2}, {5, 5}}, scene);
+}
+
+// A video cut short decodes its first frames and then ends as if complete (16 of 30 frames,
+// exit 0, no word): the container's frame count says what is missing. The frames that decoded
+// are all written.
+TEST_F(LaserlineExtract, VideoCutShortIsReportedItsFramesKept) {
+  hal::SimScene scene(options_);
+  const std::string video = path("scan.avi");
+  {
+    cv::VideoWriter writer(video, cv::CAP_FFMPEG, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 30,
+                           cv::Size(kWidth, kHeight), false);
+    ASSERT_TRUE(writer.isOpened()) << "this OpenCV cannot write MJPG video";
+    writer.set(cv::VIDEOWRITER_PROP_QUALITY, 100);
+    for (int k = 0; k < 30; ++k)
+      writer.write(render(scene, static_cast<std::uint64_t>(k)));
+  }
+  std::vector<std::uint8_t> bytes = read_bytes(video);
+  bytes.resize(bytes.size() / 2);
+  write_bytes(path("cut.avi"), bytes);
+  cv::VideoCapture capture(path("cut.avi"), cv::CAP_FFMPEG);
+  ASSERT_TRUE(capture.isOpened());
+  ASSERT_EQ(capture.get(cv::CAP_PROP_FRAME_COUNT), 30.0) << "the header's count survives the cut";
+  int decodable = 0;
+  for (cv::Mat frame; capture.read(frame);)
+    ++decodable;
+  std::printf("the cut video decodes %d of its 30 frames\n", decodable);
+  ASSERT_GT(decodable, 0);
+  ASSERT_LT(decodable, 30);
+
+  const RunResult r = extract(path("cut.avi"));
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  const std::string n = std::to_string(decodable);
+  EXPECT_NE(r.out.find("laserline-extract: " + path("cut.avi") + ": only " + n +
+                       " of the 30 frames its container announces could be decoded (cut short or "
+                       "damaged?); those " +
+                       n + " were processed\n"),
+            std::string::npos)
+      << r.out;
+  const Csv csv = read_csv(path("points.csv"));
+  EXPECT_EQ(csv.frames.size(), static_cast<std::size_t>(decodable));
+  expect_frames_match(csv, {{0, 0}, {decodable / 2, static_cast<std::uint64_t>(decodable / 2)}},
+                      scene);
+
+  // The whole video: every frame, status 0.
+  const RunResult whole = extract(video);
+  EXPECT_EQ(whole.exit_code, 0) << whole.out;
+  EXPECT_EQ(read_csv(path("points.csv")).frames.size(), 30u);
 }
 
 TEST_F(LaserlineExtract, MissingAndWrongSizeInputsAreNamedAndSkipped) {
@@ -713,6 +850,24 @@ TEST_F(LaserlineExtract, BadArgumentsAndConfiguration) {
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_EQ(r.out, "laserline-extract: " + path("badcalib.yaml") +
                        ":1: camera.fx: must be between 1 and 1e+06, got -1\n");
+
+  // A directory, a device or an empty file is no calibration or configuration: before, --calib
+  // on a directory extracted with the default camera.
+  std::ofstream(path("empty.yaml")) << "";
+  for (const auto& [args, line] : std::vector<std::pair<std::string, std::string>>{
+           {"--calib " + dir_.string(),
+            dir_.string() +
+                ": is a directory, not a file: give a configuration or calibration file"},
+           {"--calib " + path("empty.yaml"),
+            path("empty.yaml") + ": has no keys (empty, or only comments)"},
+           {"--calib " + calib_ + " --config /dev/null",
+            "/dev/null: is a character device, not a file: give a configuration or calibration "
+            "file"}}) {
+    r = run_command(std::string(LASERLINE_EXTRACT_PATH) + " " + args +
+                    " --detector maxvalue --output " + path("p.csv") + " x.png");
+    EXPECT_EQ(r.exit_code, 2) << args;
+    EXPECT_EQ(r.out, "laserline-extract: " + line + "\n");
+  }
 }
 
 // The configuration's detector options reach the detector: a threshold above the laser's peak

@@ -1,6 +1,7 @@
 // laserlined's command line and start-up validation, run as the real executable.
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include "run_command.hpp"
 
@@ -76,7 +77,9 @@ TEST_F(LaserlinedCli, OutOfRangeAndWrongTypeFailBeforeAnythingStarts) {
 TEST_F(LaserlinedCli, MissingConfigFile) {
   const CliResult r = run("--config /nonexistent/x.yaml");
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_EQ(r.out, "laserlined: /nonexistent/x.yaml: cannot be opened for reading\n");
+  EXPECT_EQ(r.out,
+            "laserlined: /nonexistent/x.yaml: cannot be opened for reading: No such file or "
+            "directory\n");
 }
 
 TEST_F(LaserlinedCli, BadFlags) {
@@ -101,7 +104,9 @@ TEST_F(LaserlinedCli, CheckConfigValidatesWithoutRunning) {
   EXPECT_EQ(builtin.exit_code, 0) << builtin.out;
 
   // A calibration whose laser sheet lies behind the camera is refused, naming its file.
-  const std::string calib = file("calib.yaml", "laser: {plane: [0, 0.5, 0.866, 0.25]}\n");
+  const std::string calib = file("calib.yaml",
+                                 "camera: {width: 1280, height: 1024, fx: 1400, fy: 1400}\n"
+                                 "laser: {plane: [0, 0.5, 0.866, 0.25]}\n");
   const CliResult behind =
       run("--check-config --config " + file("behind.yaml", "calibration: " + calib + "\n"));
   EXPECT_EQ(behind.exit_code, 2) << behind.out;
@@ -183,6 +188,92 @@ TEST_F(LaserlinedCli, RealtimeGrantedRuns) {
                "lcm: {url: 'memq://'}\n"));
   EXPECT_EQ(r.exit_code, 0) << r.out;
   EXPECT_NE(r.out.find("running"), std::string::npos) << r.out;
+}
+
+}  // namespace
+
+// --check-config on what an outside tester gave laserlined (issue 15): each case is refused by
+// the check with one line, as the start would refuse it (or crash, before); a configuration the
+// check passes starts and runs on the simulator.
+namespace {
+
+class CheckConfigHostile : public LaserlinedCli {
+ protected:
+  // Refused by --check-config with exit status 2 and exactly `line` (the directory left out).
+  void expect_refused(const std::string& config_path, const std::string& line) {
+    const CliResult r = run("--check-config --config " + config_path);
+    EXPECT_EQ(r.exit_code, 2) << r.out;
+    EXPECT_EQ(lines(r.out), 1u) << r.out;
+    std::string out = r.out;
+    for (std::size_t at; (at = out.find(dir_.string() + "/")) != std::string::npos;)
+      out.erase(at, dir_.string().size() + 1);
+    EXPECT_EQ(out, "laserlined: " + line + "\n");
+  }
+};
+
+TEST_F(CheckConfigHostile, DerivedSizesAreCheckedAsTheStartDoes) {
+  expect_refused(file("roi_x.yaml", "lcm: {image_roi: [2147483647, 0, 16, 16]}\n"),
+                 "roi_x.yaml:1: lcm.image_roi: [2147483647, 0, 16, 16] is not inside the "
+                 "calibration's 1280x1024 frame");
+  expect_refused(file("roi_w.yaml", "lcm: {image_roi: [1, 0, 2147483647, 16]}\n"),
+                 "roi_w.yaml:1: lcm.image_roi: [1, 0, 2147483647, 16] is not inside the "
+                 "calibration's 1280x1024 frame");
+  expect_refused(file("small.yaml",
+                      "calibration: {camera: {width: 16, height: 16, fx: 20, fy: "
+                      "20}}\n"),
+                 "small.yaml: detector background: frames of 16x16 (calibration.camera): frame "
+                 "smaller than 64x4 pixels");
+  expect_refused(file("huge.yaml",
+                      "calibration: {camera: {width: 16384, height: 16384, fx: "
+                      "20000, fy: 20000}}\npipeline: {frame_slots: 1024}\n"),
+                 "huge.yaml: pipeline.frame_memory_limit_mb: frames of 16384x16384 need 276741.3 "
+                 "MB (pipeline.frame_slots 1024, image_slots 2, profile_slots 16 and the "
+                 "raw-frame buffers), more than the limit of 1024 MB: fewer slots, a smaller "
+                 "camera or a higher limit");
+}
+
+TEST_F(CheckConfigHostile, OnlyOneRegularFileOfYamlIsAConfiguration) {
+  expect_refused(dir_.string(), dir_.string() +
+                                    ": is a directory, not a file: give a configuration or "
+                                    "calibration file");
+  expect_refused("/dev/null",
+                 "/dev/null: is a character device, not a file: give a configuration or "
+                 "calibration file");
+  expect_refused(file("empty.yaml", ""), "empty.yaml: has no keys (empty, or only comments)");
+  const std::string fifo = (dir_ / "fifo.yaml").string();
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  expect_refused(fifo,
+                 "fifo.yaml: is a named pipe (FIFO), not a file: give a configuration or "
+                 "calibration file");
+  expect_refused(file("deep.yaml", "a: " + std::string(10000, '[') + std::string(10000, ']')),
+                 "deep.yaml:1: nested more than 32 levels deep");
+  expect_refused(file("two.yaml", "laser: {mode: on}\n---\nlaser: {mode: off}\n"),
+                 "two.yaml:3: a second YAML document (after '---'): only one is read, give all "
+                 "keys in one");
+  expect_refused(file("nul.yaml", "lcm: {status_channel: \"STATUS\\0HIDDEN\"}\n"),
+                 "nul.yaml:1: lcm.status_channel: contains a NUL byte: \"STATUS\\0HIDDEN\"");
+  expect_refused(
+      file("calib_dir.yaml", "calibration: " + dir_.string() + "\n"),
+      dir_.string() + ": is a directory, not a file: give a configuration or calibration file");
+}
+
+// What the check passes starts: the last pixels of the frame as the region, the frame-path's
+// memory near its limit, the smallest frame the maxvalue detector takes.
+TEST_F(CheckConfigHostile, WhatTheCheckPassesStarts) {
+  for (const std::string text :
+       {"lcm: {url: 'memq://', image_every_n: 1, image_roi: [1272, 1020, 8, 4], image_downscale: "
+        "4}\n",
+        "lcm: {url: 'memq://'}\npipeline: {frame_slots: 64, frame_memory_limit_mb: 128}\n",
+        "lcm: {url: 'memq://'}\ndetector: {name: maxvalue}\n"
+        "calibration: {camera: {width: 64, height: 16, fx: 80, fy: 80}}\n"}) {
+    const std::string path = file("good.yaml", text);
+    const CliResult check = run("--check-config --config " + path);
+    EXPECT_EQ(check.exit_code, 0) << text << check.out;
+    const CliResult started = run("--duration 0.5 --config " + path);
+    EXPECT_EQ(started.exit_code, 0) << text << started.out;
+    EXPECT_NE(started.out.find("running"), std::string::npos) << started.out;
+    EXPECT_NE(started.out.find("stopped (duration elapsed)"), std::string::npos) << started.out;
+  }
 }
 
 }  // namespace

@@ -173,3 +173,56 @@ TEST(RawFrameEncoder, CompressedRecordingsReplayExactly) {
 }
 
 }  // namespace
+
+namespace {
+
+// A region reaching past the frame, however its x + width is computed, is refused by name before
+// any buffer is sized from it (x = 2^31 - 1 overflowed to a negative end and read far outside the
+// frame; width = 2^31 - 1 allocated 8 GB).
+TEST(RawFrameEncoder, RegionOutsideTheFrameIsRefusedBeforeAnyBuffer) {
+  const laserline::hal::FrameFormat format{kW, kH, kW, laserline::hal::PixelFormat::kMono8};
+  struct Case {
+    int x, y, width, height, downscale;
+    const char* problem;
+  };
+  const Case cases[] = {
+      {2147483647, 0, 16, 16, 1,
+       "lcm.image_roi: [2147483647, 0, 16, 16] is not inside the camera's 64x48 frame"},
+      {1, 0, 2147483647, 16, 2,
+       "lcm.image_roi: [1, 0, 2147483647, 16] is not inside the camera's 64x48 frame"},
+      {0, 2147483640, 8, 2147483647, 1,
+       "lcm.image_roi: [0, 2147483640, 8, 2147483647] is not inside the camera's 64x48 frame"},
+      {-8, 0, 16, 16, 1, "lcm.image_roi: [-8, 0, 16, 16] is not inside the camera's 64x48 frame"},
+      {60, 44, 4, 3, 4, "lcm.image_downscale: 4 leaves no pixel of a 4x3 region"},
+  };
+  for (const Case& c : cases) {
+    RawFrameOptions options;
+    options.roi_x = c.x;
+    options.roi_y = c.y;
+    options.roi_width = c.width;
+    options.roi_height = c.height;
+    options.downscale = c.downscale;
+    EXPECT_EQ(laserline::daemon::raw_frame_region_problem(options, format), c.problem);
+    try {
+      RawFrameEncoder encoder(options, format);
+      ADD_FAILURE() << "accepted " << c.problem;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_EQ(std::string(e.what()), std::string("RawFrameEncoder: ") + c.problem);
+    }
+  }
+  // The last pixels of the frame are inside.
+  RawFrameOptions corner;
+  corner.roi_x = kW - 8;
+  corner.roi_y = kH - 4;
+  corner.roi_width = 8;
+  corner.roi_height = 4;
+  corner.downscale = 4;
+  corner.compression = ImageCompression::kNone;
+  EXPECT_EQ(laserline::daemon::raw_frame_region_problem(corner, format), "");
+  const laserline::image_t m = encode(corner, test_frame());
+  EXPECT_EQ(m.width, 2);
+  EXPECT_EQ(m.height, 1);
+  EXPECT_EQ(laserline::daemon::raw_frame_encoder_bytes(corner, format), 2u + 2u + 0u + 4096u);
+}
+
+}  // namespace

@@ -1,8 +1,124 @@
 #include "tools/frame_channel.hpp"
 
+#include <zlib.h>
+
+#include <cerrno>
+#include <cstring>
+#include <fstream>
+#include <iterator>
 #include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 namespace laserline::tools {
+
+namespace {
+
+constexpr const char* kCutShort = "cut short";
+
+std::string at_byte(std::size_t offset) {
+  return " at byte " + std::to_string(offset);
+}
+
+// JPEG (ITU T.81 B.1): markers FF xx, segments with a 16-bit length, entropy-coded data after each
+// start of scan up to the next marker that is not a stuffed byte (FF 00) or a restart (FF D0..D7).
+std::string jpeg_damage(const std::vector<std::uint8_t>& d) {
+  const std::size_t n = d.size();
+  auto cut = [](const char* where) {
+    return std::string(kCutShort) + where + ": no end-of-image marker (FF D9)";
+  };
+  std::size_t i = 2;  // after the start-of-image marker
+  while (true) {
+    if (i >= n) return cut("");
+    if (d[i] != 0xFF) return "damaged: a segment expected" + at_byte(i);
+    while (i < n && d[i] == 0xFF)
+      ++i;  // fill bytes
+    if (i >= n) return cut("");
+    const std::uint8_t marker = d[i++];
+    if (marker == 0xD9) return "";
+    if (marker == 0x01 || (marker >= 0xD0 && marker <= 0xD7)) continue;  // no length
+    if (i + 2 > n) return cut(" in a segment");
+    const std::size_t length = (std::size_t{d[i]} << 8) | d[i + 1];
+    if (length < 2) return "damaged: a segment of length " + std::to_string(length) + at_byte(i);
+    if (i + length > n) return cut(" in a segment");
+    i += length;
+    if (marker != 0xDA) continue;
+    while (true) {  // entropy-coded data
+      if (i + 1 >= n) return cut(" in the image data");
+      if (d[i] == 0xFF && d[i + 1] != 0x00 && d[i + 1] != 0xFF &&
+          !(d[i + 1] >= 0xD0 && d[i + 1] <= 0xD7)) {
+        break;
+      }
+      ++i;
+    }
+  }
+}
+
+std::uint32_t big_endian_32(const std::uint8_t* p) {
+  return (std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) | (std::uint32_t{p[2]} << 8) |
+         p[3];
+}
+
+// PNG: the signature, then chunks (length, type, data, CRC of type and data) up to IEND.
+std::string png_damage(const std::vector<std::uint8_t>& d) {
+  const std::size_t n = d.size();
+  std::size_t i = 8;
+  while (true) {
+    if (i + 8 > n) return std::string(kCutShort) + ": no IEND chunk";
+    const std::size_t length = big_endian_32(&d[i]);
+    const std::string type(reinterpret_cast<const char*>(&d[i + 4]), 4);
+    if (length > n || i + 12 + length > n) {
+      return std::string(kCutShort) + ": chunk " + type + at_byte(i) + " runs past the end";
+    }
+    const auto crc = crc32(crc32(0L, Z_NULL, 0), &d[i + 4], static_cast<uInt>(length + 4));
+    if (crc != big_endian_32(&d[i + 8 + length])) {
+      return "damaged: chunk " + type + at_byte(i) + " fails its CRC";
+    }
+    if (type == "IEND") return "";
+    i += 12 + length;
+  }
+}
+
+}  // namespace
+
+std::string encoded_image_damage(const std::vector<std::uint8_t>& bytes) {
+  static constexpr std::uint8_t kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1A, '\n'};
+  if (bytes.size() >= 3 && bytes[0] == 0xFF && bytes[1] == 0xD8 && bytes[2] == 0xFF) {
+    return jpeg_damage(bytes);
+  }
+  if (bytes.size() >= 8 && std::equal(std::begin(kPng), std::end(kPng), bytes.begin())) {
+    return png_damage(bytes);
+  }
+  return "";
+}
+
+bool read_image_file(const std::string& path, cv::Mat& out, std::string& problem) {
+  out.release();
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    problem = std::string("cannot be read: ") + std::strerror(errno);
+    return false;
+  }
+  const std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(in)),
+                                        std::istreambuf_iterator<char>());
+  if (in.bad()) {
+    problem = std::string("read error: ") + std::strerror(errno);
+    return false;
+  }
+  if (const std::string damage = encoded_image_damage(bytes); !damage.empty()) {
+    problem = "damaged image (" + damage + ")";
+    return false;
+  }
+  try {
+    out = cv::imdecode(bytes, cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception&) {
+    out.release();
+  }
+  if (out.empty()) {
+    problem = "not a readable image (corrupt or unsupported format)";
+    return false;
+  }
+  return true;
+}
 
 bool to_laser_mono8(const cv::Mat& raw, const hal::LaserChannel& channel, cv::Mat& out,
                     std::string& problem) {

@@ -1,7 +1,9 @@
 #pragma once
 
+#include <cstdint>
 #include <opencv2/core.hpp>
 #include <string>
+#include <vector>
 
 #include "hal/laser_channel.hpp"
 
@@ -14,5 +16,16 @@ namespace laserline::tools {
 // empty image or a pixel type the detectors cannot take.
 bool to_laser_mono8(const cv::Mat& raw, const hal::LaserChannel& channel, cv::Mat& out,
                     std::string& problem);
+
+// Why the bytes of an encoded image are not a whole image, or "" when they are (as far as can be
+// told without decoding): a JPEG must reach its end-of-image marker (FF D9) through its segments
+// and entropy-coded data, a PNG its IEND chunk with every chunk's CRC right. OpenCV's decoders
+// return what they could decode of a cut file (the rest grey or black) with no more than a
+// warning, so a damaged frame would look like a good one. Other formats: "" (their decoder says).
+std::string encoded_image_damage(const std::vector<std::uint8_t>& bytes);
+
+// Reads an image file as cv::imread(path, cv::IMREAD_UNCHANGED) does, refusing one that
+// encoded_image_damage() finds damaged. False with a one-line reason (the file not named).
+bool read_image_file(const std::string& path, cv::Mat& out, std::string& problem);
 
 }  // namespace laserline::tools

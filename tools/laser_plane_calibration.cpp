@@ -1349,17 +1349,10 @@ void write_calibration_file(const std::string& path, const PlaneCalibrationResul
 
 cv::Mat load_image(const std::string& path, const hal::LaserChannel& channel) {
   cv::Mat raw;
-  try {
-    raw = cv::imread(path, cv::IMREAD_UNCHANGED);
-  } catch (const cv::Exception&) {
-    raw.release();
-  }
-  if (raw.empty()) {
-    if (access(path.c_str(), R_OK) != 0) fail(path + ": cannot be read: " + std::strerror(errno));
-    fail(path + ": not a readable image (corrupt or unsupported format)");
-  }
-  cv::Mat out;
   std::string problem;
+  // A damaged file (cut short) decodes with grey where data is missing: refused, not measured.
+  if (!read_image_file(path, raw, problem)) fail(path + ": " + problem);
+  cv::Mat out;
   if (!to_laser_mono8(raw, channel, out, problem)) fail(path + ": " + problem);
   return raw;
 }

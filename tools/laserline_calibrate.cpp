@@ -228,7 +228,9 @@ int main(int argc, char** argv) {
 
   try {
     if (!calib_path.empty()) {
-      const laserline::hal::Calibration given = laserline::hal::load_calibration_file(calib_path);
+      // Its laser section is optional here: only the prior of what is being calibrated.
+      const laserline::hal::Calibration given = laserline::hal::load_calibration_file(
+          calib_path, laserline::hal::CalibrationParts::kCamera);
       options.intrinsics = given.camera;
       options.laser_prior = given.laser;
       options.laser_prior.plane.reset();  // what is being calibrated; d and beta stay the prior

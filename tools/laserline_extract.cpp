@@ -456,20 +456,13 @@ class Extractor {
 };
 
 // An image file: one frame, counted even when it cannot be read so that frame numbers follow
-// the list of files.
+// the list of files. A damaged file (cut short, a failed CRC) is skipped whole: its decoder fills
+// what is missing, and lines through the filled part would be false points.
 void extract_image(Extractor& x, const std::string& path) {
   cv::Mat image;
-  try {
-    image = cv::imread(path, cv::IMREAD_UNCHANGED);
-  } catch (const cv::Exception&) {
-    image.release();
-  }
-  if (image.empty()) {
-    if (access(path.c_str(), R_OK) != 0) {
-      x.unreadable_frame(path + ": cannot be read: " + std::strerror(errno) + "; skipped");
-    } else {
-      x.unreadable_frame(path + ": not a readable image (corrupt or unsupported format); skipped");
-    }
+  std::string problem;
+  if (!laserline::tools::read_image_file(path, image, problem)) {
+    x.unreadable_frame(path + ": " + problem + "; skipped");
     return;
   }
   x.frame(image, path);
@@ -511,7 +504,17 @@ void extract_video(Extractor& x, const std::string& path, std::size_t input, std
     x.progress().update(input, inputs, name, count > 0 ? static_cast<double>(n) / count : 0.0,
                         x.frames());
   }
-  if (n == 0) x.fail(path + ": no frame could be decoded");
+  if (n == 0) {
+    x.fail(path + ": no frame could be decoded");
+  } else if (count > 0 && static_cast<double>(n) < count) {
+    // The container's own count (its header or index) against what decoded: a file cut short or
+    // a decode that failed midway ends the frames early without an error from OpenCV.
+    char announced[32];
+    std::snprintf(announced, sizeof announced, "%.0f", count);
+    x.fail(path + ": only " + std::to_string(n) + " of the " + announced +
+           " frames its container announces could be decoded (cut short or damaged?); those " +
+           std::to_string(n) + " were processed");
+  }
 }
 
 // Raw or compressed pixels of an image_t, as an OpenCV image (owning its pixels).
