@@ -1,5 +1,5 @@
 // laserlined: the laser line scanner daemon. Grabs frames, switches the laser, extracts the
-// laser line and publishes profiles, raw frames and status over LCM until SIGINT/SIGTERM.
+// laser line and publishes profiles, raw frames and status over LCM until a stop signal.
 #include <pthread.h>
 #include <sched.h>
 #include <signal.h>
@@ -7,17 +7,23 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
+#include <thread>
 
 #include "daemon/backends.hpp"
 #include "daemon/config.hpp"
 #include "daemon/cpu_usage.hpp"
 #include "daemon/frame_path.hpp"
+#include "daemon/lcm_publisher.hpp"
 #include "daemon/service_notifier.hpp"
 #include "daemon/thread_priorities.hpp"
 #include "hal/clock.hpp"
@@ -28,17 +34,26 @@ using laserline::daemon::Backends;
 using laserline::daemon::DaemonConfig;
 
 constexpr const char* kUsage =
-    "usage: laserlined [--config FILE] [--duration SECONDS] [--check-config]\n"
+    "usage: laserlined [--config FILE] [--duration SECONDS] [--check-config] [--laser-off]\n"
     "                  [--print-default-config] [--help] [--version]\n"
     "  --config FILE          YAML configuration (default: built-in, the simulated scanner)\n"
-    "  --duration SECONDS     stop by itself after this long (default: until SIGINT/SIGTERM)\n"
+    "  --duration SECONDS     stop by itself after this long, 0.001 to 1e9 (default: until a\n"
+    "                         stop signal)\n"
     "  --check-config         validate the configuration and backends, then exit\n"
+    "  --laser-off            drive the configured laser line to off, release it and exit (for\n"
+    "                         a supervisor once the daemon is gone: the unit's ExecStopPost=)\n"
     "  --print-default-config print the built-in configuration and exit\n";
+
+// --duration's range: less than a millisecond is below the main loop's 50 ms look at the clock
+// anyway; beyond 1e9 s (31 years) the count of nanoseconds nears its limit.
+constexpr double kMinDurationS = 1e-3;
+constexpr double kMaxDurationS = 1e9;
 
 struct Options {
   std::optional<std::string> config_path;
   double duration_s = 0;  // 0 = run until signalled
   bool check_only = false;
+  bool laser_off = false;
 };
 
 // The laser of this process, for the fatal-signal handler: a crash must not leave it on.
@@ -50,8 +65,100 @@ void fatal_signal_handler(int sig) {
   raise(sig);
 }
 
+// What each signal of `kill -l` 1-31 does. SIGKILL and SIGSTOP cannot be caught: the unit's
+// ExecStopPost= (laserlined --laser-off) and the watchdogs answer them (docs/operations.md).
+//
+// Faults: the kernel sends them to the thread that faulted and, were they blocked there, would
+// kill the process without running anything; so they are never blocked, and their handler
+// switches the laser off before the default action (a core dump) ends the process. SIGABRT is
+// also what an uncaught exception ends in and systemd's WatchdogSignal; SIGTRAP is a breakpoint,
+// SIGSYS a system call a seccomp filter forbids.
+constexpr int kCrashSignals[] = {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT, SIGTRAP, SIGSYS};
+// Ignored on purpose:
+//   SIGPIPE: a closed socket or pipe is an error of the write that met it (a counted publish
+//            error), not a reason to stop;
+//   SIGTTIN, SIGTTOU: a background job touching its terminal; their default action would freeze
+//            the whole process, the laser's frame watchdog with it. The daemon never reads its
+//            terminal, and its writes to it go through.
+constexpr int kIgnoredSignals[] = {SIGPIPE, SIGTTIN, SIGTTOU};
+// Ignored by their default action and needed by nothing here (SIGCONT also resumes a stopped
+// process): left unblocked, so that they are never queued.
+constexpr int kDefaultIgnoredSignals[] = {SIGCHLD, SIGCONT, SIGURG, SIGWINCH};
+
+// Every other signal, 1-31 and the real-time ones, stops the daemon the orderly way (frame path
+// stopped, laser off, line released, the "stopped" line): SIGINT, SIGTERM and SIGHUP exit 0, being
+// the ways to ask it to stop; any other exits 128 + its number, so that a supervisor sees a
+// failure (SIGQUIT, SIGUSR1, SIGXCPU of RLIMIT_RTTIME, ...). SIGTSTP stops it too: a suspended
+// daemon could not switch its laser off. Blocked in every thread, taken by the signal thread.
+sigset_t stop_signal_set() {
+  sigset_t set;
+  sigfillset(&set);  // glibc leaves out the real-time signals it keeps for itself
+  for (int sig : kCrashSignals)
+    sigdelset(&set, sig);
+  for (int sig : kIgnoredSignals)
+    sigdelset(&set, sig);
+  for (int sig : kDefaultIgnoredSignals)
+    sigdelset(&set, sig);
+  sigdelset(&set, SIGKILL);
+  sigdelset(&set, SIGSTOP);
+  return set;
+}
+
+int exit_status_for(int sig) {
+  return sig == SIGINT || sig == SIGTERM || sig == SIGHUP ? 0 : 128 + sig;
+}
+
+std::string signal_name(int sig) {
+  if (sig >= SIGRTMIN && sig <= SIGRTMAX) return "SIGRTMIN+" + std::to_string(sig - SIGRTMIN);
+  if (const char* abbrev = sigabbrev_np(sig); abbrev != nullptr) return std::string("SIG") + abbrev;
+  return "signal " + std::to_string(sig);
+}
+
+// Between the signal thread and the main thread.
+struct StopRequest {
+  std::mutex mutex;
+  std::condition_variable wake;
+  int signal = 0;        // the first stop signal taken once running
+  bool running = false;  // from here on the frame path may switch the laser on
+};
+StopRequest g_stop;
+
+// The signal thread: takes every stop signal with sigwaitinfo. While the daemon is still
+// starting (opening a camera may take seconds) nothing can have switched the laser on: it ends
+// the process at once, and the kernel releases the line at the "off" level it was requested at.
+// Once running, it hands the signal to the main loop.
+void take_stop_signals(sigset_t set) {
+  while (true) {
+    const int sig = sigwaitinfo(&set, nullptr);
+    if (sig <= 0) continue;  // EINTR
+    std::unique_lock lock(g_stop.mutex);
+    if (!g_stop.running) {
+      std::printf("laserlined: stopped (%s) while starting, the laser never switched on\n",
+                  signal_name(sig).c_str());
+      std::fflush(stdout);
+      _exit(exit_status_for(sig));
+    }
+    if (g_stop.signal == 0) g_stop.signal = sig;
+    lock.unlock();
+    g_stop.wake.notify_all();
+  }
+}
+
+// Waits up to `timeout` for a stop signal; returns it, or 0.
+int wait_for_stop_signal(std::chrono::milliseconds timeout) {
+  std::unique_lock lock(g_stop.mutex);
+  g_stop.wake.wait_for(lock, timeout, [] { return g_stop.signal != 0; });
+  return g_stop.signal;
+}
+
 [[noreturn]] void usage_error(const std::string& message) {
   std::fprintf(stderr, "laserlined: %s\n%s", message.c_str(), kUsage);
+  std::exit(2);
+}
+
+// A flag's value that cannot be used: one line naming the flag.
+[[noreturn]] void value_error(const std::string& message) {
+  std::fprintf(stderr, "laserlined: %s\n", message.c_str());
   std::exit(2);
 }
 
@@ -60,7 +167,7 @@ Options parse_args(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     auto value = [&](const char* flag) -> std::string {
-      if (i + 1 >= argc) usage_error(std::string(flag) + ": missing value");
+      if (i + 1 >= argc) value_error(std::string(flag) + ": missing value");
       return argv[++i];
     };
     if (arg == "--config") {
@@ -68,14 +175,17 @@ Options parse_args(int argc, char** argv) {
     } else if (arg == "--duration") {
       const std::string text = value("--duration");
       char* end = nullptr;
-      errno = 0;
       o.duration_s = std::strtod(text.c_str(), &end);
-      if (errno != 0 || end == text.c_str() || *end != '\0' || !std::isfinite(o.duration_s) ||
-          o.duration_s <= 0) {
-        usage_error("--duration: expected a number of seconds > 0, got '" + text + "'");
+      // Written so that NaN fails it too.
+      const bool in_range = o.duration_s >= kMinDurationS && o.duration_s <= kMaxDurationS;
+      if (end == text.c_str() || *end != '\0' || !in_range) {
+        value_error("--duration: expected a number of seconds from 0.001 to 1e9, got '" + text +
+                    "'");
       }
     } else if (arg == "--check-config") {
       o.check_only = true;
+    } else if (arg == "--laser-off") {
+      o.laser_off = true;
     } else if (arg == "--print-default-config") {
       std::fputs(laserline::daemon::builtin_config_text(), stdout);
       std::exit(0);
@@ -128,21 +238,36 @@ class HealthLine {
   laserline::daemon::CpuUsage cpu_;
 };
 
+// --laser-off: the line requested at its off level, as the daemon's own start does, then
+// released (the kernel keeps that level). For a supervisor once the daemon is gone, however it
+// went; refused while another process holds the line.
+int switch_laser_off(const DaemonConfig& config, laserline::hal::Laser& laser) {
+  std::string error;
+  if (!laser.open(&error) || !laser.set(false, 0, nullptr)) {
+    std::fprintf(stderr, "laserlined: laser (%s): %s\n", config.laser_backend.c_str(),
+                 error.empty() ? "cannot be switched off" : error.c_str());
+    return 1;
+  }
+  std::printf("laserlined: laser %s: off\n", config.laser_backend.c_str());
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  // Stop signals are taken synchronously by the main thread; every thread started later inherits
-  // the mask, so no frame-path thread is ever interrupted by them.
-  sigset_t stop_signals;
-  sigemptyset(&stop_signals);
-  sigaddset(&stop_signals, SIGINT);
-  sigaddset(&stop_signals, SIGTERM);
-  sigaddset(&stop_signals, SIGHUP);
+  // Stop signals are blocked before any thread exists, so every thread inherits the mask and no
+  // frame-path thread is ever interrupted by them; the signal thread takes them.
+  const sigset_t stop_signals = stop_signal_set();
   pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
-  signal(SIGPIPE, SIG_IGN);
+  for (int sig : kIgnoredSignals)
+    signal(sig, SIG_IGN);
+  for (int sig : kDefaultIgnoredSignals)
+    signal(sig, SIG_DFL);
 
   const Options options = parse_args(argc, argv);
   setvbuf(stdout, nullptr, _IOLBF, 0);
+  // --laser-off leaves the signals blocked: it is over in milliseconds and must not be cut short.
+  if (!options.laser_off) std::thread(take_stop_signals, stop_signals).detach();
 
   DaemonConfig config;
   Backends backends;
@@ -157,15 +282,16 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "laserlined: %s: %s\n", config.source.c_str(), e.what());
     return 2;
   }
+  if (options.laser_off) return switch_laser_off(config, *backends.laser);
   if (options.check_only) {
     std::printf("laserlined: %s: configuration is valid\n", config.source.c_str());
     return 0;
   }
 
-  lcm::LCM lcm(config.lcm_url);
-  if (!lcm.good()) {
-    std::fprintf(stderr, "laserlined: %s: lcm.url: cannot open '%s'\n", config.source.c_str(),
-                 config.lcm_url.c_str());
+  std::string error;
+  const std::unique_ptr<lcm::LCM> lcm = laserline::daemon::open_lcm(config.lcm_url, &error);
+  if (!lcm) {
+    std::fprintf(stderr, "laserlined: %s: lcm.url: %s\n", config.source.c_str(), error.c_str());
     return 2;
   }
 
@@ -194,10 +320,9 @@ int main(int argc, char** argv) {
   }
 
   g_laser = backends.laser.get();
-  for (int sig : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT})
+  for (int sig : kCrashSignals)
     signal(sig, fatal_signal_handler);
 
-  std::string error;
   if (!backends.laser->open(&error)) {
     std::fprintf(stderr, "laserlined: laser (%s): %s\n", config.laser_backend.c_str(),
                  error.c_str());
@@ -209,7 +334,12 @@ int main(int argc, char** argv) {
     return 1;
   }
   laserline::daemon::FramePath path(config, *backends.camera, *backends.laser, *backends.detector,
-                                    lcm);
+                                    *lcm);
+  {
+    // From here a stop signal goes to the main loop: the frame path is about to run the laser.
+    const std::lock_guard lock(g_stop.mutex);
+    g_stop.running = true;
+  }
   if (!path.start(&error)) {
     std::fprintf(stderr, "laserlined: %s: %s\n", config.source.c_str(), error.c_str());
     return 1;
@@ -226,11 +356,13 @@ int main(int argc, char** argv) {
   HealthLine health;
   std::int64_t next_status = start + kStatusPeriodNs;
   std::int64_t next_journal = start + kJournalPeriodNs;
+  std::string signal_reason;
+  int exit_status = 0;
   while (true) {
-    const timespec tick{0, 50'000'000};
-    const int sig = sigtimedwait(&stop_signals, nullptr, &tick);
-    if (sig > 0) {
-      reason = sig == SIGINT ? "SIGINT" : sig == SIGTERM ? "SIGTERM" : "SIGHUP";
+    if (const int sig = wait_for_stop_signal(std::chrono::milliseconds(50)); sig != 0) {
+      signal_reason = signal_name(sig);
+      reason = signal_reason.c_str();
+      exit_status = exit_status_for(sig);
       break;
     }
     path.enforce_laser_safety();
@@ -279,5 +411,5 @@ int main(int argc, char** argv) {
       config.laser_backend.c_str(), static_cast<long long>(s.laser_switches),
       static_cast<long long>(s.laser_late_switches), static_cast<long long>(s.laser_safety_offs));
   g_laser = nullptr;
-  return 0;
+  return exit_status;
 }

@@ -1,9 +1,69 @@
 #include "daemon/lcm_publisher.hpp"
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cstdio>
 #include <cstring>
 
 namespace laserline::daemon {
+
+namespace {
+
+// LCM's lines on stderr, joined into one; "connecting..." progress lines left out.
+std::string one_line(const std::string& text) {
+  std::string joined;
+  std::size_t start = 0;
+  while (start < text.size()) {
+    std::size_t end = text.find('\n', start);
+    if (end == std::string::npos) end = text.size();
+    const std::string line = text.substr(start, end - start);
+    start = end + 1;
+    if (line.empty() || line.ends_with("...")) continue;
+    joined += (joined.empty() ? "" : "; ") + line;
+  }
+  return joined;
+}
+
+}  // namespace
+
+std::unique_ptr<lcm::LCM> open_lcm(const std::string& url, std::string* error) {
+  // stderr goes into a pipe while LCM starts. Non-blocking: a longer complaint than the pipe
+  // holds is cut short instead of blocking the write.
+  int pipe_fds[2] = {-1, -1};
+  const bool capture = pipe2(pipe_fds, O_CLOEXEC | O_NONBLOCK) == 0;
+  int saved_stderr = -1;
+  if (capture) {
+    std::fflush(stderr);
+    saved_stderr = dup(STDERR_FILENO);
+    dup2(pipe_fds[1], STDERR_FILENO);
+  }
+  auto lcm = std::make_unique<lcm::LCM>(url);
+  const bool tcpq_unconnected = lcm->good() && url.starts_with("tcpq://") && lcm->getFileno() < 0;
+  std::string said;
+  if (capture) {
+    std::fflush(stderr);
+    dup2(saved_stderr, STDERR_FILENO);
+    close(saved_stderr);
+    close(pipe_fds[1]);
+    char buffer[4096];
+    ssize_t n;
+    while ((n = read(pipe_fds[0], buffer, sizeof buffer)) > 0)
+      said.append(buffer, static_cast<std::size_t>(n));
+    close(pipe_fds[0]);
+  }
+  if (lcm->good() && !tcpq_unconnected) {
+    if (!said.empty()) std::fputs(said.c_str(), stderr);
+    return lcm;
+  }
+  if (error != nullptr) {
+    const std::string why = one_line(said);
+    *error = "cannot open '" + url + "'" + (tcpq_unconnected ? ": no tcpq hub answered" : "") +
+             (why.empty() ? "" : ": " + why);
+  }
+  return nullptr;
+}
 
 std::int64_t frame_utime(const hal::FrameInfo& info) {
   return info.exposure_wall_ns() / 1000;

@@ -6,6 +6,7 @@
 #include <lcm/lcm-cpp.hpp>
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -55,6 +56,13 @@ class LcmPublisher {
   std::vector<std::uint8_t> buffer_;        // profiles and status (publisher thread)
   std::vector<std::uint8_t> image_buffer_;  // raw frames (image thread)
 };
+
+// Creates the LCM instance for `url`, or returns null with why in *error ("cannot open 'URL':
+// ..."). LCM prints its own complaints on stderr, several lines per attempt; they are taken into
+// that one line (and passed on to stderr when the instance is good after all). A tcpq:// instance
+// whose hub did not answer is refused: LCM would try to connect again, and say so in three lines,
+// on every message. Thread context: at start, before other threads write to stderr.
+std::unique_ptr<lcm::LCM> open_lcm(const std::string& url, std::string* error);
 
 // Microseconds since the Unix epoch of a frame's exposure (LCM's utime convention).
 std::int64_t frame_utime(const hal::FrameInfo& info);

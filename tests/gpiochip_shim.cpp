@@ -10,6 +10,9 @@
 //                              "<mono_ns> <wall_ns> <offset> <physical level> <event> <consumer>"
 //                              event = request | set | release; physical = level on the pin
 //                              (active-low inverts it).
+//                              A process opening the chip starts with the levels the log ends
+//                              with: like the kernel, which keeps a line's level after its
+//                              holder exited, however it exited (kill -9 included).
 //
 // What it does not cover: edge events (GPIO_GET_LINEEVENT_IOCTL), the v2 uAPI, line-config
 // changes on a live handle, and chips other than gpiochip0. Like the kernel, releasing a line
@@ -98,11 +101,43 @@ void open_log(Chip& c) {
   }
 }
 
+// Called with the mutex held, before any line is set: each line's level as the log leaves it.
+void restore_levels(Chip& c) {
+  if (c.log_path[0] == '\0') return;
+  using OpenFn = int (*)(const char*, int, ...);
+  using CloseFn = int (*)(int);
+  const int fd = real<OpenFn>("open")(c.log_path, O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return;
+  char line[256];
+  std::size_t used = 0;
+  char chunk[4096];
+  ssize_t n;
+  while ((n = read(fd, chunk, sizeof(chunk))) > 0) {
+    for (ssize_t i = 0; i < n; ++i) {
+      if (chunk[i] != '\n') {
+        if (used + 1 < sizeof(line)) line[used++] = chunk[i];
+        continue;
+      }
+      line[used] = '\0';
+      used = 0;
+      long long mono = 0, wall = 0;
+      unsigned offset = 0;
+      int level = 0;
+      if (std::sscanf(line, "%lld %lld %u %d", &mono, &wall, &offset, &level) == 4 &&
+          offset < static_cast<unsigned>(kMaxLines)) {
+        c.lines[offset].physical = level != 0 ? 1 : 0;
+      }
+    }
+  }
+  real<CloseFn>("close")(fd);
+}
+
 // Called with the mutex held.
 void initialise(Chip& c) {
   open_log(c);
   if (c.initialised) return;
   c.initialised = true;
+  restore_levels(c);
   for (int& fd : c.chip_fds)
     fd = -1;
   if (const char* names = std::getenv("LASERLINE_GPIO_SHIM_LINES"); names != nullptr && *names) {

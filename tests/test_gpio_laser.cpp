@@ -4,6 +4,7 @@
 // "oscilloscope": every level change on the pin with its host time.
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 #include <laserline/profile_t.hpp>
@@ -11,7 +12,9 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -22,6 +25,7 @@
 #include "hal/clock.hpp"
 #include "hal/gpio_laser.hpp"
 #include "hal/registry.hpp"
+#include "run_command.hpp"
 #include "thread_allocations.hpp"
 
 namespace {
@@ -187,7 +191,16 @@ TEST_F(GpioLaserTest, ConfigurationNamesTheMissingKey) {
 struct Daemon {
   pid_t pid = -1;
   std::filesystem::path output;
+  std::filesystem::path config;
 };
+
+// The environment that gives a command the stand-in chip, its pin log at `pins`.
+std::string shim_environment(const std::filesystem::path& pins) {
+  return std::string("LD_PRELOAD=") + GPIOCHIP_SHIM_PATH +
+         " LASERLINE_GPIO_SHIM_LOG=" + pins.string() +
+         " LASERLINE_GPIO_SHIM_LINES=SPARE0,SPARE1,LASER_EN,STROBE" +
+         " ASAN_OPTIONS=verify_asan_link_order=0";
+}
 
 // Starts laserlined on `config` with the stand-in chip preloaded, its pin log at `pins`.
 Daemon start_daemon(const std::string& config, const std::filesystem::path& pins,
@@ -196,9 +209,13 @@ Daemon start_daemon(const std::string& config, const std::filesystem::path& pins
   Daemon d;
   d.output = g_dir / ("daemon" + std::to_string(++counter) + ".out");
   const std::filesystem::path config_path = g_dir / ("daemon" + std::to_string(counter) + ".yaml");
+  d.config = config_path;
   std::ofstream(config_path) << config;
+  std::fflush(stdout);  // or the child's freopen() writes the parent's pending output again
   d.pid = fork();
   if (d.pid == 0) {
+    const rlimit no_core{0, 0};  // the crash signals below need no core file
+    setrlimit(RLIMIT_CORE, &no_core);
     freopen(d.output.c_str(), "w", stdout);
     dup2(fileno(stdout), 2);
     setenv("LD_PRELOAD", GPIOCHIP_SHIM_PATH, 1);
@@ -230,12 +247,20 @@ int wait_status(pid_t pid) {
 
 // Waits until the daemon's laser line has been switched on (frames are flowing).
 bool wait_for_laser_on(const std::filesystem::path& pins) {
-  for (int i = 0; i < 600; ++i) {
+  for (int i = 0; i < 3000; ++i) {
     for (const auto& e : read_pin_log(pins))
       if (e.event == "set" && e.level == 1) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   return false;
+}
+
+// How many times the pin was switched so far.
+std::size_t count_switches(const std::filesystem::path& pins) {
+  std::size_t n = 0;
+  for (const auto& e : read_pin_log(pins))
+    n += e.event == "set";
+  return n;
 }
 
 std::string daemon_config(const std::string& laser, const std::string& camera,
@@ -406,6 +431,248 @@ TEST_F(GpioLaserTest, DaemonSwitchesLaserOffWhileFramesStop) {
   EXPECT_NE(out.find("forced off because frames stopped"), std::string::npos) << out;
 }
 
+// What laserlined does with each signal (daemon/laserlined.cpp says why).
+enum class SignalOutcome { kStop, kCrash, kIgnore };
+
+SignalOutcome outcome_of(int sig) {
+  switch (sig) {
+    case SIGSEGV:
+    case SIGBUS:
+    case SIGFPE:
+    case SIGILL:
+    case SIGABRT:
+    case SIGTRAP:
+    case SIGSYS:
+      return SignalOutcome::kCrash;
+    case SIGPIPE:
+    case SIGTTIN:
+    case SIGTTOU:
+    case SIGCHLD:
+    case SIGCONT:
+    case SIGURG:
+    case SIGWINCH:
+      return SignalOutcome::kIgnore;
+    default:
+      return SignalOutcome::kStop;
+  }
+}
+
+std::string signal_name(int sig) {
+  if (sig >= SIGRTMIN && sig <= SIGRTMAX) return "SIGRTMIN+" + std::to_string(sig - SIGRTMIN);
+  return std::string("SIG") + sigabbrev_np(sig);
+}
+
+// Every signal of `kill -l` 1-31 but SIGKILL and SIGSTOP (the supervisor's test below), and one
+// real-time signal, each sent to its own daemon while its laser is on: a stop signal ends it the
+// orderly way (exit 0 for SIGINT, SIGTERM and SIGHUP, 128 + the signal otherwise, the "stopped"
+// line, the line released off); a crash signal ends it by that signal with the line switched off
+// by the handler; an ignored one leaves it switching its laser until SIGTERM.
+struct SignalRun {
+  int sig = 0;
+  std::filesystem::path pins;
+  Daemon daemon;
+};
+
+// Starts a daemon per signal, all at once, sends each its signal once its laser is on and checks
+// how each ended.
+void run_signals(std::vector<SignalRun>& runs) {
+  for (SignalRun& r : runs) {
+    r.pins = g_dir / ("signal" + std::to_string(r.sig) + ".pins");
+    std::filesystem::remove(r.pins);
+    const auto lcm_log = g_dir / ("signal" + std::to_string(r.sig) + ".lcm");
+    r.daemon = start_daemon(daemon_config("mode: alternate", "", lcm_log), r.pins, "");
+  }
+  for (SignalRun& r : runs)
+    ASSERT_TRUE(wait_for_laser_on(r.pins)) << signal_name(r.sig) << read_text(r.daemon.output);
+  std::vector<std::size_t> switches_before;
+  for (SignalRun& r : runs) {
+    switches_before.push_back(count_switches(r.pins));
+    kill(r.daemon.pid, r.sig);
+  }
+  for (std::size_t i = 0; i < runs.size(); ++i) {
+    const SignalRun& r = runs[i];
+    if (outcome_of(r.sig) != SignalOutcome::kIgnore) continue;
+    // Still running: the laser keeps switching, once per frame.
+    bool switching = false;
+    for (int wait = 0; wait < 300 && !switching; ++wait) {
+      switching = count_switches(r.pins) >= switches_before[i] + 10;
+      if (!switching) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    EXPECT_TRUE(switching) << signal_name(r.sig) << " stopped the laser's switching";
+    kill(r.daemon.pid, SIGTERM);
+  }
+  for (const SignalRun& r : runs) {
+    const std::string name = signal_name(r.sig);
+    const int status = wait_status(r.daemon.pid);
+    const std::string out = read_text(r.daemon.output);
+    const auto events = read_pin_log(r.pins);
+    expect_left_off(events);
+    switch (outcome_of(r.sig)) {
+      case SignalOutcome::kStop: {
+        const int code = r.sig == SIGINT || r.sig == SIGTERM || r.sig == SIGHUP ? 0 : 128 + r.sig;
+        EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == code)
+            << name << ": status " << status << "\n"
+            << out;
+        EXPECT_NE(out.find("laserlined: stopped (" + name + ")"), std::string::npos) << out;
+        EXPECT_EQ(events.back().event, "release") << name << "\n" << describe(events);
+        break;
+      }
+      case SignalOutcome::kCrash:
+        EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == r.sig)
+            << name << ": status " << status << "\n"
+            << out;
+        EXPECT_EQ(events.back().event, "set") << name << ": the handler switches it off\n"
+                                              << describe(events);
+        break;
+      case SignalOutcome::kIgnore:
+        EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0)
+            << name << ": status " << status << "\n"
+            << out;
+        EXPECT_NE(out.find("laserlined: stopped (SIGTERM)"), std::string::npos) << name << out;
+        EXPECT_EQ(events.back().event, "release") << name << "\n" << describe(events);
+        break;
+    }
+  }
+}
+
+// Every signal of `kill -l` 1-31 but SIGKILL and SIGSTOP (the supervisor's test below), and one
+// real-time signal, each sent to its own daemon while its laser is on: a stop signal ends it the
+// orderly way (exit 0 for SIGINT, SIGTERM and SIGHUP, 128 + the signal otherwise, the "stopped"
+// line, the line released off); a crash signal ends it by that signal with the line switched off
+// by the handler; an ignored one leaves it switching its laser until SIGTERM.
+TEST_F(GpioLaserTest, DaemonStopsOrIgnoresEverySignalWithTheLaserOff) {
+  std::vector<int> signals;
+  for (int sig = 1; sig <= 31; ++sig)
+    if (sig != SIGKILL && sig != SIGSTOP) signals.push_back(sig);
+  signals.push_back(SIGRTMIN + 3);
+  // Eight daemons at a time: each takes a fraction of a CPU at 100 frames/s of 320x240, and a
+  // sanitized one much memory.
+  constexpr std::size_t kBatch = 8;
+  const auto begin = std::chrono::steady_clock::now();
+  for (std::size_t first = 0; first < signals.size(); first += kBatch) {
+    std::vector<SignalRun> runs;
+    for (std::size_t i = first; i < std::min(signals.size(), first + kBatch); ++i)
+      runs.push_back(SignalRun{signals[i], {}, {}});
+    run_signals(runs);
+    if (HasFatalFailure()) return;
+  }
+  std::printf("%zu signals, a daemon each: %.2f s\n", signals.size(),
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count());
+}
+
+// The unit's ExecStopPost= command, with this build's laserlined and `config` in place of the
+// installed paths.
+std::string unit_laser_off_command(const std::filesystem::path& config) {
+  std::ifstream unit(LASERLINE_UNIT_PATH);
+  std::string line;
+  while (std::getline(unit, line)) {
+    if (line.rfind("ExecStopPost=", 0) != 0) continue;
+    std::istringstream words(line.substr(std::strlen("ExecStopPost=")));
+    std::string program;
+    words >> program;
+    EXPECT_EQ(std::filesystem::path(program).filename(), "laserlined") << line;
+    std::string command = LASERLINED_PATH;
+    for (std::string word; words >> word;) {
+      command += " " + word;
+      if (word == "--config" && words >> word) command += " " + config.string();
+    }
+    EXPECT_NE(command.find(" --laser-off"), std::string::npos) << line;
+    EXPECT_NE(command.find(" --config " + config.string()), std::string::npos) << line;
+    return command;
+  }
+  ADD_FAILURE() << "no ExecStopPost= in " << LASERLINE_UNIT_PATH;
+  return "false";
+}
+
+// The pin's level as libgpiod's own gpioget reads it (a new process: the shim keeps the level
+// the last holder left, as the kernel does).
+std::string gpioget(const std::filesystem::path& pins) {
+  return laserline::test_support::run_command(shim_environment(pins) + " gpioget gpiochip0 2").out;
+}
+
+// What no process can catch: SIGKILL, and SIGSTOP, which freezes the frame watchdog with the
+// daemon. The kernel keeps the killed daemon's "on"; the unit's ExecStopPost= command (run here
+// as systemd would after the kill) drives the line off.
+TEST_F(GpioLaserTest, SupervisorCommandSwitchesTheLaserOffAfterKillOrStop) {
+  if (laserline::test_support::run_command("command -v gpioget").exit_code != 0) {
+    GTEST_SKIP() << "no gpioget (Debian package gpiod)";
+  }
+  for (int sig : {SIGKILL, SIGSTOP}) {
+    std::filesystem::remove(log_);
+    Daemon d = start_daemon(daemon_config("mode: on", "", g_dir / "supervisor.lcm"), log_, "");
+    ASSERT_TRUE(wait_for_laser_on(log_)) << read_text(d.output);
+    kill(d.pid, sig);
+    if (sig == SIGSTOP) {
+      // Frozen: nothing of the daemon acts any more, its frame watchdog included.
+      std::this_thread::sleep_for(std::chrono::milliseconds(400));
+      EXPECT_EQ(pins().back().level, 1) << describe(pins());
+      kill(d.pid, SIGKILL);  // systemd's last step, TimeoutAbortSec= after its watchdog fired
+    }
+    const int status = wait_status(d.pid);
+    ASSERT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL) << status;
+    EXPECT_EQ(pins().back().level, 1) << "the test needs the laser left on\n" << describe(pins());
+    EXPECT_EQ(gpioget(log_), "1\n") << "a killed holder leaves its level on the pin";
+
+    const std::size_t before = pins().size();
+    const auto started = std::chrono::steady_clock::now();
+    const auto off = laserline::test_support::run_command(shim_environment(log_) + " " +
+                                                          unit_laser_off_command(d.config));
+    const double took_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+    EXPECT_EQ(off.exit_code, 0) << off.out;
+    EXPECT_EQ(off.out, "laserlined: laser gpiod: off\n");
+    const auto events = pins();
+    ASSERT_GT(events.size(), before) << describe(events);
+    EXPECT_EQ(events[before].event, "request");
+    EXPECT_EQ(events[before].level, 0) << "requested at its off level\n" << describe(events);
+    EXPECT_EQ(events.back().event, "release");
+    EXPECT_EQ(events.back().level, 0) << describe(events);
+    EXPECT_EQ(gpioget(log_), "0\n");
+    std::printf("after %s: laserlined --laser-off drove the pin low in %.3f s\n",
+                signal_name(sig).c_str(), took_s);
+  }
+}
+
+// A stop signal while the camera is still being opened (Aravis asking an address where no
+// camera answers, several seconds) ends the daemon at once; the laser was never switched on.
+TEST_F(GpioLaserTest, DaemonStopsAtOnceWhileStarting) {
+  const std::string config =
+      "camera: {backend: aravis, device: 127.0.0.2}\n"
+      "calibration: {camera: {width: 320, height: 240, fx: 350, fy: 350}}\n"
+      "detector: {name: maxvalue}\n"
+      "laser: {backend: gpiod, chip: gpiochip0, line: LASER_EN, mode: on}\n"
+      "lcm: {url: 'memq://'}\n";
+  const auto begin = std::chrono::steady_clock::now();
+  Daemon d = start_daemon(config, log_, "");
+  // The laser's line is requested before the camera is opened.
+  bool requested = false;
+  for (int i = 0; i < 1000 && !requested; ++i) {
+    requested = !pins().empty();
+    if (!requested) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_TRUE(requested) << read_text(d.output);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  int status = 0;
+  if (waitpid(d.pid, &status, WNOHANG) == d.pid) {
+    GTEST_SKIP() << "the camera failed within 0.3 s, no slow start to interrupt: "
+                 << read_text(d.output);
+  }
+  const auto signalled = std::chrono::steady_clock::now();
+  kill(d.pid, SIGTERM);
+  status = wait_status(d.pid);
+  const double took_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - signalled).count();
+  const std::string out = read_text(d.output);
+  std::printf("SIGTERM %.2f s into a slow start: ended %.3f s later\n",
+              std::chrono::duration<double>(signalled - begin).count(), took_s);
+  EXPECT_LT(took_s, 1.0);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << status << "\n" << out;
+  EXPECT_EQ(out, "laserlined: stopped (SIGTERM) while starting, the laser never switched on\n");
+  const auto events = pins();
+  ASSERT_FALSE(events.empty());
+  for (const auto& e : events)
+    EXPECT_EQ(e.level, 0) << describe(events);
+}
 }  // namespace
 
 int main(int argc, char** argv) {
