@@ -71,8 +71,11 @@ class Walker {
                   std::to_string(length) + " outside 1.." + std::to_string(max_bytes + 1));
     }
     if (!skip(static_cast<std::size_t>(length), field)) return false;
-    if (p_[pos_ - 1] != 0) {
-      return fail(std::string(field) + " at byte " + std::to_string(at) + ": not NUL-terminated");
+    // One NUL, at the end: anything else does not encode back to the same bytes.
+    const std::uint8_t* text = p_ + pos_ - static_cast<std::size_t>(length);
+    if (std::memchr(text, 0, static_cast<std::size_t>(length)) != text + length - 1) {
+      return fail(std::string(field) + " at byte " + std::to_string(at) +
+                  ": not one NUL-terminated string");
     }
     return true;
   }
@@ -85,9 +88,9 @@ class Walker {
     }
     if (static_cast<std::size_t>(*n) * element_bytes > remaining()) {
       return fail(std::string(field) + " at byte " + std::to_string(at) + ": " +
-                  std::to_string(*n) + " elements need " +
-                  std::to_string(static_cast<std::size_t>(*n) * element_bytes) + " bytes, " +
-                  std::to_string(remaining()) + " remain");
+                  std::to_string(*n) + " elements (" +
+                  std::to_string(static_cast<std::size_t>(*n) * element_bytes) + " bytes) but " +
+                  std::to_string(remaining()) + " bytes remain");
     }
     return skip(static_cast<std::size_t>(*n) * element_bytes, field);
   }

@@ -514,12 +514,15 @@ TEST_F(LaserlineExtract, LcmLogOfImageMessages) {
 
   const RunResult r = extract(log_path);
   EXPECT_EQ(r.exit_code, 1) << "the truncated frame is a failure: " << r.out;
-  EXPECT_NE(r.out.find(log_path + ": the last 12 bytes are not a complete event (recording cut "
-                                  "short?); ignored\n"),
+  EXPECT_NE(r.out.find(log_path + ": bytes " + std::to_string(complete) + ".." +
+                       std::to_string(complete + 11) +
+                       " are not a complete event (recording cut short?); ignored\n"),
             std::string::npos)
       << r.out;
-  EXPECT_NE(r.out.find(log_path + " event 5 (LASERLINE_IMAGE): laserline.image_t cannot be "
-                                  "decoded; skipped"),
+  EXPECT_NE(r.out.find(log_path + " event 5 (LASERLINE_IMAGE): not a valid laserline.image_t: "
+                                  "size at byte 59: 81920 elements (81920 bytes) but 37 bytes "
+                                  "remain; "
+                                  "skipped"),
             std::string::npos)
       << r.out;
   EXPECT_NE(r.out.find("laserline-extract: 1 of the processed frames were exposed with the laser "
