@@ -9,3 +9,6 @@ scripts/build.sh default
 # A test that fails runs once more: on a shared host a process can be stalled for a quarter of
 # a second, which those timing judgements see; a real fault fails both times.
 ctest --preset default --timeout 300 --repeat until-pass:2
+# libFuzzer harnesses (tests/fuzz/) under ASan and UBSan, 20 s each (with their clang build about
+# 4 minutes).
+scripts/fuzz.sh 20
