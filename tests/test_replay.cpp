@@ -343,7 +343,7 @@ TEST(LcmCameraLog, MissingLogIsOneClearLine) {
 
 // ---- Record with lcm-logger, replay offline and live through the real daemon.
 
-// Profile messages of a log, by sequence number (encoded bytes as published).
+// Profile messages of a log, by sequence number (encoded bytes as published, instance id 0).
 std::map<std::int64_t, std::string> profiles_of(const std::string& log_path) {
   std::map<std::int64_t, std::string> out;
   lcm::LogFile log(log_path, "r");
@@ -352,7 +352,11 @@ std::map<std::int64_t, std::string> profiles_of(const std::string& log_path) {
     if (e->channel != "LASERLINE_PROFILE") continue;
     laserline::profile_t p;
     EXPECT_GE(p.decode(e->data, 0, e->datalen), 0);
-    out[p.sequence] = std::string(static_cast<const char*>(e->data), e->datalen);
+    // Each daemon draws its own instance id; everything else must be the same.
+    p.instance_id = 0;
+    std::string bytes(static_cast<std::size_t>(p.getEncodedSize()), '\0');
+    p.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+    out[p.sequence] = bytes;
   }
   return out;
 }
