@@ -60,10 +60,10 @@ void on_status(const lcm::ReceiveBuffer* rbuf, const std::string& channel, void*
   const laserline::status_t* s = &status;
   std::printf(
       "status: camera %s, %.1f Hz, %lld processed, %lld dropped, laser %s, latency p99 %.2f ms, "
-      "CPU %.0f%%\n",
+      "CPU %.0f%%, %lld bad input messages\n",
       s->camera_state.c_str(), s->frame_rate_hz, static_cast<long long>(s->frames_processed),
       static_cast<long long>(s->frames_dropped), s->laser_on ? "on" : "off", s->latency_p99_ms,
-      s->cpu_percent);
+      s->cpu_percent, static_cast<long long>(s->bad_messages + s->bad_frames));
 }
 
 }  // namespace

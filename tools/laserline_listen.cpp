@@ -260,10 +260,11 @@ void report(const Listener& l, const std::string& url) {
         pipe99.empty() ? NAN : *std::max_element(pipe99.begin(), pipe99.end()), pipe_worst);
     std::printf(
         "  status: %zu messages; last: camera %s, %lld frames captured, %lld processed, %lld "
-        "dropped, %lld grab timeouts, laser %s\n",
+        "dropped, %lld grab timeouts, laser %s, %lld bad input messages, %lld bad frames\n",
         l.statuses.size(), s.camera_state.c_str(), static_cast<long long>(s.frames_captured),
         static_cast<long long>(s.frames_processed), static_cast<long long>(s.frames_dropped),
-        static_cast<long long>(s.grab_timeouts), s.laser_on ? "on" : "off");
+        static_cast<long long>(s.grab_timeouts), s.laser_on ? "on" : "off",
+        static_cast<long long>(s.bad_messages), static_cast<long long>(s.bad_frames));
   } else {
     std::printf("  status: none received\n");
   }
