@@ -25,6 +25,7 @@
 
 #include "daemon/lcm_camera.hpp"
 #include "hal/clock.hpp"
+#include "lcmtypes/checked_decode.hpp"
 #include "private_network.hpp"
 
 namespace {
@@ -482,6 +483,81 @@ TEST_F(Replay, RecordedRunReplaysIdenticallyOfflineTwiceAndLive) {
   EXPECT_TRUE(live == first) << "live replay gives the offline replay's profiles";
   RecordProperty("frames", std::to_string(recorded_frames));
   RecordProperty("live_profiles", std::to_string(live.size()));
+}
+
+// Live over UDP: crafted messages on the raw-frame channel (issue 15: a negative or huge
+// image_t.size, row_stride -1, a frame of another size, bytes of another type) do not stop the
+// daemon's lcm camera; they are counted in status_t by kind and reported at a limited rate, and a
+// good frame after them is still taken.
+TEST_F(Replay, LiveHostileMessagesAreCountedInStatus) {
+  const std::string cfg =
+      config("hostile.yaml",
+             scanner_config(std::string("  backend: lcm\n  lcm: {url: \"") + kRecordUrl + "\"}",
+                            std::string("{url: \"") + kOutputUrl +
+                                "\", image_every_n: 0, status_period_s: 0.2}"));
+  Child daemon({LASERLINED_PATH, "--config", cfg}, dir_ / "hostile.out");
+  ASSERT_TRUE(daemon.wait_for_output("laserlined: running lcm camera", 30)) << daemon.output();
+
+  struct Seen {
+    laserline::status_t last;
+    std::int64_t statuses = 0;
+    std::int64_t profiles = 0;
+  } seen;
+  lcm::LCM out(kOutputUrl);
+  ASSERT_TRUE(out.good());
+  out.subscribeFunction(
+      "LASERLINE_STATUS",
+      +[](const lcm::ReceiveBuffer* rbuf, const std::string&, Seen* s) {
+        std::string problem;
+        if (laserline::messages::decode(rbuf->data, rbuf->data_size, &s->last, {}, &problem)) {
+          ++s->statuses;
+        }
+      },
+      &seen);
+  out.subscribeFunction(
+      "LASERLINE_PROFILE",
+      +[](const lcm::ReceiveBuffer*, const std::string&, Seen* s) { ++s->profiles; }, &seen);
+  lcm::LCM in(kRecordUrl);
+  ASSERT_TRUE(in.good());
+  constexpr int kW2 = 320, kH2 = 256;
+  auto patched = [&](std::int64_t sequence, std::size_t at, std::int32_t value) {
+    std::vector<std::uint8_t> bytes = encode_image(sequence, kW2, kH2);
+    for (int i = 0; i < 4; ++i)
+      bytes[at + static_cast<std::size_t>(i)] =
+          static_cast<std::uint8_t>(static_cast<std::uint32_t>(value) >> (24 - 8 * i));
+    return bytes;
+  };
+  auto publish = [&](const std::vector<std::uint8_t>& bytes) {
+    ASSERT_EQ(in.publish("LASERLINE_IMAGE", bytes.data(), static_cast<unsigned>(bytes.size())), 0);
+    usleep(5'000);
+  };
+  for (int i = 0; i < 10; ++i) {
+    publish(patched(1, kSizeAt, -1));
+    publish(patched(2, kSizeAt, 0x7fffffff));
+    publish({1, 2, 3, 4, 5});
+    publish(patched(3, kRowStrideAt, -1));
+    publish(encode_image(4, kW, kH));  // the wrong size
+  }
+  publish(encode_image(5, kW2, kH2));
+  const std::int64_t end = laserline::hal::monotonic_ns() + 10'000'000'000;
+  while (laserline::hal::monotonic_ns() < end &&
+         (seen.last.bad_messages < 30 || seen.last.bad_frames < 20 || seen.profiles < 1)) {
+    out.handleTimeout(100);
+  }
+  EXPECT_EQ(seen.last.bad_messages, 30) << daemon.output();
+  EXPECT_EQ(seen.last.bad_frames, 20) << daemon.output();
+  EXPECT_GE(seen.profiles, 1) << "the good frame after them is taken";
+  EXPECT_NE(seen.last.instance_id, 0);
+  EXPECT_EQ(daemon.stop(SIGTERM, 10), 0) << daemon.output();
+  const std::string log = daemon.output();
+  EXPECT_NE(log.find("LASERLINE_IMAGE: not a valid laserline.image_t: size at byte 59: -1"),
+            std::string::npos)
+      << log;
+  std::size_t replay_lines = 0;
+  for (std::size_t at = log.find("laserlined: replay "); at != std::string::npos;
+       at = log.find("laserlined: replay ", at + 1))
+    ++replay_lines;
+  EXPECT_LE(replay_lines, 20u) << "50 bad messages are not 50 lines: " << log;
 }
 
 }  // namespace
