@@ -84,21 +84,22 @@ hal::GrabStatus LcmCamera::grab_offline(std::span<std::uint8_t> dst, hal::FrameI
     if (damage.bytes > 0) {
       damaged_regions_.fetch_add(1);
       damaged_bytes_.fetch_add(damage.bytes);
-      const long long first = damage.offset, last = damage.offset + damage.bytes - 1;
+      const std::string first = std::to_string(damage.offset);
+      const std::string bytes = std::to_string(damage.bytes);
+      // Through the problem log: a log damaged all over gives a few lines, not one per region.
       if (more) {
-        std::fprintf(stderr,
-                     "laserlined: replay %s: bytes %lld..%lld are damaged (%lld bytes, %lld "
-                     "records, not LCM log events); skipped, replay resumes at event %lld at byte "
-                     "%lld\n",
-                     path_.c_str(), first, last, static_cast<long long>(damage.bytes),
-                     static_cast<long long>(damage.records), static_cast<long long>(event_.number),
-                     static_cast<long long>(event_.offset));
+        problems_.report(
+            "log damage",
+            path_ + ": bytes " + first + ".." + std::to_string(damage.offset + damage.bytes - 1) +
+                " are damaged (" + bytes + " bytes, " + std::to_string(damage.records) +
+                " records, not LCM log events); skipped, replay resumes at event " +
+                std::to_string(event_.number) + " at byte " + std::to_string(event_.offset));
       } else {
-        std::fprintf(stderr,
-                     "laserlined: replay %s: the log ends inside an event or in damage: the last "
-                     "%lld bytes (from byte %lld) are not a complete LCM log event (recording cut "
-                     "short?); ignored\n",
-                     path_.c_str(), static_cast<long long>(damage.bytes), first);
+        problems_.report("log end", path_ +
+                                        ": the log ends inside an event or in damage: the last " +
+                                        bytes + " bytes (from byte " + first +
+                                        ") are not a complete LCM log event (recording cut "
+                                        "short?); ignored");
       }
     }
     if (!more) break;

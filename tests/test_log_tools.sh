@@ -91,6 +91,36 @@ for tool in reader listen; do
 done
 echo "test_log_tools: damage in the middle skipped and reported, $got profiles read"
 
+# Damage between every two events: every event still read, the damage reported in a few lines
+# and summed up, not a line per region.
+python3 - "$dir/dive.lcmlog" "$dir/everywhere.lcmlog" <<'PY'
+import struct, sys
+blob, out, pos = open(sys.argv[1], "rb").read(), bytearray(), 0
+while pos + 28 <= len(blob):
+    end = pos + 28 + sum(struct.unpack_from(">II", blob, pos + 20))
+    out += blob[pos:end] + b"garbage"
+    pos = end
+open(sys.argv[2], "wb").write(out)
+PY
+events=$(python3 "$reader" "$dir/dive.lcmlog" --types "$types" | sed -n 's/.*: \([0-9]*\) events over.*/\1/p')
+for tool in reader listen; do
+  if [ $tool = reader ]; then
+    cmd=(python3 "$reader" "$dir/everywhere.lcmlog" --types "$types")
+  else
+    cmd=("$listen" --url "file://$dir/everywhere.lcmlog")
+  fi
+  status=0
+  "${cmd[@]}" >"$dir/everywhere.out" 2>"$dir/everywhere.err" || status=$?
+  [ $status -eq 1 ] || fail "$tool: exit status $status: $(cat "$dir/everywhere.err")"
+  grep -q ": $events damaged regions ($events records, $((events * 7)) bytes skipped, the first at" \
+    "$dir/everywhere.err" || fail "$tool: no summary of $events regions: $(cat "$dir/everywhere.err")"
+  [ "$(wc -l <"$dir/everywhere.err")" -le 25 ] ||
+    fail "$tool: a line per damaged region: $(wc -l <"$dir/everywhere.err") lines"
+  grep -q "$published profiles\|profiles: $published " "$dir/everywhere.out" ||
+    fail "$tool: not every profile read: $(cat "$dir/everywhere.out")"
+done
+echo "test_log_tools: damage between all $events events: every event read, $events regions summed up"
+
 # A corrupt size field (an image's size one less than its bytes) and a hostile status (string
 # length -1, which made lcm-gen's C++ decode throw std::length_error): refused in one line each.
 python3 - "$dir/dive.lcmlog" "$dir/hostile.lcmlog" <<'PY'

@@ -293,23 +293,22 @@ bool read_log(const std::string& path, Listener& listener, const std::string& pr
   laserline::messages::LcmLogReader::Damage damage;
   while (g_stop == 0) {
     const bool more = log.next(&event, &damage);
-    if (damage.bytes > 0) {
-      if (more) {
-        std::fprintf(stderr,
-                     "laserline-listen: %s: bytes %lld..%lld are damaged (%lld bytes, %lld "
-                     "records); skipped, reading resumes at event %lld at byte %lld\n",
-                     path.c_str(), static_cast<long long>(damage.offset),
-                     static_cast<long long>(damage.offset + damage.bytes - 1),
-                     static_cast<long long>(damage.bytes), static_cast<long long>(damage.records),
-                     static_cast<long long>(event.number), static_cast<long long>(event.offset));
-      } else {
-        std::fprintf(stderr,
-                     "laserline-listen: %s: the log ends inside an event or in damage: the last "
-                     "%lld bytes (from byte %lld) are not a complete event (recording cut "
-                     "short?)\n",
-                     path.c_str(), static_cast<long long>(damage.bytes),
-                     static_cast<long long>(damage.offset));
-      }
+    // Through the problem log: a log damaged all over gives a few lines, not one per region.
+    if (damage.bytes > 0 && more) {
+      listener.problems.report(
+          "log damage",
+          path + ": bytes " + std::to_string(damage.offset) + ".." +
+              std::to_string(damage.offset + damage.bytes - 1) + " are damaged (" +
+              std::to_string(damage.bytes) + " bytes, " + std::to_string(damage.records) +
+              " records); skipped, reading resumes at event " + std::to_string(event.number) +
+              " at byte " + std::to_string(event.offset));
+    } else if (damage.bytes > 0) {
+      listener.problems.report("log end", path +
+                                              ": the log ends inside an event or in damage: the "
+                                              "last " +
+                                              std::to_string(damage.bytes) + " bytes (from byte " +
+                                              std::to_string(damage.offset) +
+                                              ") are not a complete event (recording cut short?)");
     }
     if (!more) break;
     const std::string where = path + ": event " + std::to_string(event.number) + " at byte " +

@@ -88,10 +88,15 @@ def main():
                  "installed; pass --types DIR (e.g. build/default/lcmtypes/python)")
 
     problems = []
+    shown = 20  # lines of problems shown; the rest are counted (a log damaged all over)
 
     def report(message):
         problems.append(message)
-        print("laserline-log-reader: " + message, file=sys.stderr)
+        if len(problems) <= shown:
+            print("laserline-log-reader: " + message, file=sys.stderr)
+        elif len(problems) == shown + 1:
+            print("laserline-log-reader: %s: further problems are counted, not shown" % args.log,
+                  file=sys.stderr)
 
     decoders = {args.profile_channel: laserline.profile_t, args.status_channel: laserline.status_t,
                 args.image_channel: laserline.image_t}
@@ -159,7 +164,11 @@ def main():
     finally:
         if points_out:
             points_out.close()
+    if len(problems) > shown:
+        print("laserline-log-reader: %s: %d problems in all" % (args.log, len(problems)),
+              file=sys.stderr)
     if totals["regions"]:
+        shown = len(problems) + 1  # the summary is always shown
         report("%s: %d damaged region%s (%d records, %d bytes skipped, the first at byte %d)%s"
                % (args.log, totals["regions"], "" if totals["regions"] == 1 else "s",
                   totals["records"], totals["bytes"], totals["first"],
