@@ -3,7 +3,8 @@
 // they arrive. Every message is decoded through laserline's checked decode
 // (lcmtypes/checked_decode.hpp): lcm-gen's typed subscription trusts the lengths in a message, so
 // one crafted message on the multicast group could crash a subscriber; bad messages are reported
-// at a limited rate and skipped.
+// at a limited rate and skipped. LCM's own file:// reader stops at the first damaged record of a
+// log: to read a whole recording, damaged or not, use laserline-listen or laserline-log-reader.
 //
 //   laserline-example-subscriber [LCM URL]
 //   laserline-example-subscriber 'udpm://239.255.76.67:7667?ttl=0'     # live (the default)
