@@ -353,6 +353,8 @@ void FramePath::fill_status(std::int64_t now_mono, std::int64_t period_ns) {
   s.camera_size_mismatches = health.size_mismatches;
   s.camera_underruns = health.underruns;
   s.camera_other_errors = health.other_errors;
+  s.bad_messages = health.bad_messages;
+  s.bad_frames = health.bad_frames;
   const double seconds = static_cast<double>(std::max<std::int64_t>(period_ns, 1)) * 1e-9;
   s.frame_rate_hz =
       static_cast<float>(static_cast<double>(s.frames_processed - last_status_frames_) / seconds);

@@ -1,13 +1,8 @@
 #include "daemon/lcm_camera.hpp"
 
-#include <sys/types.h>
-#include <zlib.h>
-
 #include <algorithm>
-#include <cerrno>
 #include <cstdio>
 #include <cstring>
-#include <filesystem>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
@@ -19,34 +14,7 @@ namespace laserline::daemon {
 namespace {
 
 constexpr std::int64_t kMs = 1'000'000;
-// Magic, event number, timestamp, channel length, data length: the LCM log event header.
-constexpr std::int64_t kEventHeaderBytes = 4 + 8 + 8 + 4 + 4;
 constexpr std::size_t kMaxReportedChannels = 32;
-constexpr std::uint32_t kEventMarker = 0xEDA1DA01;
-// Limits a sane event stays within; a header beyond them is damage, not a huge allocation.
-constexpr std::int32_t kMaxChannelBytes = 256;
-constexpr std::int32_t kMaxEventBytes = 256 << 20;
-
-std::uint64_t big_endian(const std::uint8_t* p, int bytes) {
-  std::uint64_t v = 0;
-  for (int i = 0; i < bytes; ++i)
-    v = (v << 8) | p[i];
-  return v;
-}
-
-std::string compression_name(std::int8_t c) {
-  switch (c) {
-    case laserline::image_t::COMPRESSION_NONE:
-      return "none";
-    case laserline::image_t::COMPRESSION_PNG:
-      return "png";
-    case laserline::image_t::COMPRESSION_JPEG:
-      return "jpeg";
-    case laserline::image_t::COMPRESSION_ZLIB:
-      return "zlib";
-  }
-  return std::to_string(c);
-}
 
 }  // namespace
 
@@ -61,12 +29,21 @@ LcmCamera::LcmCamera(Options options) : options_(std::move(options)) {
     path_ = path_.substr(0, path_.find('?'));
   }
   reported_channels_.reserve(kMaxReportedChannels);
+  // A frame is at most the calibrated size in 16 bit; PNG may add a little to that.
+  limits_.max_width = options_.width;
+  limits_.max_height = options_.height;
+  limits_.max_image_bytes =
+      2 * static_cast<std::int64_t>(options_.width) * options_.height + (64 << 10);
 }
 
 LcmCamera::~LcmCamera() = default;
 
 bool LcmCamera::open(std::string* error) {
-  if (offline_) return log_.open(path_, error);
+  if (offline_) {
+    if (log_.open(path_, error)) return true;
+    *error = "camera.lcm.url: " + *error;
+    return false;
+  }
   lcm_ = std::make_unique<lcm::LCM>(options_.url);
   if (!lcm_->good()) {
     *error = "camera.lcm.url: cannot open LCM '" + options_.url + "'";
@@ -81,8 +58,16 @@ void LcmCamera::stop() {
 }
 
 LcmCamera::Counts LcmCamera::counts() const {
-  return {frames_.load(), frames_skipped_.load(), other_events_.load(), damaged_regions_.load(),
-          damaged_bytes_.load()};
+  const std::int64_t bad_messages = bad_messages_.load(), bad_frames = bad_frames_.load();
+  return {frames_.load(),       bad_messages + bad_frames, bad_messages,         bad_frames,
+          other_events_.load(), damaged_regions_.load(),   damaged_bytes_.load()};
+}
+
+hal::CameraHealth LcmCamera::health() const {
+  hal::CameraHealth h;
+  h.bad_messages = bad_messages_.load(std::memory_order_relaxed);
+  h.bad_frames = bad_frames_.load(std::memory_order_relaxed);
+  return h;
 }
 
 hal::GrabStatus LcmCamera::grab(std::span<std::uint8_t> dst, hal::FrameInfo& info,
@@ -94,23 +79,27 @@ hal::GrabStatus LcmCamera::grab(std::span<std::uint8_t> dst, hal::FrameInfo& inf
 hal::GrabStatus LcmCamera::grab_offline(std::span<std::uint8_t> dst, hal::FrameInfo& info) {
   if (ended_) return hal::GrabStatus::kStopped;
   while (!stopping_.load(std::memory_order_relaxed)) {
-    LcmLogReader::Damage damage;
+    messages::LcmLogReader::Damage damage;
     const bool more = log_.next(&event_, &damage);
     if (damage.bytes > 0) {
       damaged_regions_.fetch_add(1);
       damaged_bytes_.fetch_add(damage.bytes);
-      const long long first = damage.offset, last = damage.offset + damage.bytes - 1;
+      const std::string first = std::to_string(damage.offset);
+      const std::string bytes = std::to_string(damage.bytes);
+      // Through the problem log: a log damaged all over gives a few lines, not one per region.
       if (more) {
-        std::fprintf(stderr,
-                     "laserlined: replay %s: bytes %lld..%lld are damaged (%lld bytes, not an LCM "
-                     "log event); skipped, replay resumes at event %lld at byte %lld\n",
-                     path_.c_str(), first, last, static_cast<long long>(damage.bytes),
-                     static_cast<long long>(event_.number), static_cast<long long>(event_.offset));
+        problems_.report(
+            "log damage",
+            path_ + ": bytes " + first + ".." + std::to_string(damage.offset + damage.bytes - 1) +
+                " are damaged (" + bytes + " bytes, " + std::to_string(damage.records) +
+                " records, not LCM log events); skipped, replay resumes at event " +
+                std::to_string(event_.number) + " at byte " + std::to_string(event_.offset));
       } else {
-        std::fprintf(stderr,
-                     "laserlined: replay %s: damaged tail: the last %lld bytes (from byte %lld) "
-                     "are not a complete LCM log event; ignored\n",
-                     path_.c_str(), static_cast<long long>(damage.bytes), first);
+        problems_.report("log end", path_ +
+                                        ": the log ends inside an event or in damage: the last " +
+                                        bytes + " bytes (from byte " + first +
+                                        ") are not a complete LCM log event (recording cut "
+                                        "short?); ignored");
       }
     }
     if (!more) break;
@@ -156,82 +145,49 @@ void LcmCamera::on_live_event(const lcm::ReceiveBuffer* rbuf, const std::string&
   }
 }
 
+bool LcmCamera::skip_frame(bool bad_message, const std::string& kind, const std::string& where,
+                           const std::string& problem) {
+  (bad_message ? bad_messages_ : bad_frames_).fetch_add(1);
+  problems_.report(kind, where + ": " + problem + "; frame skipped");
+  return false;
+}
+
 bool LcmCamera::take_frame(const void* data, int size, const std::string& where,
                            std::span<std::uint8_t> dst, hal::FrameInfo& info) {
-  auto skip = [&](const std::string& problem) {
-    frames_skipped_.fetch_add(1);
-    std::fprintf(stderr, "laserlined: replay %s: %s; frame skipped\n", where.c_str(),
-                 problem.c_str());
-    return false;
-  };
-  if (image_.decode(data, 0, size) < 0) {
-    return skip("not a laserline.image_t (" + std::to_string(size) +
-                " bytes that do not decode as one)");
+  std::string problem;
+  const std::string& channel = options_.channel;
+  if (size < 0 ||
+      !messages::decode(data, static_cast<std::size_t>(size), &image_, limits_, &problem)) {
+    return skip_frame(true, channel + " bad message", where,
+                      "not a valid laserline.image_t: " + problem);
   }
   if (image_.pixelformat != laserline::image_t::PIXEL_FORMAT_GRAY) {
-    return skip("pixel format " + std::to_string(image_.pixelformat) +
-                " is not 8-bit grey (PIXEL_FORMAT_GRAY)");
+    return skip_frame(false, channel + " pixel format", where,
+                      "pixel format " + std::to_string(image_.pixelformat) +
+                          " is not 8-bit grey (PIXEL_FORMAT_GRAY)");
   }
   if (image_.width != format_.width || image_.height != format_.height) {
-    return skip("frame " + std::to_string(image_.width) + "x" + std::to_string(image_.height) +
-                " differs from the calibrated camera's " + std::to_string(format_.width) + "x" +
-                std::to_string(format_.height));
+    return skip_frame(false, channel + " frame size", where,
+                      "frame " + std::to_string(image_.width) + "x" +
+                          std::to_string(image_.height) + " differs from the calibrated camera's " +
+                          std::to_string(format_.width) + "x" + std::to_string(format_.height));
   }
   if (image_.downscale > 1 || image_.roi_x != 0 || image_.roi_y != 0) {
-    return skip(
-        "a downscaled or cropped raw frame cannot be replayed (record with "
-        "lcm.image_downscale 1 and no lcm.image_roi)");
+    return skip_frame(false, channel + " region", where,
+                      "a downscaled or cropped raw frame cannot be replayed (record with "
+                      "lcm.image_downscale 1 and no lcm.image_roi)");
   }
-  const std::size_t row_bytes = static_cast<std::size_t>(format_.width);
-  const std::uint8_t* pixels = image_.data.data();
-  std::size_t stride = static_cast<std::size_t>(image_.row_stride);
-  std::size_t available = image_.data.size();
-  switch (image_.compression) {
-    case laserline::image_t::COMPRESSION_NONE:
-      break;
-    case laserline::image_t::COMPRESSION_ZLIB: {
-      unpacked_.resize(format_.bytes());
-      uLongf got = static_cast<uLongf>(unpacked_.size());
-      const int z = uncompress(unpacked_.data(), &got, image_.data.data(),
-                               static_cast<uLong>(image_.data.size()));
-      if (z != Z_OK || got != unpacked_.size()) {
-        return skip("zlib data do not unpack to a " + std::to_string(format_.width) + "x" +
-                    std::to_string(format_.height) + " frame (" + zError(z) + ")");
-      }
-      pixels = unpacked_.data();
-      stride = row_bytes;
-      available = got;
-      break;
-    }
-    case laserline::image_t::COMPRESSION_PNG:
-    case laserline::image_t::COMPRESSION_JPEG: {
-      const cv::Mat decoded = cv::imdecode(
-          cv::Mat(1, static_cast<int>(image_.data.size()), CV_8UC1, image_.data.data()),
-          cv::IMREAD_GRAYSCALE);
-      if (decoded.empty() || decoded.cols != format_.width || decoded.rows != format_.height) {
-        return skip(compression_name(image_.compression) + " data do not decode to a " +
-                    std::to_string(format_.width) + "x" + std::to_string(format_.height) +
-                    " frame");
-      }
-      unpacked_.resize(format_.bytes());
-      for (int row = 0; row < format_.height; ++row)
-        std::memcpy(unpacked_.data() + row * row_bytes, decoded.ptr(row), row_bytes);
-      pixels = unpacked_.data();
-      stride = row_bytes;
-      available = unpacked_.size();
-      break;
-    }
-    default:
-      return skip("unknown compression " + std::to_string(image_.compression));
+  if (!messages::unpack_image(image_, limits_, cv::IMREAD_GRAYSCALE, &pixels_, &problem)) {
+    return skip_frame(false, channel + " pixels", where, problem);
   }
-  if (stride < row_bytes || available < stride * (format_.height - 1) + row_bytes) {
-    return skip("row stride " + std::to_string(stride) + " and " + std::to_string(available) +
-                " bytes do not hold a " + std::to_string(format_.width) + "x" +
-                std::to_string(format_.height) + " frame");
+  if (pixels_.type() != CV_8UC1 || pixels_.cols != format_.width ||
+      pixels_.rows != format_.height) {
+    return skip_frame(false, channel + " pixels", where, "pixels are not an 8-bit grey frame");
   }
+  const auto row_bytes = static_cast<std::size_t>(format_.width);
   for (int row = 0; row < format_.height; ++row) {
-    std::memcpy(dst.data() + static_cast<std::size_t>(row) * format_.stride,
-                pixels + static_cast<std::size_t>(row) * stride, row_bytes);
+    std::memcpy(dst.data() + static_cast<std::size_t>(row) * format_.stride, pixels_.ptr(row),
+                row_bytes);
   }
   // The recorded exposure becomes the frame's exposure, so the replay's profiles carry the
   // original utime; on this host the frame is exposed (as far as latency goes) when it arrives.
@@ -268,85 +224,6 @@ void LcmCamera::report_end() {
                path_.c_str(), static_cast<long long>(c.frames),
                static_cast<long long>(c.frames_skipped), static_cast<long long>(c.other_events),
                static_cast<long long>(c.damaged_regions), static_cast<long long>(c.damaged_bytes));
-}
-
-LcmLogReader::~LcmLogReader() {
-  if (file_ != nullptr) std::fclose(file_);
-}
-
-bool LcmLogReader::open(const std::string& path, std::string* error) {
-  std::error_code ec;
-  const auto size = std::filesystem::file_size(path, ec);
-  if (ec) {
-    *error = "camera.lcm.url: cannot read log '" + path + "': " + ec.message();
-    return false;
-  }
-  file_ = std::fopen(path.c_str(), "rb");
-  if (file_ == nullptr) {
-    *error = "camera.lcm.url: cannot open log '" + path + "': " + std::strerror(errno);
-    return false;
-  }
-  size_ = static_cast<std::int64_t>(size);
-  position_ = 0;
-  return true;
-}
-
-bool LcmLogReader::read_at(std::int64_t offset, Event* event) {
-  std::uint8_t header[kEventHeaderBytes];
-  if (fseeko(file_, offset, SEEK_SET) != 0 ||
-      std::fread(header, 1, sizeof header, file_) != sizeof header) {
-    return false;
-  }
-  if (big_endian(header, 4) != kEventMarker) return false;
-  const auto channel_bytes = static_cast<std::int32_t>(big_endian(header + 20, 4));
-  const auto data_bytes = static_cast<std::int32_t>(big_endian(header + 24, 4));
-  if (channel_bytes <= 0 || channel_bytes > kMaxChannelBytes || data_bytes < 0 ||
-      data_bytes > kMaxEventBytes ||
-      offset + kEventHeaderBytes + channel_bytes + data_bytes > size_) {
-    return false;
-  }
-  event->channel.resize(static_cast<std::size_t>(channel_bytes));
-  event->data.resize(static_cast<std::size_t>(data_bytes));
-  if (std::fread(event->channel.data(), 1, event->channel.size(), file_) != event->channel.size() ||
-      std::fread(event->data.data(), 1, event->data.size(), file_) != event->data.size()) {
-    return false;
-  }
-  event->offset = offset;
-  event->number = static_cast<std::int64_t>(big_endian(header + 4, 8));
-  position_ = offset + kEventHeaderBytes + channel_bytes + data_bytes;
-  return true;
-}
-
-std::int64_t LcmLogReader::find_marker(std::int64_t from) {
-  constexpr std::size_t kChunk = 64 * 1024;
-  scan_.resize(kChunk + 3);
-  for (std::int64_t base = from; base < size_; base += kChunk) {
-    if (fseeko(file_, base, SEEK_SET) != 0) return size_;
-    // 3 bytes of overlap so that a marker across two chunks is found.
-    const std::size_t got = std::fread(scan_.data(), 1, scan_.size(), file_);
-    for (std::size_t i = 0; i + 4 <= got; ++i) {
-      if (big_endian(scan_.data() + i, 4) == kEventMarker) {
-        return base + static_cast<std::int64_t>(i);
-      }
-    }
-  }
-  return size_;
-}
-
-bool LcmLogReader::next(Event* event, Damage* damage) {
-  *damage = {};
-  const std::int64_t start = position_;
-  // At an event boundary the next event starts here; after damage, at the next marker that
-  // begins a whole event.
-  for (std::int64_t at = start; at < size_; at = find_marker(at + 1)) {
-    if (read_at(at, event)) {
-      if (at > start) *damage = {start, at - start};
-      return true;
-    }
-  }
-  if (size_ > start) *damage = {start, size_ - start};
-  position_ = size_;
-  return false;
 }
 
 void register_lcm_camera() {

@@ -11,6 +11,8 @@
 #include <vector>
 
 #include "hal/camera.hpp"
+#include "lcmtypes/checked_decode.hpp"
+#include "lcmtypes/lcm_log.hpp"
 
 namespace laserline::daemon {
 
@@ -25,7 +27,10 @@ namespace laserline::daemon {
 // The frame's sequence number, camera timestamp, laser state and exposure time come from the
 // recording, so a replay publishes the same profiles as the original run. Problems in the log
 // (a damaged region, an event on another channel, a frame that does not decode or has another
-// size) are reported on stderr once each with where they are, and the rest is replayed.
+// size) are reported on stderr with where they are, and the rest is replayed. Every message is
+// decoded only after its lengths are checked against the bytes received and the calibrated
+// frame's size (messages::decode); bad messages and unusable frames are counted by kind in
+// health() (status_t.bad_messages, bad_frames) and reported at a limited rate.
 //
 // It lives in daemon/ rather than hal/ because it needs LCM; it registers itself into the same
 // camera factory (register_lcm_camera()). It is a desk tool: reading and decoding allocate, which
@@ -33,41 +38,6 @@ namespace laserline::daemon {
 //
 // Thread context: open()/format() from the setup thread; grab() from the camera thread; stop()
 // from any thread.
-// Reads an LCM log file (the format lcm-logger writes: per event a big-endian header of marker
-// 0xEDA1DA01, event number, timestamp, channel length and data length, then the channel and the
-// data). Unlike lcm_eventlog_read_next_event it says where damage is and how long, and it keeps
-// the whole event before a damaged region. Buffers grow to the largest event and are reused.
-// Thread context: one thread.
-class LcmLogReader {
- public:
-  struct Event {
-    std::int64_t offset = 0;  // byte offset of the event in the file
-    std::int64_t number = 0;  // the event number lcm-logger gave it
-    std::string channel;
-    std::vector<std::uint8_t> data;
-  };
-  struct Damage {
-    std::int64_t offset = 0;  // first damaged byte
-    std::int64_t bytes = 0;   // damaged bytes skipped
-  };
-
-  ~LcmLogReader();
-  bool open(const std::string& path, std::string* error);
-  std::int64_t file_size() const { return size_; }
-  // Reads the next whole event into *event; false at the end of the file. Damaged bytes skipped
-  // before it (or before the end) are added to *damage (bytes == 0 when there were none).
-  bool next(Event* event, Damage* damage);
-
- private:
-  bool read_at(std::int64_t offset, Event* event);
-  std::int64_t find_marker(std::int64_t from);  // offset of the next marker, or the file size
-
-  std::vector<std::uint8_t> scan_;
-  std::FILE* file_ = nullptr;
-  std::int64_t size_ = 0;
-  std::int64_t position_ = 0;
-};
-
 class LcmCamera : public hal::Camera {
  public:
   struct Options {
@@ -80,7 +50,9 @@ class LcmCamera : public hal::Camera {
   // What a replay met so far; complete once grab() returned kStopped.
   struct Counts {
     std::int64_t frames = 0;           // delivered to the frame path
-    std::int64_t frames_skipped = 0;   // wrong size, undecodable or unsupported
+    std::int64_t frames_skipped = 0;   // bad messages and bad frames
+    std::int64_t bad_messages = 0;     // not a valid laserline.image_t within the limits
+    std::int64_t bad_frames = 0;       // a valid message whose frame cannot be used
     std::int64_t other_events = 0;     // events on other channels
     std::int64_t damaged_regions = 0;  // places where the log could not be read
     std::int64_t damaged_bytes = 0;    // bytes of the log lost in them
@@ -97,6 +69,7 @@ class LcmCamera : public hal::Camera {
   bool paced_by_consumer() const override { return offline_; }
 
   Counts counts() const;
+  hal::CameraHealth health() const override;
 
  private:
   hal::GrabStatus grab_offline(std::span<std::uint8_t> dst, hal::FrameInfo& info);
@@ -105,6 +78,8 @@ class LcmCamera : public hal::Camera {
   // Decodes one image_t event into dst/info; false (reported) when it cannot be used.
   bool take_frame(const void* data, int size, const std::string& where, std::span<std::uint8_t> dst,
                   hal::FrameInfo& info);
+  bool skip_frame(bool bad_message, const std::string& kind, const std::string& where,
+                  const std::string& problem);
   void note_channel(const std::string& channel, const std::string& where);
   void report_end();
 
@@ -115,11 +90,13 @@ class LcmCamera : public hal::Camera {
   hal::FrameFormat format_;
   bool offline_ = false;
   std::string path_;  // offline: the log file
-  LcmLogReader log_;
-  LcmLogReader::Event event_;
+  messages::LcmLogReader log_;
+  messages::LcmLogReader::Event event_;
+  messages::Limits limits_;  // the calibrated frame's size bounds every message
+  messages::ProblemLog problems_{"laserlined: replay "};
+  cv::Mat pixels_;  // a frame's unpacked pixels
   std::unique_ptr<lcm::LCM> lcm_;
-  laserline::image_t image_;            // decode target, reused
-  std::vector<std::uint8_t> unpacked_;  // a compressed frame's pixels
+  laserline::image_t image_;  // decode target, reused
   std::vector<std::string> reported_channels_;
   std::atomic<bool> stopping_{false};
   bool ended_ = false;
@@ -130,7 +107,8 @@ class LcmCamera : public hal::Camera {
   bool live_got_frame_ = false;
 
   std::atomic<std::int64_t> frames_{0};
-  std::atomic<std::int64_t> frames_skipped_{0};
+  std::atomic<std::int64_t> bad_messages_{0};
+  std::atomic<std::int64_t> bad_frames_{0};
   std::atomic<std::int64_t> other_events_{0};
   std::atomic<std::int64_t> damaged_regions_{0};
   std::atomic<std::int64_t> damaged_bytes_{0};

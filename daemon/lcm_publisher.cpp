@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstring>
+#include <random>
 
 namespace laserline::daemon {
 
@@ -69,6 +70,17 @@ std::int64_t frame_utime(const hal::FrameInfo& info) {
   return info.exposure_wall_ns() / 1000;
 }
 
+std::int64_t process_instance_id() {
+  static const std::int64_t id = [] {
+    std::random_device random;
+    std::uint64_t v = 0;
+    while (v == 0)
+      v = (std::uint64_t{random()} << 32) | random();
+    return static_cast<std::int64_t>(v);
+  }();
+  return id;
+}
+
 LcmPublisher::LcmPublisher(lcm::LCM& lcm, lcm::LCM* image_lcm, PublisherChannels channels,
                            const std::string& detector, std::size_t max_points,
                            const hal::FrameFormat& format)
@@ -82,6 +94,8 @@ LcmPublisher::LcmPublisher(lcm::LCM& lcm, lcm::LCM* image_lcm, PublisherChannels
   image_.size = static_cast<std::int32_t>(format.bytes());
   status_.detector = detector;
   status_.camera_state = "starting";
+  status_.instance_id = process_instance_id();
+  profile_.instance_id = status_.instance_id;
   const std::size_t largest =
       std::max({static_cast<std::size_t>(profile_.getEncodedSize()), std::size_t{4096}});
   // Room for longer status strings than the ones measured here.

@@ -64,6 +64,10 @@ class LcmPublisher {
 // on every message. Thread context: at start, before other threads write to stderr.
 std::unique_ptr<lcm::LCM> open_lcm(const std::string& url, std::string* error);
 
+// This process's id in status_t and profile_t: 64 random bits drawn once, never 0, so that two
+// daemons publishing on the same channels can be told apart.
+std::int64_t process_instance_id();
+
 // Microseconds since the Unix epoch of a frame's exposure (LCM's utime convention).
 std::int64_t frame_utime(const hal::FrameInfo& info);
 

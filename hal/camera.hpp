@@ -26,6 +26,9 @@ struct CameraHealth {
   std::int64_t underruns = 0;        // frames lost because no buffer was free
   std::int64_t other_errors = 0;     // any other failed frame or device error
   std::int64_t reconnects = 0;       // times the camera was lost and opened again
+  // Backends fed by messages (lcm): input refused before it became a frame.
+  std::int64_t bad_messages = 0;  // not a valid message of its type, or beyond the limits
+  std::int64_t bad_frames = 0;    // a valid message whose frame cannot be used
 };
 
 // A source of frames. Backends (sim, aravis, v4l2, replay) implement it and register with

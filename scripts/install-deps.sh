@@ -21,8 +21,8 @@ packages=(
   libgpiod-dev gpiod
   libaravis-dev libusb-1.0-0-dev aravis-tools
   libfuse3-dev fuse3
-  # tests and benchmarks
-  libgtest-dev libgmock-dev libbenchmark-dev
+  # tests and benchmarks; the fuzz harnesses (clang 16 with libFuzzer and the sanitizers)
+  libgtest-dev libgmock-dev libbenchmark-dev clang-16 libclang-rt-16-dev
   # network namespaces for the LCM tests and the demo
   iproute2 util-linux
   # the service: systemd-analyze verify/security and systemd-sysusers in the tests, the .deb

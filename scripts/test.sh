@@ -11,3 +11,6 @@ scripts/build.sh default
 ctest --preset default --timeout 300 --repeat until-pass:2
 # The code that takes outside input again under ASan+UBSan, the threaded code under TSan.
 scripts/sanitize.sh
+# libFuzzer harnesses (tests/fuzz/) under ASan and UBSan, 20 s each (with their clang build about
+# 4 minutes).
+scripts/fuzz.sh 20

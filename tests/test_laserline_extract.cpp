@@ -514,12 +514,15 @@ TEST_F(LaserlineExtract, LcmLogOfImageMessages) {
 
   const RunResult r = extract(log_path);
   EXPECT_EQ(r.exit_code, 1) << "the truncated frame is a failure: " << r.out;
-  EXPECT_NE(r.out.find(log_path + ": the last 12 bytes are not a complete event (recording cut "
-                                  "short?); ignored\n"),
+  EXPECT_NE(r.out.find(log_path + ": bytes " + std::to_string(complete) + ".." +
+                       std::to_string(complete + 11) +
+                       " are not a complete event (recording cut short?); ignored\n"),
             std::string::npos)
       << r.out;
-  EXPECT_NE(r.out.find(log_path + " event 5 (LASERLINE_IMAGE): laserline.image_t cannot be "
-                                  "decoded; skipped"),
+  EXPECT_NE(r.out.find(log_path + " event 5 (LASERLINE_IMAGE): not a valid laserline.image_t: "
+                                  "size at byte 59: 81920 elements (81920 bytes) but 37 bytes "
+                                  "remain; "
+                                  "skipped"),
             std::string::npos)
       << r.out;
   EXPECT_NE(r.out.find("laserline-extract: 1 of the processed frames were exposed with the laser "
@@ -560,6 +563,58 @@ void write_bytes(const std::string& path, const std::vector<std::uint8_t>& bytes
 std::vector<std::uint8_t> read_bytes(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// A damaged record in the middle of a log (LCM's own reader stopped there and lost the rest): the
+// frames after it are extracted, the damage is reported with its byte offsets, exit status 1. A
+// hostile image_t (row_stride -1: a segfault in memcpy before) is refused in one line.
+TEST_F(LaserlineExtract, LcmLogDamagedInTheMiddleIsReadThrough) {
+  hal::SimScene scene(options_);
+  const std::string log_path = path("damaged.lcmlog");
+  auto frame = [&](int k) {
+    const cv::Mat image = render(scene, k);
+    laserline::image_t m = image_message(image, k);
+    m.pixelformat = laserline::image_t::PIXEL_FORMAT_GRAY;
+    m.row_stride = kWidth;
+    m.data.assign(image.data, image.data + image.total());
+    m.size = static_cast<std::int32_t>(m.data.size());
+    return m;
+  };
+  {
+    lcm::LogFile log(log_path, "w");
+    ASSERT_TRUE(log.good());
+    write_event(log, "LASERLINE_IMAGE", encode(frame(0)), 1);
+    laserline::image_t hostile = frame(1);
+    hostile.row_stride = -1;
+    write_event(log, "LASERLINE_IMAGE", encode(hostile), 2);
+  }
+  const auto damage_at = fs::file_size(log_path);
+  std::ofstream(log_path, std::ios::binary | std::ios::app)
+      .write("\xED\xA1\xDA\x01 not an event", 17);
+  {
+    const std::string tail_path = path("tail.lcmlog");
+    {
+      lcm::LogFile log(tail_path, "w");
+      write_event(log, "LASERLINE_IMAGE", encode(frame(2)), 3);
+      write_event(log, "LASERLINE_IMAGE", encode(frame(3)), 4);
+    }
+    std::ifstream tail(tail_path, std::ios::binary);
+    std::ofstream(log_path, std::ios::binary | std::ios::app) << tail.rdbuf();
+  }
+  const RunResult r = extract(log_path);
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find(log_path + ": bytes " + std::to_string(damage_at) + ".." +
+                       std::to_string(damage_at + 16) +
+                       " are damaged (1 records); skipped, reading resumes at event 0"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find(log_path + " event 1 (LASERLINE_IMAGE): row_stride -1 and 81920 bytes do "
+                                  "not hold a 320x256 frame; skipped"),
+            std::string::npos)
+      << r.out;
+  const Csv csv = read_csv(path("points.csv"));
+  EXPECT_EQ(csv.frames.count(1), 0u);
+  expect_frames_match(csv, {{0, 0}, {2, 2}, {3, 3}}, scene);
 }
 
 TEST_F(LaserlineExtract, CorruptImageBetweenGoodOnesKeepsTheOthers) {

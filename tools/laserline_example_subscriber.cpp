@@ -1,6 +1,10 @@
 // laserline-example-subscriber: the smallest useful LCM subscriber of laserlined, and the starting
 // point for every other process on the vehicle. Prints one line per profile and per status as
-// they arrive.
+// they arrive. Every message is decoded through laserline's checked decode
+// (lcmtypes/checked_decode.hpp): lcm-gen's typed subscription trusts the lengths in a message, so
+// one crafted message on the multicast group could crash a subscriber; bad messages are reported
+// at a limited rate and skipped. LCM's own file:// reader stops at the first damaged record of a
+// log: to read a whole recording, damaged or not, use laserline-listen or laserline-log-reader.
 //
 //   laserline-example-subscriber [LCM URL]
 //   laserline-example-subscriber 'udpm://239.255.76.67:7667?ttl=0'     # live (the default)
@@ -13,11 +17,26 @@
 #include <cstdio>
 #include <string>
 
+#include "lcmtypes/checked_decode.hpp"
+
 namespace {
 
+laserline::messages::ProblemLog g_problems("laserline-example-subscriber: ");
+
+// Decodes a message of ours; false (reported) for one that is not valid.
+template <typename Message>
+bool decode(const lcm::ReceiveBuffer* rbuf, const std::string& channel, Message* out) {
+  std::string problem;
+  if (laserline::messages::decode(rbuf->data, rbuf->data_size, out, {}, &problem)) return true;
+  g_problems.report(channel, channel + ": " + problem + "; skipped");
+  return false;
+}
+
 // Plain functions rather than member handlers: GCC 12's UBSan misreports LCM's member dispatch.
-void on_profile(const lcm::ReceiveBuffer*, const std::string&, const laserline::profile_t* p,
-                void*) {
+void on_profile(const lcm::ReceiveBuffer* rbuf, const std::string& channel, void*) {
+  laserline::profile_t profile;
+  if (!decode(rbuf, channel, &profile)) return;
+  const laserline::profile_t* p = &profile;
   // Points carry their epipolar line u and sub-pixel position v along it (pixel centres at
   // integers; for SEARCH_COLUMNS the column and the row), mapped to the frame's pixel (x, y) by
   // the profile's search axes, and xyz in metres in the camera frame (NaN for rejected points and
@@ -36,13 +55,16 @@ void on_profile(const lcm::ReceiveBuffer*, const std::string&, const laserline::
               valid > 0 ? y_sum / valid : NAN);
 }
 
-void on_status(const lcm::ReceiveBuffer*, const std::string&, const laserline::status_t* s, void*) {
+void on_status(const lcm::ReceiveBuffer* rbuf, const std::string& channel, void*) {
+  laserline::status_t status;
+  if (!decode(rbuf, channel, &status)) return;
+  const laserline::status_t* s = &status;
   std::printf(
       "status: camera %s, %.1f Hz, %lld processed, %lld dropped, laser %s, latency p99 %.2f ms, "
-      "CPU %.0f%%\n",
+      "CPU %.0f%%, %lld bad input messages\n",
       s->camera_state.c_str(), s->frame_rate_hz, static_cast<long long>(s->frames_processed),
       static_cast<long long>(s->frames_dropped), s->laser_on ? "on" : "off", s->latency_p99_ms,
-      s->cpu_percent);
+      s->cpu_percent, static_cast<long long>(s->bad_messages + s->bad_frames));
 }
 
 }  // namespace

@@ -9,7 +9,6 @@
 #include <unistd.h>
 #include <laserline/image_t.hpp>
 #include <laserline/profile_t.hpp>
-#include <lcm/lcm-cpp.hpp>
 
 #include <algorithm>
 #include <cerrno>
@@ -34,6 +33,8 @@
 #include "daemon/config.hpp"
 #include "hal/calibration.hpp"
 #include "hal/laser_channel.hpp"
+#include "lcmtypes/checked_decode.hpp"
+#include "lcmtypes/lcm_log.hpp"
 #include "pipeline/detector.hpp"
 #include "tools/frame_channel.hpp"
 #include "tools/natural_order.hpp"
@@ -91,7 +92,9 @@ constexpr const char* kUsage =
     "  (at least one of --output and --ply)\n"
     "  INPUT              image files (in the order given), folders of images (in natural\n"
     "                     order: 2 before 10), videos (.avi .mp4 .mkv .mov ...), LCM logs of\n"
-    "                     laserline.image_t messages\n"
+    "                     laserline.image_t messages (damaged records are skipped, reported\n"
+    "                     with their byte offsets, and reading resumes at the next whole event;\n"
+    "                     a damaged or cut-short log counts as a failed input: exit status 1)\n"
     "Colour frames: the green channel is used unless --channel; 16-bit frames are scaled to\n"
     "8 bit.\n"
     "Exit status: 0 all frames processed; 1 some input or frame failed (the others are\n"
@@ -126,16 +129,6 @@ bool is_lcm_log(const std::string& path) {
   unsigned char magic[4] = {};
   if (!in.read(reinterpret_cast<char*>(magic), 4)) return false;
   return magic[0] == 0xED && magic[1] == 0xA1 && magic[2] == 0xDA && magic[3] == 0x01;
-}
-
-// The fingerprint LCM puts in front of every encoded message.
-std::int64_t message_hash(const void* data, std::int32_t size) {
-  if (size < 8) return 0;
-  const auto* b = static_cast<const unsigned char*>(data);
-  std::uint64_t h = 0;
-  for (int i = 0; i < 8; ++i)
-    h = (h << 8) | b[i];
-  return static_cast<std::int64_t>(h);
 }
 
 // A progress line on stderr, only when stderr is a terminal (never in logs or pipes).
@@ -517,80 +510,35 @@ void extract_video(Extractor& x, const std::string& path, std::size_t input, std
   }
 }
 
-// Raw or compressed pixels of an image_t, as an OpenCV image (owning its pixels).
-bool image_from_message(const laserline::image_t& m, cv::Mat& out, std::string& problem) {
-  using laserline::image_t;
-  if (m.width <= 0 || m.height <= 0) {
-    problem = "invalid size " + std::to_string(m.width) + "x" + std::to_string(m.height);
-    return false;
-  }
-  if (m.compression == image_t::COMPRESSION_PNG || m.compression == image_t::COMPRESSION_JPEG) {
-    try {
-      out = cv::imdecode(m.data, cv::IMREAD_UNCHANGED);
-    } catch (const cv::Exception&) {
-      out.release();
-    }
-    if (out.empty()) problem = "compressed data cannot be decoded";
-    return !out.empty();
-  }
-  if (m.compression != image_t::COMPRESSION_NONE) {
-    problem = "unknown compression " + std::to_string(m.compression);
-    return false;
-  }
-  int type = 0, bytes_per_pixel = 0;
-  if (m.pixelformat == image_t::PIXEL_FORMAT_GRAY) {
-    type = CV_8UC1;
-    bytes_per_pixel = 1;
-  } else if (m.pixelformat == image_t::PIXEL_FORMAT_LE_GRAY16 ||
-             m.pixelformat == image_t::PIXEL_FORMAT_BE_GRAY16) {
-    type = CV_16UC1;
-    bytes_per_pixel = 2;
-  } else {
-    problem = "unsupported pixel format " + std::to_string(m.pixelformat);
-    return false;
-  }
-  const std::int64_t row_bytes = static_cast<std::int64_t>(m.width) * bytes_per_pixel;
-  if (m.row_stride < row_bytes || static_cast<std::int64_t>(m.row_stride) * m.height >
-                                      static_cast<std::int64_t>(m.data.size())) {
-    problem = "row_stride " + std::to_string(m.row_stride) + " and height " +
-              std::to_string(m.height) + " do not fit " + std::to_string(m.data.size()) +
-              " bytes of data";
-    return false;
-  }
-  cv::Mat(m.height, m.width, type, const_cast<std::uint8_t*>(m.data.data()),
-          static_cast<std::size_t>(m.row_stride))
-      .copyTo(out);
-  if (m.pixelformat == image_t::PIXEL_FORMAT_BE_GRAY16) {
-    for (int v = 0; v < out.rows; ++v) {
-      auto* row = out.ptr<std::uint16_t>(v);
-      for (int u = 0; u < out.cols; ++u)
-        row[u] = static_cast<std::uint16_t>((row[u] >> 8) | (row[u] << 8));
-    }
-  }
-  return true;
-}
-
 // An LCM log: every laserline.image_t message (on any channel) is a frame, in log order. The
 // laser state of a frame comes from the profile_t of the same sequence number in the same log
-// (image_t does not carry it); without one, from --laser-pattern (else on).
+// (image_t does not carry it); without one, from --laser-pattern (else on). Damaged records are
+// skipped (reported with their byte offsets) and reading goes on at the next whole event; every
+// message is decoded only after its lengths are checked (messages::decode).
 void extract_log(Extractor& x, const std::string& path, std::size_t input, std::size_t inputs) {
+  using laserline::messages::LcmLogReader;
+  const laserline::messages::Limits limits;
   std::map<std::int64_t, bool> laser_on_by_sequence;
   std::int64_t images = 0;
+  LcmLogReader::Event event;
+  LcmLogReader::Damage damage;
+  std::string problem;
   {
-    lcm::LogFile log(path, "r");
-    if (!log.good()) {
-      x.fail(path + ": cannot be opened as an LCM log: " + std::strerror(errno) + "; skipped");
+    LcmLogReader log;
+    if (!log.open(path, &problem)) {
+      x.fail(problem + "; skipped");
       return;
     }
-    while (const lcm::LogEvent* event = log.readNextEvent()) {
-      const std::int64_t hash = message_hash(event->data, event->datalen);
+    laserline::profile_t profile;
+    while (log.next(&event, &damage)) {
+      const std::int64_t hash =
+          laserline::messages::message_hash(event.data.data(), event.data.size());
       if (hash == laserline::image_t::getHash()) {
         ++images;
-      } else if (hash == laserline::profile_t::getHash()) {
-        laserline::profile_t profile;
-        if (profile.decode(event->data, 0, event->datalen) >= 0) {
-          laser_on_by_sequence[profile.sequence] = profile.laser_on;
-        }
+      } else if (hash == laserline::profile_t::getHash() &&
+                 laserline::messages::decode(event.data.data(), event.data.size(), &profile, limits,
+                                             &problem)) {
+        laser_on_by_sequence[profile.sequence] = profile.laser_on;
       }
     }
   }
@@ -598,26 +546,39 @@ void extract_log(Extractor& x, const std::string& path, std::size_t input, std::
     x.fail(path + ": the LCM log holds no laserline.image_t message");
     return;
   }
-  lcm::LogFile log(path, "r");
-  if (!log.good()) {
-    x.fail(path + ": cannot be opened as an LCM log: " + std::strerror(errno) + "; skipped");
+  LcmLogReader log;
+  if (!log.open(path, &problem)) {
+    x.fail(problem + "; skipped");
     return;
   }
   const std::string name = fs::path(path).filename().string();
   std::int64_t n = 0;
   laserline::image_t message;
   cv::Mat image;
-  long complete_bytes = 0;  // end of the last complete event
-  while (const lcm::LogEvent* event = log.readNextEvent()) {
-    complete_bytes = std::ftell(log.getFilePtr());
-    if (message_hash(event->data, event->datalen) != laserline::image_t::getHash()) continue;
+  while (true) {
+    const bool more = log.next(&event, &damage);
+    if (damage.bytes > 0) {
+      const std::string range = "bytes " + std::to_string(damage.offset) + ".." +
+                                std::to_string(damage.offset + damage.bytes - 1);
+      x.fail(path + ": " + range +
+             (more ? " are damaged (" + std::to_string(damage.records) +
+                         " records); skipped, reading resumes at event " +
+                         std::to_string(event.number)
+                   : " are not a complete event (recording cut short?); ignored"));
+    }
+    if (!more) break;
+    if (laserline::messages::message_hash(event.data.data(), event.data.size()) !=
+        laserline::image_t::getHash()) {
+      continue;
+    }
     const std::string where =
-        path + " event " + std::to_string(event->eventnum) + " (" + event->channel + ")";
+        path + " event " + std::to_string(event.number) + " (" + event.channel + ")";
     ++n;
-    std::string problem;
-    if (message.decode(event->data, 0, event->datalen) < 0) {
-      x.unreadable_frame(where + ": laserline.image_t cannot be decoded; skipped");
-    } else if (!image_from_message(message, image, problem)) {
+    if (!laserline::messages::decode(event.data.data(), event.data.size(), &message, limits,
+                                     &problem)) {
+      x.unreadable_frame(where + ": not a valid laserline.image_t: " + problem + "; skipped");
+    } else if (!laserline::messages::unpack_image(message, limits, cv::IMREAD_UNCHANGED, &image,
+                                                  &problem)) {
       x.unreadable_frame(where + ": " + problem + "; skipped");
     } else {
       const auto state = laser_on_by_sequence.find(message.sequence);
@@ -629,13 +590,8 @@ void extract_log(Extractor& x, const std::string& path, std::size_t input, std::
     x.progress().update(input, inputs, name, static_cast<double>(n) / static_cast<double>(images),
                         x.frames());
   }
-  // A recording cut short ends in part of an event, which LCM's reader drops without a word.
-  std::error_code ec;
-  const auto size = fs::file_size(path, ec);
-  if (!ec && complete_bytes >= 0 && static_cast<std::uintmax_t>(complete_bytes) < size) {
-    x.fail(path + ": the last " +
-           std::to_string(size - static_cast<std::uintmax_t>(complete_bytes)) +
-           " bytes are not a complete event (recording cut short?); ignored");
+  if (log.totals().damaged_regions > 0) {
+    x.fail(path + ": " + log.damage_summary());
   }
 }
 

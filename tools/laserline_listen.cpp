@@ -3,7 +3,6 @@
 // the points of the same frame drawn on it.
 #include <signal.h>
 #include <time.h>
-#include <zlib.h>
 #include <laserline/image_t.hpp>
 #include <laserline/profile_t.hpp>
 #include <laserline/status_t.hpp>
@@ -18,8 +17,12 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
+
+#include "lcmtypes/checked_decode.hpp"
+#include "lcmtypes/lcm_log.hpp"
 
 namespace {
 
@@ -30,7 +33,12 @@ constexpr const char* kUsage =
     "  --duration S     stop after S seconds (default: run until --quiet or SIGINT)\n"
     "  --quiet S        stop when nothing arrived for S seconds after the first message (default "
     "2)\n"
-    "  --overlay FILE   write the last raw frame with its profile's points drawn on it\n";
+    "  --overlay FILE   write the last raw frame with its profile's points drawn on it\n"
+    "A log (--url file://PATH) is read here to its end, on through damaged records (each reported\n"
+    "with its byte offsets); since the point is to read the whole log, the exit status is 1 when\n"
+    "the log was damaged or cut short or held messages that do not decode, as it is when no\n"
+    "profile arrived. Messages that do not decode are counted and reported at a limited rate;\n"
+    "two daemons publishing on one channel (two instance ids) are reported.\n";
 
 volatile sig_atomic_t g_stop = 0;
 void on_signal(int) {
@@ -62,18 +70,44 @@ struct Listener {
   std::vector<laserline::status_t> statuses;
   double last_message_s = 0;
   std::int64_t decode_errors = 0;
+  laserline::messages::Limits limits;
+  laserline::messages::ProblemLog problems{"laserline-listen: "};
+  std::map<std::string, std::set<std::int64_t>> instances;  // ids seen per channel
 
-  static void on_profile(const lcm::ReceiveBuffer* rbuf, const std::string&, Listener* self) {
-    self->handle_profile(rbuf);
+  // Messages from the network or a log: (bytes, receive time, channel, where for reports).
+  struct Message {
+    const void* data;
+    std::size_t size;
+    std::int64_t recv_utime;
+    const std::string& channel;
+    const std::string& where;
+  };
+
+  template <typename Type>
+  bool decode(const Message& m, Type* out) {
+    std::string problem;
+    if (laserline::messages::decode(m.data, m.size, out, limits, &problem)) return true;
+    ++decode_errors;
+    problems.report(m.channel, m.where + ": " + problem + "; skipped");
+    return false;
   }
-  void handle_profile(const lcm::ReceiveBuffer* rbuf) {
+
+  void note_instance(const std::string& channel, std::int64_t id) {
+    std::set<std::int64_t>& ids = instances[channel];
+    if (ids.size() >= 16 || !ids.insert(id).second || ids.size() != 2) return;
+    std::fprintf(stderr,
+                 "laserline-listen: %s: messages from two daemons (instance ids %016llx and "
+                 "%016llx): two laserlined publish on the same channels\n",
+                 channel.c_str(), static_cast<unsigned long long>(*ids.begin()),
+                 static_cast<unsigned long long>(*ids.rbegin()));
+  }
+
+  void handle_profile(const Message& m) {
     laserline::profile_t p;
-    if (p.decode(rbuf->data, 0, rbuf->data_size) < 0) {
-      ++decode_errors;
-      return;
-    }
+    if (!decode(m, &p)) return;
+    note_instance(m.channel, p.instance_id);
     last_message_s = now_s(CLOCK_MONOTONIC);
-    receive_latency_ms.push_back(static_cast<double>(rbuf->recv_utime - p.utime) / 1000.0);
+    receive_latency_ms.push_back(static_cast<double>(m.recv_utime - p.utime) / 1000.0);
     if (profiles > 0) {
       if (p.sequence <= last_sequence) ++sequence_reversals;
       if (p.sequence > last_sequence + 1) sequence_gaps += p.sequence - last_sequence - 1;
@@ -90,31 +124,35 @@ struct Listener {
     if (recent.size() > 256) recent.pop_front();
   }
 
-  static void on_image(const lcm::ReceiveBuffer* rbuf, const std::string&, Listener* self) {
-    self->handle_image(rbuf);
-  }
-  void handle_image(const lcm::ReceiveBuffer* rbuf) {
+  void handle_image(const Message& m) {
     laserline::image_t image;
-    if (image.decode(rbuf->data, 0, rbuf->data_size) < 0) {
-      ++decode_errors;
-      return;
-    }
+    if (!decode(m, &image)) return;
     last_message_s = now_s(CLOCK_MONOTONIC);
     ++images;
     last_image = std::move(image);
   }
 
-  static void on_status(const lcm::ReceiveBuffer* rbuf, const std::string&, Listener* self) {
-    self->handle_status(rbuf);
-  }
-  void handle_status(const lcm::ReceiveBuffer* rbuf) {
+  void handle_status(const Message& m) {
     laserline::status_t s;
-    if (s.decode(rbuf->data, 0, rbuf->data_size) < 0) {
-      ++decode_errors;
-      return;
-    }
+    if (!decode(m, &s)) return;
+    note_instance(m.channel, s.instance_id);
     last_message_s = now_s(CLOCK_MONOTONIC);
     statuses.push_back(std::move(s));
+  }
+
+  // LCM's subscription handlers (plain functions: GCC's UBSan misreports LCM's
+  // member-function-pointer dispatch).
+  static Message live(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+    return {rbuf->data, rbuf->data_size, rbuf->recv_utime, channel, channel};
+  }
+  static void on_profile(const lcm::ReceiveBuffer* rbuf, const std::string& c, Listener* self) {
+    self->handle_profile(live(rbuf, c));
+  }
+  static void on_image(const lcm::ReceiveBuffer* rbuf, const std::string& c, Listener* self) {
+    self->handle_image(live(rbuf, c));
+  }
+  static void on_status(const lcm::ReceiveBuffer* rbuf, const std::string& c, Listener* self) {
+    self->handle_status(live(rbuf, c));
   }
 };
 
@@ -129,26 +167,11 @@ bool write_overlay(const Listener& l, const std::string& path) {
     return false;
   }
   cv::Mat gray;
-  if (img.compression == laserline::image_t::COMPRESSION_NONE &&
-      static_cast<std::int64_t>(img.row_stride) * img.height <= img.size) {
-    gray = cv::Mat(img.height, img.width, CV_8UC1, const_cast<std::uint8_t*>(img.data.data()),
-                   static_cast<std::size_t>(img.row_stride));
-  } else if (img.compression == laserline::image_t::COMPRESSION_ZLIB) {
-    gray = cv::Mat(img.height, img.width, CV_8UC1);
-    uLongf got = static_cast<uLongf>(gray.total());
-    if (uncompress(gray.data, &got, img.data.data(), static_cast<uLong>(img.data.size())) != Z_OK ||
-        got != gray.total()) {
-      gray = cv::Mat();
-    }
-  } else if (img.compression == laserline::image_t::COMPRESSION_PNG ||
-             img.compression == laserline::image_t::COMPRESSION_JPEG) {
-    gray = cv::imdecode(cv::Mat(1, static_cast<int>(img.data.size()), CV_8UC1,
-                                const_cast<std::uint8_t*>(img.data.data())),
-                        cv::IMREAD_GRAYSCALE);
-  }
-  if (gray.empty() || gray.cols != img.width || gray.rows != img.height) {
-    std::printf("  overlay: not written, the raw frame (compression %d) does not decode\n",
-                static_cast<int>(img.compression));
+  std::string problem;
+  if (!laserline::messages::unpack_image(img, l.limits, cv::IMREAD_GRAYSCALE, &gray, &problem) ||
+      gray.type() != CV_8UC1) {
+    std::printf("  overlay: not written, the raw frame (compression %d) does not decode: %s\n",
+                static_cast<int>(img.compression), problem.c_str());
     return false;
   }
   // Points are in full-frame pixels; the frame may be a region, downscaled by block means
@@ -237,10 +260,11 @@ void report(const Listener& l, const std::string& url) {
         pipe99.empty() ? NAN : *std::max_element(pipe99.begin(), pipe99.end()), pipe_worst);
     std::printf(
         "  status: %zu messages; last: camera %s, %lld frames captured, %lld processed, %lld "
-        "dropped, %lld grab timeouts, laser %s\n",
+        "dropped, %lld grab timeouts, laser %s, %lld bad input messages, %lld bad frames\n",
         l.statuses.size(), s.camera_state.c_str(), static_cast<long long>(s.frames_captured),
         static_cast<long long>(s.frames_processed), static_cast<long long>(s.frames_dropped),
-        static_cast<long long>(s.grab_timeouts), s.laser_on ? "on" : "off");
+        static_cast<long long>(s.grab_timeouts), s.laser_on ? "on" : "off",
+        static_cast<long long>(s.bad_messages), static_cast<long long>(s.bad_frames));
   } else {
     std::printf("  status: none received\n");
   }
@@ -248,6 +272,62 @@ void report(const Listener& l, const std::string& url) {
   if (l.decode_errors > 0) {
     std::printf("  undecodable messages: %lld\n", static_cast<long long>(l.decode_errors));
   }
+  for (const auto& [channel, ids] : l.instances) {
+    if (ids.size() > 1) {
+      std::printf("  %s: messages from %zu daemons (instance ids)\n", channel.c_str(), ids.size());
+    }
+  }
+}
+
+// Reads a log to its end (LCM's own file:// reader stops at the first damaged record without a
+// word); false when it cannot be opened. *damaged: the log was damaged or cut short.
+bool read_log(const std::string& path, Listener& listener, const std::string& profile_channel,
+              const std::string& image_channel, const std::string& status_channel, bool* damaged) {
+  laserline::messages::LcmLogReader log;
+  std::string error;
+  if (!log.open(path, &error)) {
+    std::fprintf(stderr, "laserline-listen: --url: %s\n", error.c_str());
+    return false;
+  }
+  laserline::messages::LcmLogReader::Event event;
+  laserline::messages::LcmLogReader::Damage damage;
+  while (g_stop == 0) {
+    const bool more = log.next(&event, &damage);
+    // Through the problem log: a log damaged all over gives a few lines, not one per region.
+    if (damage.bytes > 0 && more) {
+      listener.problems.report(
+          "log damage",
+          path + ": bytes " + std::to_string(damage.offset) + ".." +
+              std::to_string(damage.offset + damage.bytes - 1) + " are damaged (" +
+              std::to_string(damage.bytes) + " bytes, " + std::to_string(damage.records) +
+              " records); skipped, reading resumes at event " + std::to_string(event.number) +
+              " at byte " + std::to_string(event.offset));
+    } else if (damage.bytes > 0) {
+      listener.problems.report("log end", path +
+                                              ": the log ends inside an event or in damage: the "
+                                              "last " +
+                                              std::to_string(damage.bytes) + " bytes (from byte " +
+                                              std::to_string(damage.offset) +
+                                              ") are not a complete event (recording cut short?)");
+    }
+    if (!more) break;
+    const std::string where = path + ": event " + std::to_string(event.number) + " at byte " +
+                              std::to_string(event.offset) + " on " + event.channel;
+    const Listener::Message m{event.data.data(), event.data.size(), event.utime, event.channel,
+                              where};
+    if (event.channel == profile_channel) {
+      listener.handle_profile(m);
+    } else if (event.channel == image_channel) {
+      listener.handle_image(m);
+    } else if (event.channel == status_channel) {
+      listener.handle_status(m);
+    }
+  }
+  *damaged = log.totals().damaged_regions > 0;
+  if (*damaged) {
+    std::fprintf(stderr, "laserline-listen: %s: %s\n", path.c_str(), log.damage_summary().c_str());
+  }
+  return true;
 }
 
 }  // namespace
@@ -303,13 +383,23 @@ int main(int argc, char** argv) {
   signal(SIGINT, on_signal);
   signal(SIGTERM, on_signal);
 
+  Listener listener;
+  if (url.rfind("file://", 0) == 0) {
+    const std::string path = url.substr(7, url.find('?') - 7);
+    bool damaged = false;
+    if (!read_log(path, listener, profile_channel, image_channel, status_channel, &damaged)) {
+      return 1;
+    }
+    report(listener, url);
+    if (!overlay.empty()) write_overlay(listener, overlay);
+    return listener.profiles > 0 && !damaged && listener.decode_errors == 0 ? 0 : 1;
+  }
+
   lcm::LCM lcm(url);
   if (!lcm.good()) {
     std::fprintf(stderr, "laserline-listen: --url: cannot open LCM '%s'\n", url.c_str());
     return 1;
   }
-  Listener listener;
-  // Plain-function handlers: GCC's UBSan misreports LCM's member-function-pointer dispatch.
   lcm.subscribeFunction(profile_channel, &Listener::on_profile, &listener);
   lcm.subscribeFunction(image_channel, &Listener::on_image, &listener);
   lcm.subscribeFunction(status_channel, &Listener::on_status, &listener);

@@ -9,7 +9,10 @@ the messages by themselves.
   laserline-log-reader dive.lcmlog --points points.csv  # every profile point as CSV
   laserline-log-reader dive.lcmlog --types build/default/lcmtypes/python   # types not installed
 
-A damaged region of the log is reported with its byte offsets and skipped; the rest is read.
+A damaged region of the log is reported with its byte offsets and skipped; reading resumes at the
+next sync word that begins a whole event. A message that does not decode, or whose size fields do
+not match its bytes, is reported in one line and skipped. The exit status is 1 when anything was
+damaged, cut short or undecodable (the point is to read the whole log), else 0.
 """
 import argparse
 import csv
@@ -22,11 +25,20 @@ HEADER = struct.Struct(">IqqII")  # marker, event number, timestamp, channel len
 MAX_CHANNEL = 256
 
 
-def read_events(path, report):
-    """Yields (event number, timestamp, channel, data); damage goes to report(message)."""
+def read_events(path, report, totals):
+    """Yields (event number, timestamp, channel, data); damage goes to report(message) and is
+    added up in totals (regions, records, bytes, first offset)."""
     with open(path, "rb") as f:
         blob = f.read()
     pos, good_end = 0, 0
+    failed_markers = 0
+
+    def note(start, end):
+        totals["regions"] += 1
+        totals["records"] += max(1, failed_markers)
+        totals["bytes"] += end - start
+        if totals["first"] is None:
+            totals["first"] = start
     marker = struct.pack(">I", EVENT_MARKER)
     while pos < len(blob):
         event = None
@@ -37,16 +49,24 @@ def read_events(path, report):
                 channel = blob[pos + HEADER.size:pos + HEADER.size + clen].decode("utf-8", "replace")
                 event = (number, utime, channel, blob[pos + HEADER.size + clen:end])
         if event is None:
+            if blob.startswith(marker, pos):
+                failed_markers += 1
             nxt = blob.find(marker, pos + 1)
             pos = len(blob) if nxt < 0 else nxt
             continue
         if pos > good_end:
-            report("%s: bytes %d..%d are damaged (%d bytes); skipped, reading resumes at event %d"
-                   % (path, good_end, pos - 1, pos - good_end, event[0]))
+            note(good_end, pos)
+            report("%s: bytes %d..%d are damaged (%d bytes, %d records); skipped, reading resumes "
+                   "at event %d" % (path, good_end, pos - 1, pos - good_end, max(1, failed_markers),
+                                     event[0]))
+        failed_markers = 0
         yield event
         pos = good_end = end
     if good_end < len(blob):
-        report("%s: damaged tail: the last %d bytes (from byte %d) are not a complete event; ignored"
+        note(good_end, len(blob))
+        totals["truncated"] = True
+        report("%s: the log ends inside an event or in damage: the last %d bytes (from byte %d) "
+               "are not a complete event (recording cut short?); ignored"
                % (path, len(blob) - good_end, good_end))
 
 
@@ -68,16 +88,24 @@ def main():
                  "installed; pass --types DIR (e.g. build/default/lcmtypes/python)")
 
     problems = []
+    shown = 20  # lines of problems shown; the rest are counted (a log damaged all over)
 
     def report(message):
         problems.append(message)
-        print("laserline-log-reader: " + message, file=sys.stderr)
+        if len(problems) <= shown:
+            print("laserline-log-reader: " + message, file=sys.stderr)
+        elif len(problems) == shown + 1:
+            print("laserline-log-reader: %s: further problems are counted, not shown" % args.log,
+                  file=sys.stderr)
 
     decoders = {args.profile_channel: laserline.profile_t, args.status_channel: laserline.status_t,
                 args.image_channel: laserline.image_t}
     profiles, statuses, images, other = [], [], [], {}
     first_utime = last_utime = None
-    points_out = open(args.points, "w", newline="") if args.points else None
+    try:
+        points_out = open(args.points, "w", newline="") if args.points else None
+    except OSError as e:
+        sys.exit("laserline-log-reader: --points %s: %s" % (args.points, e.strerror or e))
     writer = csv.writer(points_out) if points_out else None
     if writer:
         # u, v: the point's epipolar line and position along it (the column and row for the usual
@@ -85,8 +113,10 @@ def main():
         writer.writerow(["sequence", "utime", "u", "v", "pixel_x", "pixel_y", "snr_db", "segment",
                          "valid", "x", "y", "z"])
     events = 0
+    totals = {"regions": 0, "records": 0, "bytes": 0, "first": None, "truncated": False}
+    instances = {}  # channel -> instance ids seen (two daemons on one channel show two)
     try:
-        for number, utime, channel, data in read_events(args.log, report):
+        for number, utime, channel, data in read_events(args.log, report, totals):
             events += 1
             first_utime = utime if first_utime is None else first_utime
             last_utime = utime
@@ -96,10 +126,25 @@ def main():
                 continue
             try:
                 msg = decoder.decode(data)
-            except ValueError as e:  # a wrong fingerprint: another type on our channel
-                report("%s: event %d on %s does not decode as %s (%s); skipped"
-                       % (args.log, number, channel, decoder.__name__, e))
+                # A size field that does not match the bytes (a string, num_points or an image's
+                # size) decodes without a word in lcm-gen's Python: encoded again it differs.
+                encoded = len(msg.encode())
+            except Exception as e:  # pylint: disable=broad-except
+                report("%s: event %d on %s does not decode as %s (%s: %s); skipped"
+                       % (args.log, number, channel, decoder.__name__, type(e).__name__, e))
                 continue
+            if encoded != len(data):
+                report("%s: event %d on %s: its size fields do not match its %d bytes (they "
+                       "account for %d); skipped" % (args.log, number, channel, len(data), encoded))
+                continue
+            if decoder is not laserline.image_t:
+                ids = instances.setdefault(channel, set())
+                ids.add(msg.instance_id)
+                if len(ids) == 2:
+                    report("%s: %s: messages from two daemons (instance ids %s); two laserlined "
+                           "published on the same channels"
+                           % (args.log, channel, " and ".join("%016x" % (i & (2**64 - 1))
+                                                              for i in sorted(ids))))
             if decoder is laserline.profile_t:
                 profiles.append((msg.sequence, msg.num_points))
                 if writer:
@@ -114,9 +159,21 @@ def main():
                 statuses.append(msg)
             else:
                 images.append((msg.width, msg.height, msg.compression))
+    except OSError as e:
+        sys.exit("laserline-log-reader: %s: %s" % (args.log, e.strerror or e))
     finally:
         if points_out:
             points_out.close()
+    if len(problems) > shown:
+        print("laserline-log-reader: %s: %d problems in all" % (args.log, len(problems)),
+              file=sys.stderr)
+    if totals["regions"]:
+        shown = len(problems) + 1  # the summary is always shown
+        report("%s: %d damaged region%s (%d records, %d bytes skipped, the first at byte %d)%s"
+               % (args.log, totals["regions"], "" if totals["regions"] == 1 else "s",
+                  totals["records"], totals["bytes"], totals["first"],
+                  "; the file ends inside an event (recording cut short?)"
+                  if totals["truncated"] else ""))
 
     seconds = (last_utime - first_utime) * 1e-6 if events else 0.0
     print("%s: %d events over %.1f s" % (args.log, events, seconds))
@@ -131,9 +188,10 @@ def main():
     if statuses:
         s = statuses[-1]
         print("%s: %d messages; last: camera %s, %d frames processed, %d dropped, laser %s, "
-              "CPU %.0f%%" % (args.status_channel, len(statuses), s.camera_state,
-                              s.frames_processed, s.frames_dropped,
-                              "on" if s.laser_on else "off", s.cpu_percent))
+              "CPU %.0f%%, %d bad input messages, %d bad frames, instance %016x"
+              % (args.status_channel, len(statuses), s.camera_state, s.frames_processed,
+                 s.frames_dropped, "on" if s.laser_on else "off", s.cpu_percent, s.bad_messages,
+                 s.bad_frames, s.instance_id & (2**64 - 1)))
     if images:
         names = {0: "none", 1: "png", 2: "jpeg", 3: "zlib"}
         w, h, c = images[-1]

@@ -33,6 +33,7 @@ public class LcmTypesJarTest {
     p.search_line_step = new double[] {0, 1};
     p.search_along = new double[] {1, 0};
     p.num_points = 2;
+    p.instance_id = -42L;
     p.points = new point_t[2];
     for (int i = 0; i < 2; ++i) {
       p.points[i] = new point_t();
@@ -50,6 +51,7 @@ public class LcmTypesJarTest {
           "profile search axes");
     check(back.num_points == 2 && back.points[1].u == 101 && back.points[1].v == 512.25f,
           "profile points");
+    check(back.instance_id == p.instance_id, "profile instance id");
 
     status_t s = new status_t();
     s.camera_backend = "sim";
@@ -57,8 +59,13 @@ public class LcmTypesJarTest {
     s.camera_state = "streaming";
     s.frames_processed = 301;
     s.cpu_percent = 23.5f;
+    s.bad_messages = 7;
+    s.bad_frames = 2;
+    s.instance_id = 0x7eadbeef12345678L;
     status_t sb = new status_t(encode(s));
     check(sb.frames_processed == 301 && sb.cpu_percent == 23.5f, "status");
+    check(sb.bad_messages == 7 && sb.bad_frames == 2 && sb.instance_id == 0x7eadbeef12345678L,
+          "status input counters and instance id");
     check(profile_t.LCM_FINGERPRINT != status_t.LCM_FINGERPRINT, "fingerprints");
     System.out.println("LcmTypesJarTest: profile_t and status_t round-trip through the jar");
   }

@@ -1,0 +1,207 @@
+// lcmtypes/checked_decode: every message of ours decoded only after its lengths are checked; the
+// crafted messages of issue 15 (negative or huge string lengths, num_points = -1, image_t.size =
+// -1 or 0x7fffffff, row_stride = -1) refused in one line without an exception or a big
+// allocation; what is accepted encodes back to the same bytes.
+#include <gtest/gtest.h>
+#include <zlib.h>
+
+#include <cmath>
+#include <opencv2/imgcodecs.hpp>
+#include <vector>
+
+#include "lcmtypes/checked_decode.hpp"
+
+namespace {
+
+using laserline::messages::decode;
+using laserline::messages::Limits;
+using Bytes = std::vector<std::uint8_t>;
+
+template <typename Message>
+Bytes encode(const Message& m) {
+  Bytes out(static_cast<std::size_t>(m.getEncodedSize()));
+  EXPECT_EQ(m.encode(out.data(), 0, static_cast<int>(out.size())), static_cast<int>(out.size()));
+  return out;
+}
+
+void put_i32(Bytes& bytes, std::size_t at, std::int32_t value) {
+  for (int i = 0; i < 4; ++i)
+    bytes[at + static_cast<std::size_t>(i)] =
+        static_cast<std::uint8_t>(static_cast<std::uint32_t>(value) >> (24 - 8 * i));
+}
+
+laserline::profile_t profile(int points) {
+  laserline::profile_t p{};
+  p.sequence = 7;
+  p.detector = "maxvalue";
+  for (int i = 0; i < points; ++i) {
+    laserline::point_t pt{};
+    pt.u = static_cast<std::int16_t>(i);
+    pt.v = 1.5f;
+    pt.xyz[2] = NAN;
+    p.points.push_back(pt);
+  }
+  p.num_points = points;
+  p.instance_id = -5;
+  return p;
+}
+
+laserline::status_t status() {
+  laserline::status_t s{};
+  s.camera_backend = "lcm";
+  s.detector = "maxvalue";
+  s.camera_state = "streaming";
+  s.frames_processed = 301;
+  s.camera_other_errors = 3;
+  s.bad_messages = 4;
+  s.bad_frames = 5;
+  s.instance_id = 0x0123456789abcdef;
+  return s;
+}
+
+laserline::image_t image(int width, int height) {
+  laserline::image_t m{};
+  m.width = width;
+  m.height = height;
+  m.row_stride = width;
+  m.pixelformat = laserline::image_t::PIXEL_FORMAT_GRAY;
+  m.compression = laserline::image_t::COMPRESSION_NONE;
+  m.downscale = 1;
+  m.data.resize(static_cast<std::size_t>(width * height));
+  for (std::size_t i = 0; i < m.data.size(); ++i)
+    m.data[i] = static_cast<std::uint8_t>(i * 7);
+  m.size = static_cast<std::int32_t>(m.data.size());
+  return m;
+}
+
+// Every prefix of a valid message is refused with a reason, none throws.
+template <typename Message>
+void every_prefix_refused(const Bytes& bytes) {
+  for (std::size_t n = 0; n < bytes.size(); ++n) {
+    Message m;
+    std::string problem;
+    EXPECT_FALSE(decode(bytes.data(), n, &m, Limits{}, &problem)) << n;
+    EXPECT_FALSE(problem.empty()) << n;
+  }
+}
+
+TEST(CheckedDecode, RealMessagesRoundTripAndEveryPrefixIsRefused) {
+  std::string problem;
+  for (int points : {0, 1, 500}) {
+    const Bytes bytes = encode(profile(points));
+    laserline::profile_t back;
+    ASSERT_TRUE(decode(bytes.data(), bytes.size(), &back, Limits{}, &problem)) << problem;
+    EXPECT_EQ(encode(back), bytes);
+    EXPECT_EQ(back.num_points, points);
+    EXPECT_EQ(back.instance_id, -5);
+  }
+  every_prefix_refused<laserline::profile_t>(encode(profile(3)));
+  const Bytes s = encode(status());
+  laserline::status_t sb;
+  ASSERT_TRUE(decode(s.data(), s.size(), &sb, Limits{}, &problem)) << problem;
+  EXPECT_EQ(encode(sb), s);
+  EXPECT_EQ(sb.bad_frames, 5);
+  EXPECT_EQ(sb.instance_id, 0x0123456789abcdef);
+  every_prefix_refused<laserline::status_t>(s);
+  const Bytes i = encode(image(16, 8));
+  laserline::image_t ib;
+  ASSERT_TRUE(decode(i.data(), i.size(), &ib, Limits{}, &problem)) << problem;
+  EXPECT_EQ(encode(ib), i);
+  every_prefix_refused<laserline::image_t>(i);
+  const Bytes pt = encode(profile(1).points[0]);
+  laserline::point_t pb;
+  ASSERT_TRUE(decode(pt.data(), pt.size(), &pb, Limits{}, &problem)) << problem;
+  every_prefix_refused<laserline::point_t>(pt);
+  // Trailing bytes and another type's fingerprint.
+  Bytes longer = i;
+  longer.push_back(0);
+  EXPECT_FALSE(decode(longer.data(), longer.size(), &ib, Limits{}, &problem));
+  EXPECT_EQ(problem, "1 bytes after the end of the laserline.image_t (191 of 192 bytes used)");
+  EXPECT_FALSE(decode(s.data(), s.size(), &ib, Limits{}, &problem));
+  EXPECT_EQ(problem, "not a laserline.image_t (another type's fingerprint)");
+}
+
+// Offsets in the encodings: the profile's detector length after hash 8, 3 int64, a boolean and
+// width and height; status' camera_backend length after hash 8 and 2 int64.
+constexpr std::size_t kDetectorAt = 8 + 24 + 1 + 8;
+constexpr std::size_t kCameraBackendAt = 8 + 16;
+constexpr std::size_t kImageSizeAt = 8 + 24 + 1 + 16 + 1 + 8 + 1;
+
+TEST(CheckedDecode, CraftedLengthsAreRefusedInOneLine) {
+  std::string problem;
+  laserline::profile_t p;
+  for (std::int32_t length : {-1, 0, 0x7fffffff, 258}) {
+    Bytes bytes = encode(profile(2));
+    put_i32(bytes, kDetectorAt, length);
+    EXPECT_FALSE(decode(bytes.data(), bytes.size(), &p, Limits{}, &problem));
+    EXPECT_EQ(problem, "detector at byte 41: length " + std::to_string(length) + " outside 1..257");
+  }
+  const std::size_t num_points_at = kDetectorAt + 4 + 9 + 8 + 1 + 1 + 48;
+  for (std::int32_t n : {-1, 0x7fffffff, 3}) {
+    Bytes bytes = encode(profile(2));
+    put_i32(bytes, num_points_at, n);
+    EXPECT_FALSE(decode(bytes.data(), bytes.size(), &p, Limits{}, &problem)) << n;
+    EXPECT_NE(problem.find("num_points at byte " + std::to_string(num_points_at) + ": " +
+                           std::to_string(n)),
+              std::string::npos)
+        << problem;
+  }
+  laserline::status_t s;
+  Bytes bytes = encode(status());
+  put_i32(bytes, kCameraBackendAt, -1);
+  EXPECT_FALSE(decode(bytes.data(), bytes.size(), &s, Limits{}, &problem));
+  EXPECT_EQ(problem, "camera_backend at byte 24: length -1 outside 1..257");
+  laserline::image_t m;
+  for (std::int32_t size : {-1, 0x7fffffff}) {
+    Bytes image_bytes = encode(image(16, 8));
+    put_i32(image_bytes, kImageSizeAt, size);
+    EXPECT_FALSE(decode(image_bytes.data(), image_bytes.size(), &m, Limits{}, &problem));
+    EXPECT_EQ(problem, "size at byte 59: " + std::to_string(size) + " outside 0..67108864");
+  }
+}
+
+TEST(CheckedDecode, ImagePixelsAreBoundedByTheirBytes) {
+  Limits limits;
+  limits.max_width = 64;
+  limits.max_height = 64;
+  cv::Mat out;
+  std::string problem;
+  laserline::image_t m = image(16, 8);
+  ASSERT_TRUE(laserline::messages::unpack_image(m, limits, cv::IMREAD_GRAYSCALE, &out, &problem));
+  EXPECT_EQ(out.at<std::uint8_t>(1, 2), static_cast<std::uint8_t>(18 * 7));
+  m.row_stride = -1;
+  EXPECT_FALSE(laserline::messages::unpack_image(m, limits, cv::IMREAD_GRAYSCALE, &out, &problem));
+  EXPECT_EQ(problem, "row_stride -1 and 128 bytes do not hold a 16x8 frame");
+  m.row_stride = 17;
+  EXPECT_FALSE(laserline::messages::unpack_image(m, limits, cv::IMREAD_GRAYSCALE, &out, &problem));
+  m = image(16, 8);
+  m.height = 100;
+  EXPECT_FALSE(laserline::messages::unpack_image(m, limits, cv::IMREAD_GRAYSCALE, &out, &problem));
+  EXPECT_EQ(problem, "frame size 16x100 outside 1x1..64x64");
+  // A zlib bomb: 64 MB of zeros in a few kB unpack to no more than the frame's 128 bytes.
+  m = image(16, 8);
+  m.compression = laserline::image_t::COMPRESSION_ZLIB;
+  Bytes zeros(64 << 20);
+  uLongf packed = compressBound(static_cast<uLong>(zeros.size()));
+  m.data.resize(packed);
+  ASSERT_EQ(compress(m.data.data(), &packed, zeros.data(), static_cast<uLong>(zeros.size())), Z_OK);
+  m.data.resize(packed);
+  m.size = static_cast<std::int32_t>(packed);
+  EXPECT_FALSE(laserline::messages::unpack_image(m, limits, cv::IMREAD_GRAYSCALE, &out, &problem));
+  EXPECT_EQ(problem, "zlib data do not unpack to a 16x8 frame (buffer error)");
+  // A PNG whose header says another size than the message is not decoded.
+  m = image(16, 8);
+  m.compression = laserline::image_t::COMPRESSION_PNG;
+  ASSERT_TRUE(cv::imencode(".png", cv::Mat(8, 32, CV_8UC1, cv::Scalar(9)), m.data));
+  m.size = static_cast<std::int32_t>(m.data.size());
+  EXPECT_FALSE(laserline::messages::unpack_image(m, limits, cv::IMREAD_GRAYSCALE, &out, &problem));
+  EXPECT_EQ(problem, "compressed image is 32x8, the message says 16x8");
+  ASSERT_TRUE(cv::imencode(".jpg", cv::Mat(8, 16, CV_8UC1, cv::Scalar(9)), m.data));
+  m.compression = laserline::image_t::COMPRESSION_JPEG;
+  m.size = static_cast<std::int32_t>(m.data.size());
+  ASSERT_TRUE(laserline::messages::unpack_image(m, limits, cv::IMREAD_GRAYSCALE, &out, &problem))
+      << problem;
+  EXPECT_EQ(out.cols, 16);
+}
+
+}  // namespace
