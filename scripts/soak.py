@@ -253,8 +253,17 @@ def main():
           % (args.minutes, args.rate, args.lost_per_thousand, len(outages), args.outage_s,
              seq * len(valid), out))
     print("  crashes: %s" % ("none" if crashed is None else crashed))
-    print("  listener: %s" % ("ran to the end" if not listener_failed
-                              else "ended with status %s" % listener.returncode))
+    refused = ""
+    try:
+        with open(os.path.join(out, "listen.out")) as f:
+            for line in f:
+                if "undecodable messages:" in line:
+                    refused = ", %s refused as undecodable" % line.split(":")[1].strip()
+    except OSError:
+        pass
+    print("  listener (laserline-listen): %s%s" % (
+        "ran to the end" if not listener_failed
+        else "ended with status %s" % listener.returncode, refused))
     if settled:
         print("  resident memory after the first minute: %d -> %d kB (%+.2f %%), max %d kB"
               % (settled[0], settled[-1], growth, max(settled)))
