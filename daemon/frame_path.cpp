@@ -353,6 +353,7 @@ void FramePath::fill_status(std::int64_t now_mono, std::int64_t period_ns) {
   s.camera_size_mismatches = health.size_mismatches;
   s.camera_underruns = health.underruns;
   s.camera_other_errors = health.other_errors;
+  s.camera_skipped_frames = health.skipped_frames;
   s.bad_messages = health.bad_messages;
   s.bad_frames = health.bad_frames;
   const double seconds = static_cast<double>(std::max<std::int64_t>(period_ns, 1)) * 1e-9;

@@ -400,8 +400,13 @@ GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
       sequence_base_ += 65535;
     }
     last_frame_id_ = frame_id;
+    const std::uint64_t expected = next_sequence_;
     next_sequence_ =
         static_cast<std::uint64_t>(sequence_base_ + static_cast<std::int64_t>(frame_id)) + 1;
+    if (next_sequence_ > expected + 1) {
+      skipped_frames_.fetch_add(static_cast<std::int64_t>(next_sequence_ - expected - 1),
+                                std::memory_order_relaxed);
+    }
 
     const std::int64_t offset = arrival_mono - camera_ns;
     if (!offset_valid_ || offset < offset_ns_ + kDriftNsPerFrame) {
@@ -428,6 +433,7 @@ CameraHealth AravisCamera::health() const {
   h.underruns = underruns_.load(std::memory_order_relaxed);
   h.other_errors = other_errors_.load(std::memory_order_relaxed);
   h.reconnects = reconnects_.load(std::memory_order_relaxed);
+  h.skipped_frames = skipped_frames_.load(std::memory_order_relaxed);
   return h;
 }
 

@@ -133,6 +133,7 @@ class AravisCamera final : public Camera {
   std::atomic<std::int64_t> underruns_{0};
   std::atomic<std::int64_t> other_errors_{0};
   std::atomic<std::int64_t> reconnects_{0};
+  std::atomic<std::int64_t> skipped_frames_{0};
 };
 
 }  // namespace laserline::hal

@@ -26,6 +26,10 @@ struct CameraHealth {
   std::int64_t underruns = 0;        // frames lost because no buffer was free
   std::int64_t other_errors = 0;     // any other failed frame or device error
   std::int64_t reconnects = 0;       // times the camera was lost and opened again
+  // Frames the camera numbered that never arrived whole: gaps in its frame ids (or the driver's
+  // sequence) between frames delivered, whatever the cause (all packets lost, a bad buffer, no
+  // free buffer). Not counted across a reconnect, where the numbering starts again.
+  std::int64_t skipped_frames = 0;
   // Backends fed by messages (lcm): input refused before it became a frame.
   std::int64_t bad_messages = 0;  // not a valid message of its type, or beyond the limits
   std::int64_t bad_frames = 0;    // a valid message whose frame cannot be used

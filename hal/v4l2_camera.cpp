@@ -349,6 +349,7 @@ GrabStatus V4l2Camera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
 CameraHealth V4l2Camera::health() const {
   CameraHealth h;
   h.underruns = underruns_.load(std::memory_order_relaxed);
+  h.skipped_frames = h.underruns;  // the driver's sequence skips only frames it had no buffer for
   h.size_mismatches = size_mismatches_.load(std::memory_order_relaxed);
   h.other_errors = other_errors_.load(std::memory_order_relaxed);
   h.reconnects = reconnects_.load(std::memory_order_relaxed);

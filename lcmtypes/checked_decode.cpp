@@ -137,10 +137,10 @@ bool walk_status(Walker& w, const Limits& limits) {
          w.skip(2 * kI64, "utime") && w.string("camera_backend", limits.max_string_bytes) &&
          w.string("detector", limits.max_string_bytes) &&
          w.string("camera_state", limits.max_string_bytes) &&
-         // laser_on, laser_switches, 12 frame counters, 9 rates, 3 CPU/budget, 7 camera counters,
+         // laser_on, laser_switches, 12 frame counters, 9 rates, 3 CPU/budget, 8 camera counters,
          // bad_messages, bad_frames, instance_id.
          w.skip(kBool + kI64 + 12 * kI64 + 2 * kF32 + kI32 + 6 * kF32 + kF32 + kI64 + kF32 +
-                    7 * kI64 + 3 * kI64,
+                    8 * kI64 + 3 * kI64,
                 "counters") &&
          w.end("laserline.status_t");
 }

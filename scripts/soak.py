@@ -275,8 +275,9 @@ def main():
     print("  laser off at the end: %s" % ("yes" if left_off else "NO"))
     if status is not None:
         fields = ["frames_captured", "frames_processed", "frames_dropped", "profiles_published",
-                  "camera_reconnects", "camera_missing_packets", "camera_timeouts",
-                  "grab_timeouts", "grab_errors", "laser_safety_offs", "laser_errors"]
+                  "camera_reconnects", "camera_missing_packets", "camera_skipped_frames",
+                  "camera_timeouts", "grab_timeouts", "grab_errors", "laser_safety_offs",
+                  "laser_errors"]
         fields += [f for f in getattr(status, "__slots__", [])
                    if ("bad" in f or "malformed" in f) and f not in fields]
         print("  last status: " + ", ".join("%s %s" % (f, getattr(status, f)) for f in fields

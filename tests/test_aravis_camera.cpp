@@ -293,20 +293,30 @@ TEST_F(AravisTest, PacketLossIsCountedAndSurvived) {
   FrameInfo info;
   int whole = 0;
   int timeouts = 0;
+  std::int64_t first = -1, gaps = 0;  // frames the sequence numbers skipped
   for (int i = 0; i < 40 && whole < 20; ++i) {
     const GrabStatus status = camera.grab(pixels, info, std::chrono::milliseconds(500));
     whole += status == GrabStatus::kOk;
     timeouts += status == GrabStatus::kTimeout;
     ASSERT_NE(status, GrabStatus::kError) << "packet loss must not be taken for a lost camera";
+    if (status != GrabStatus::kOk) continue;
+    const auto sequence = static_cast<std::int64_t>(info.sequence);
+    if (first >= 0) gaps = sequence - first - (whole - 1);
+    if (first < 0) first = sequence;
   }
   const auto health = camera.health();
   std::printf(
       "-r 20 at 320x240: %d whole frames, %lld incomplete (missing packets), %lld driver "
-      "timeouts, %d grab timeouts, %lld reconnects\n",
+      "timeouts, %lld skipped in the camera's numbering, %d grab timeouts, %lld reconnects\n",
       whole, static_cast<long long>(health.missing_packets),
-      static_cast<long long>(health.timeouts), timeouts, static_cast<long long>(health.reconnects));
+      static_cast<long long>(health.timeouts), static_cast<long long>(health.skipped_frames),
+      timeouts, static_cast<long long>(health.reconnects));
   EXPECT_EQ(whole, 20);
   EXPECT_GT(health.missing_packets + health.timeouts, 0) << "no loss was counted";
+  // Every frame the camera numbered between the first and last whole one and that did not arrive
+  // whole is counted, whatever happened to it.
+  EXPECT_EQ(health.skipped_frames, gaps);
+  EXPECT_GT(health.skipped_frames, 0);
   EXPECT_EQ(health.reconnects, 0);
 }
 
