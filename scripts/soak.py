@@ -108,7 +108,8 @@ def last_status(log_path, types_dir):
     from laserline_log_reader import read_events  # noqa: E402
     from laserline import status_t  # noqa: E402
     status = None
-    for _, _, channel, data in read_events(log_path, lambda m: None):
+    totals = {"regions": 0, "records": 0, "bytes": 0, "first": None, "truncated": False}
+    for _, _, channel, data in read_events(log_path, lambda m: None, totals):
         if channel == "LASERLINE_STATUS":
             try:
                 status = status_t.decode(data)
