@@ -88,19 +88,23 @@ bool GpioLaser::probe(std::string* found, std::string* error) {
     if (error != nullptr) *error = why;
     return false;
   }
+  // The line's strings live in the chip's memory: copied before it is closed.
   const char* name = gpiod_line_name(line);
   const std::string named =
       line_desc + (name != nullptr && options_.offset >= 0 ? std::string(" ('") + name + "')" : "");
   const bool used = gpiod_line_is_used(line);
   const char* consumer = gpiod_line_consumer(line);
+  const std::string held_by =
+      (consumer != nullptr ? std::string(" by '") + consumer + "'" : std::string()) +
+      (consumer != nullptr && options_.consumer == consumer
+           ? " (another laserlined runs with it: stop that one first)"
+           : " (laserlined could not request it)");
   const bool output = gpiod_line_direction(line) == GPIOD_LINE_DIRECTION_OUTPUT;
   gpiod_chip_close(chip);
   if (used) {
     // The daemon's own request would fail with EBUSY.
     if (error != nullptr) {
-      *error = named + ": in use" +
-               (consumer != nullptr ? std::string(" by '") + consumer + "'" : std::string()) +
-               " (a running laserlined holds its line: stop it first)";
+      *error = named + ": in use" + held_by;
     }
     return false;
   }

@@ -201,10 +201,18 @@ TEST_F(GpioLaserTest, ProbeFindsTheLineWithoutRequestingIt) {
   GpioLaser second(GpioLaserOptions{"gpiochip0", 1, "", false, "laserlined"});
   EXPECT_FALSE(second.probe(&found, &error));
   EXPECT_EQ(error,
-            "line 1 of gpiochip0 (laserline-shim) ('SPARE1'): in use by 'other-daemon' (a running "
-            "laserlined holds its line: stop it first)");
+            "line 1 of gpiochip0 (laserline-shim) ('SPARE1'): in use by 'other-daemon' (laserlined "
+            "could not request it)");
   EXPECT_EQ(pins().size(), held_events) << describe(pins());
   EXPECT_EQ(pins().back().level, 1) << "the holder's level must stay";
+
+  GpioLaser running(GpioLaserOptions{"gpiochip0", -1, "STROBE", false, "laserlined"});
+  ASSERT_TRUE(running.open(&error)) << error;
+  GpioLaser checked(GpioLaserOptions{"gpiochip0", -1, "STROBE", false, "laserlined"});
+  EXPECT_FALSE(checked.probe(&found, &error));
+  EXPECT_EQ(error,
+            "line 'STROBE' of gpiochip0 (laserline-shim): in use by 'laserlined' (another "
+            "laserlined runs with it: stop that one first)");
 }
 
 TEST_F(GpioLaserTest, ConfigurationNamesTheMissingKey) {
