@@ -633,6 +633,33 @@ std::string unit_laser_off_command(const std::filesystem::path& config) {
   return "false";
 }
 
+std::string read_unit(const std::string& path) {
+  std::ifstream in(path);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// laserlined@NAME.service is laserlined.service reading NAME.yaml: the same daemon, the same
+// hardening and the same ExecStopPost= that switches the laser off, for the instance's own file.
+TEST(ServiceUnits, TheTemplateIsTheUnitWithTheInstancesConfiguration) {
+  std::string unit_path = LASERLINE_UNIT_PATH;
+  const std::string unit = read_unit(unit_path);
+  std::string template_path = unit_path;
+  template_path.replace(template_path.rfind("laserlined.service"), 18, "laserlined@.service");
+  std::string instance = read_unit(template_path);
+  ASSERT_FALSE(unit.empty()) << unit_path;
+  ASSERT_FALSE(instance.empty()) << template_path;
+  EXPECT_NE(instance.find("\nExecStopPost="), std::string::npos);
+  EXPECT_NE(instance.find(" --laser-off --config "), std::string::npos);
+  std::size_t configs = 0;
+  for (std::size_t at; (at = instance.find("/%i.yaml")) != std::string::npos; ++configs)
+    instance.replace(at, 8, "/laserline.yaml");
+  EXPECT_EQ(configs, 2u) << "ExecStart= and ExecStopPost= read the instance's file";
+  const std::size_t description = instance.find(" daemon (%i)\n");
+  ASSERT_NE(description, std::string::npos);
+  instance.erase(description + 7, 5);
+  EXPECT_EQ(instance, unit);
+}
+
 // The pin's level as libgpiod's own gpioget reads it (a new process: the shim keeps the level
 // the last holder left, as the kernel does).
 std::string gpioget(const std::filesystem::path& pins) {
