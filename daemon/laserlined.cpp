@@ -24,6 +24,7 @@
 #include "daemon/cpu_usage.hpp"
 #include "daemon/frame_path.hpp"
 #include "daemon/lcm_publisher.hpp"
+#include "daemon/log.hpp"
 #include "daemon/service_notifier.hpp"
 #include "daemon/thread_priorities.hpp"
 #include "hal/clock.hpp"
@@ -32,14 +33,18 @@ namespace {
 
 using laserline::daemon::Backends;
 using laserline::daemon::DaemonConfig;
+using laserline::daemon::log;
+using laserline::daemon::LogLevel;
 
 constexpr const char* kUsage =
-    "usage: laserlined [--config FILE] [--duration SECONDS] [--check-config] [--laser-off]\n"
-    "                  [--print-default-config] [--help] [--version]\n"
+    "usage: laserlined [--config FILE] [--duration SECONDS] [--check-config [--offline]]\n"
+    "                  [--laser-off] [--print-default-config] [--help] [--version]\n"
     "  --config FILE          YAML configuration (default: built-in, the simulated scanner)\n"
     "  --duration SECONDS     stop by itself after this long, 0.001 to 1e9 (default: until a\n"
     "                         stop signal)\n"
-    "  --check-config         validate the configuration and backends, then exit\n"
+    "  --check-config         validate the configuration and backends, find the camera and the\n"
+    "                         laser's GPIO line (read only: the laser stays as it is), then exit\n"
+    "  --offline              with --check-config: the file alone, no hardware looked for\n"
     "  --laser-off            drive the configured laser line to off, release it and exit (for\n"
     "                         a supervisor once the daemon is gone: the unit's ExecStopPost=)\n"
     "  --print-default-config print the built-in configuration and exit\n";
@@ -53,6 +58,7 @@ struct Options {
   std::optional<std::string> config_path;
   double duration_s = 0;  // 0 = run until signalled
   bool check_only = false;
+  bool offline = false;  // --check-config without looking for the hardware
   bool laser_off = false;
 };
 
@@ -133,9 +139,8 @@ void take_stop_signals(sigset_t set) {
     if (sig <= 0) continue;  // EINTR
     std::unique_lock lock(g_stop.mutex);
     if (!g_stop.running) {
-      std::printf("laserlined: stopped (%s) while starting, the laser never switched on\n",
-                  signal_name(sig).c_str());
-      std::fflush(stdout);
+      log(LogLevel::kInfo, "laserlined: stopped (%s) while starting, the laser never switched on",
+          signal_name(sig).c_str());
       _exit(exit_status_for(sig));
     }
     if (g_stop.signal == 0) g_stop.signal = sig;
@@ -152,13 +157,13 @@ int wait_for_stop_signal(std::chrono::milliseconds timeout) {
 }
 
 [[noreturn]] void usage_error(const std::string& message) {
-  std::fprintf(stderr, "laserlined: %s\n%s", message.c_str(), kUsage);
+  log(LogLevel::kError, "laserlined: %s\n%s", message.c_str(), kUsage);
   std::exit(2);
 }
 
 // A flag's value that cannot be used: one line naming the flag.
 [[noreturn]] void value_error(const std::string& message) {
-  std::fprintf(stderr, "laserlined: %s\n", message.c_str());
+  log(LogLevel::kError, "laserlined: %s", message.c_str());
   std::exit(2);
 }
 
@@ -184,6 +189,8 @@ Options parse_args(int argc, char** argv) {
       }
     } else if (arg == "--check-config") {
       o.check_only = true;
+    } else if (arg == "--offline") {
+      o.offline = true;
     } else if (arg == "--laser-off") {
       o.laser_off = true;
     } else if (arg == "--print-default-config") {
@@ -199,6 +206,7 @@ Options parse_args(int argc, char** argv) {
       usage_error("unknown argument '" + arg + "'");
     }
   }
+  if (o.offline && !o.check_only) value_error("--offline goes with --check-config");
   return o;
 }
 
@@ -244,11 +252,50 @@ class HealthLine {
 int switch_laser_off(const DaemonConfig& config, laserline::hal::Laser& laser) {
   std::string error;
   if (!laser.open(&error) || !laser.set(false, 0, nullptr)) {
-    std::fprintf(stderr, "laserlined: laser (%s): %s\n", config.laser_backend.c_str(),
-                 error.empty() ? "cannot be switched off" : error.c_str());
+    log(LogLevel::kError, "laserlined: laser (%s): %s", config.laser_backend.c_str(),
+        error.empty() ? "cannot be switched off" : error.c_str());
     return 1;
   }
-  std::printf("laserlined: laser %s: off\n", config.laser_backend.c_str());
+  log(LogLevel::kInfo, "laserlined: laser %s: off", config.laser_backend.c_str());
+  return 0;
+}
+
+// --check-config: the file and every backend option were validated when the backends were
+// created; unless offline, the camera and the laser line are then found and read, neither
+// configured nor driven. Exit status 2: the file; 1: the hardware; 0: both good.
+int check_config(const DaemonConfig& config, Backends& backends, bool offline) {
+  if (offline) {
+    log(LogLevel::kInfo,
+        "laserlined: %s: configuration is valid (--offline: camera and laser not looked for)",
+        config.source.c_str());
+    return 0;
+  }
+  bool found_all = true;
+  auto report = [&](const char* part, const std::string& backend, bool ok, const std::string& found,
+                    const std::string& error) {
+    if (!ok) {
+      log(LogLevel::kError, "laserlined: %s (%s): %s", part, backend.c_str(), error.c_str());
+      found_all = false;
+    } else if (!found.empty()) {
+      log(LogLevel::kInfo, "laserlined: %s (%s): %s", part, backend.c_str(), found.c_str());
+    }
+  };
+  std::string found;
+  std::string error;
+  bool ok = backends.camera->probe(&found, &error);
+  report("camera", config.camera_backend, ok, found, error);
+  found.clear();
+  error.clear();
+  ok = backends.laser->probe(&found, &error);
+  report("laser", config.laser_backend, ok, found, error);
+  if (!found_all) {
+    log(LogLevel::kError,
+        "laserlined: %s: configuration is valid, its hardware is not all there (--offline checks "
+        "the file alone)",
+        config.source.c_str());
+    return 1;
+  }
+  log(LogLevel::kInfo, "laserlined: %s: configuration is valid", config.source.c_str());
   return 0;
 }
 
@@ -276,22 +323,19 @@ int main(int argc, char** argv) {
                                  : laserline::daemon::builtin_config();
     backends = laserline::daemon::create_backends(config);
   } catch (const laserline::hal::ConfigError& e) {
-    std::fprintf(stderr, "laserlined: %s\n", e.what());
+    log(LogLevel::kError, "laserlined: %s", e.what());
     return 2;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "laserlined: %s: %s\n", config.source.c_str(), e.what());
+    log(LogLevel::kError, "laserlined: %s: %s", config.source.c_str(), e.what());
     return 2;
   }
   if (options.laser_off) return switch_laser_off(config, *backends.laser);
-  if (options.check_only) {
-    std::printf("laserlined: %s: configuration is valid\n", config.source.c_str());
-    return 0;
-  }
+  if (options.check_only) return check_config(config, backends, options.offline);
 
   std::string error;
   const std::unique_ptr<lcm::LCM> lcm = laserline::daemon::open_lcm(config.lcm_url, &error);
   if (!lcm) {
-    std::fprintf(stderr, "laserlined: %s: lcm.url: %s\n", config.source.c_str(), error.c_str());
+    log(LogLevel::kError, "laserlined: %s: lcm.url: %s", config.source.c_str(), error.c_str());
     return 2;
   }
 
@@ -324,13 +368,13 @@ int main(int argc, char** argv) {
     signal(sig, fatal_signal_handler);
 
   if (!backends.laser->open(&error)) {
-    std::fprintf(stderr, "laserlined: laser (%s): %s\n", config.laser_backend.c_str(),
-                 error.c_str());
+    log(LogLevel::kError, "laserlined: laser (%s): %s", config.laser_backend.c_str(),
+        error.c_str());
     return 1;
   }
   if (!backends.camera->open(&error)) {
-    std::fprintf(stderr, "laserlined: camera (%s): %s\n", config.camera_backend.c_str(),
-                 error.c_str());
+    log(LogLevel::kError, "laserlined: camera (%s): %s", config.camera_backend.c_str(),
+        error.c_str());
     return 1;
   }
   laserline::daemon::FramePath path(config, *backends.camera, *backends.laser, *backends.detector,
@@ -341,13 +385,14 @@ int main(int argc, char** argv) {
     g_stop.running = true;
   }
   if (!path.start(&error)) {
-    std::fprintf(stderr, "laserlined: %s: %s\n", config.source.c_str(), error.c_str());
+    log(LogLevel::kError, "laserlined: %s: %s", config.source.c_str(), error.c_str());
     return 1;
   }
   const auto format = backends.camera->format();
-  std::printf("laserlined: running %s camera %dx%d at %.1f Hz, detector %s, laser %s, LCM %s\n",
-              config.camera_backend.c_str(), format.width, format.height, config.frame_rate_hz,
-              config.detector.c_str(), config.laser_backend.c_str(), config.lcm_url.c_str());
+  log(LogLevel::kInfo,
+      "laserlined: running %s camera %dx%d at %.1f Hz, detector %s, laser %s, LCM %s",
+      config.camera_backend.c_str(), format.width, format.height, config.frame_rate_hz,
+      config.detector.c_str(), config.laser_backend.c_str(), config.lcm_url.c_str());
 
   const std::int64_t start = laserline::hal::monotonic_ns();
   const auto duration_ns = static_cast<std::int64_t>(options.duration_s * 1e9);
@@ -378,7 +423,7 @@ int main(int argc, char** argv) {
       const std::string line = health.update(path, backends.laser->is_on(), now);
       notifier.status(line);
       if (now >= next_journal) {
-        std::printf("laserlined: %s\n", line.c_str());
+        log(LogLevel::kInfo, "laserlined: %s", line.c_str());
         next_journal = now + kJournalPeriodNs;
       }
       next_status = now + kStatusPeriodNs;
@@ -394,20 +439,21 @@ int main(int argc, char** argv) {
   backends.laser->set(false, 0, nullptr);
 
   const auto s = path.summary();
-  std::printf(
+  // A stop by a signal that asks for no stop (exit status non-zero) is worth a warning.
+  log(exit_status == 0 ? LogLevel::kInfo : LogLevel::kWarning,
       "laserlined: stopped (%s) after %.1f s: %lld frames captured, %lld processed, %lld dropped, "
       "%lld profiles published, %lld raw frames published; latency exposure->published p50 %.2f "
       "ms p99 %.2f ms max %.2f ms, arrival->published p50 %.2f ms p99 %.2f ms max %.2f ms, over "
-      "%lld frames\n",
+      "%lld frames",
       reason, static_cast<double>(laserline::hal::monotonic_ns() - start) * 1e-9,
       static_cast<long long>(s.frames_captured), static_cast<long long>(s.frames_processed),
       static_cast<long long>(s.frames_dropped), static_cast<long long>(s.profiles_published),
       static_cast<long long>(s.images_published), s.latency.p50_ms, s.latency.p99_ms,
       s.latency.max_ms, s.pipeline.p50_ms, s.pipeline.p99_ms, s.pipeline.max_ms,
       static_cast<long long>(s.latency.samples));
-  std::printf(
+  log(LogLevel::kInfo,
       "laserlined: laser %s: %lld switches, %lld came after their frame's exposure began, %lld "
-      "forced off because frames stopped\n",
+      "forced off because frames stopped",
       config.laser_backend.c_str(), static_cast<long long>(s.laser_switches),
       static_cast<long long>(s.laser_late_switches), static_cast<long long>(s.laser_safety_offs));
   g_laser = nullptr;

@@ -107,6 +107,71 @@ bool AravisCamera::open(std::string* error) {
   return connect(error);
 }
 
+bool AravisCamera::probe(std::string* found, std::string* error) {
+  const std::string name = options_.device.empty() ? "the first camera found" : options_.device;
+  auto fail = [&](const std::string& why) {
+    if (error != nullptr) *error = "device '" + name + "': " + why;
+    return false;
+  };
+  // Discovery on every interface (about 1 s), then the device by any of its names.
+  arv_update_device_list();
+  const unsigned n = arv_get_n_devices();
+  std::string id;
+  auto names_it = [&](const char* s) { return s != nullptr && options_.device == s; };
+  for (unsigned i = 0; i < n && id.empty(); ++i) {
+    if (options_.device.empty() || names_it(arv_get_device_id(i)) ||
+        names_it(arv_get_device_serial_nbr(i)) || names_it(arv_get_device_address(i)) ||
+        names_it(arv_get_device_physical_id(i))) {
+      id = arv_get_device_id(i);
+    }
+  }
+  if (id.empty() && options_.device.empty()) {
+    return fail("no camera answered the discovery on any interface");
+  }
+  // An address the discovery's broadcast does not reach is asked directly (Aravis gives up
+  // after about 2.5 s).
+  GError* e = nullptr;
+  ArvCamera* camera = arv_camera_new(id.empty() ? options_.device.c_str() : id.c_str(), &e);
+  if (camera == nullptr) {
+    const std::string why = take_error(e);
+    if (id.empty()) {
+      return fail("not among the " + std::to_string(n) +
+                  " cameras that answered the discovery, and nothing answers at that address (" +
+                  why + ")");
+    }
+    return fail("found, but cannot be opened: " + why);
+  }
+  auto text = [&](const char* s) {
+    g_clear_error(&e);
+    return std::string(s != nullptr && *s != '\0' ? s : "?");
+  };
+  const std::string vendor = text(arv_camera_get_vendor_name(camera, &e));
+  const std::string model = text(arv_camera_get_model_name(camera, &e));
+  const std::string serial = text(arv_camera_get_device_serial_number(camera, &e));
+  guint count = 0;
+  const char** formats = arv_camera_dup_available_pixel_formats_as_strings(camera, &count, &e);
+  g_clear_error(&e);
+  std::string format_list;
+  bool offered = false;
+  for (guint i = 0; formats != nullptr && i < count; ++i) {
+    if (formats[i] == nullptr) continue;
+    format_list += (format_list.empty() ? "" : ", ") + std::string(formats[i]);
+    for (const char* genicam : kPixelFormats[std::max(pixel_format_index_, 0)].genicam_names) {
+      if (genicam != nullptr && std::string(genicam) == formats[i]) offered = true;
+    }
+  }
+  g_free(formats);
+  g_object_unref(camera);
+  const std::string what =
+      vendor + " " + model + ", serial " + serial + ", id " + (id.empty() ? options_.device : id);
+  if (!format_list.empty() && !offered) {
+    return fail(what + ": pixel_format '" + options_.pixel_format + "' is not among its formats (" +
+                format_list + ")");
+  }
+  if (found != nullptr) *found = "device '" + name + "': " + what + "; formats " + format_list;
+  return true;
+}
+
 bool AravisCamera::configure(std::string* error) {
   GError* e = nullptr;
   auto failed = [&](const std::string& what) {

@@ -88,6 +88,9 @@ class AravisCamera final : public Camera {
   AravisCamera& operator=(const AravisCamera&) = delete;
 
   bool open(std::string* error) override;
+  // Finds the camera (discovery, then its address directly) and reads its vendor, model, serial
+  // and pixel formats without configuring it; the configured pixel_format must be among them.
+  bool probe(std::string* found, std::string* error) override;
   FrameFormat format() const override { return format_; }
   GrabStatus grab(std::span<std::uint8_t> dst, FrameInfo& info,
                   std::chrono::milliseconds timeout) override;

@@ -46,6 +46,15 @@ class Camera {
   virtual bool open(std::string* error) = 0;
   virtual FrameFormat format() const = 0;
 
+  // For --check-config: finds the device and says in one line what it is (*found: model,
+  // serial, formats) without configuring or streaming it, or false with a one-line reason in
+  // *error. Sources that are no device (the simulator, a recording): true and *found empty.
+  virtual bool probe(std::string* found, std::string* error) {
+    (void)error;
+    if (found != nullptr) found->clear();
+    return true;
+  }
+
   // Waits up to `timeout` for the next frame and writes its pixels (format().bytes()) into `dst`.
   // No allocation and no exception: the frame path calls it.
   virtual GrabStatus grab(std::span<std::uint8_t> dst, FrameInfo& info,

@@ -35,6 +35,85 @@ void GpioLaser::close() {
   }
 }
 
+namespace {
+
+// Opens the chip and looks the line up: GPIO_GET_LINEINFO only, nothing is requested, so the
+// line's level does not change. On failure, *chip is closed again and *why says what is wrong.
+bool find_line(const GpioLaserOptions& options, gpiod_chip** chip, gpiod_line** line,
+               std::string* line_desc, std::string* why) {
+  auto fail = [&](const std::string& what) {
+    *why = what;
+    if (*chip != nullptr) gpiod_chip_close(*chip);
+    *chip = nullptr;
+    *line = nullptr;
+    return false;
+  };
+  errno = 0;
+  *chip = gpiod_chip_open_lookup(options.chip.c_str());
+  if (*chip == nullptr) {
+    return fail("chip '" + options.chip +
+                "': cannot open: " + (errno != 0 ? std::strerror(errno) : "no such GPIO chip"));
+  }
+  const std::string chip_name =
+      std::string(gpiod_chip_name(*chip)) + " (" + gpiod_chip_label(*chip) + ")";
+  const unsigned lines = gpiod_chip_num_lines(*chip);
+  if (options.offset >= 0) {
+    *line_desc = "line " + std::to_string(options.offset) + " of " + chip_name;
+    if (static_cast<unsigned>(options.offset) >= lines) {
+      return fail(*line_desc + ": the chip has only " + std::to_string(lines) + " lines (0.." +
+                  std::to_string(lines - 1) + ")");
+    }
+    *line = gpiod_chip_get_line(*chip, static_cast<unsigned>(options.offset));
+    if (*line == nullptr) return fail(*line_desc + ": " + std::strerror(errno));
+  } else {
+    *line_desc = "line '" + options.line_name + "' of " + chip_name;
+    errno = 0;
+    *line = gpiod_chip_find_line(*chip, options.line_name.c_str());
+    if (*line == nullptr) {
+      return fail(*line_desc + ": " +
+                  (errno == ENOENT || errno == 0 ? "no line of that name" : std::strerror(errno)));
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+bool GpioLaser::probe(std::string* found, std::string* error) {
+  gpiod_chip* chip = nullptr;
+  gpiod_line* line = nullptr;
+  std::string line_desc;
+  std::string why;
+  if (!find_line(options_, &chip, &line, &line_desc, &why)) {
+    if (error != nullptr) *error = why;
+    return false;
+  }
+  // The line's strings live in the chip's memory: copied before it is closed.
+  const char* name = gpiod_line_name(line);
+  const std::string named =
+      line_desc + (name != nullptr && options_.offset >= 0 ? std::string(" ('") + name + "')" : "");
+  const bool used = gpiod_line_is_used(line);
+  const char* consumer = gpiod_line_consumer(line);
+  const std::string held_by =
+      (consumer != nullptr ? std::string(" by '") + consumer + "'" : std::string()) +
+      (consumer != nullptr && options_.consumer == consumer
+           ? " (another laserlined runs with it: stop that one first)"
+           : " (laserlined could not request it)");
+  const bool output = gpiod_line_direction(line) == GPIOD_LINE_DIRECTION_OUTPUT;
+  gpiod_chip_close(chip);
+  if (used) {
+    // The daemon's own request would fail with EBUSY.
+    if (error != nullptr) {
+      *error = named + ": in use" + held_by;
+    }
+    return false;
+  }
+  if (found != nullptr) {
+    *found = named + ": free, now an " + (output ? "output" : "input") + " (not requested)";
+  }
+  return true;
+}
+
 bool GpioLaser::open(std::string* error) {
   close();
   auto fail = [&](const std::string& why) {
@@ -42,37 +121,13 @@ bool GpioLaser::open(std::string* error) {
     close();
     return false;
   };
-  errno = 0;
-  chip_ = gpiod_chip_open_lookup(options_.chip.c_str());
-  if (chip_ == nullptr) {
-    return fail("chip '" + options_.chip +
-                "': cannot open: " + (errno != 0 ? std::strerror(errno) : "no such GPIO chip"));
-  }
-  const std::string chip_name =
-      std::string(gpiod_chip_name(chip_)) + " (" + gpiod_chip_label(chip_) + ")";
-  const unsigned lines = gpiod_chip_num_lines(chip_);
   std::string line_desc;
-  if (options_.offset >= 0) {
-    line_desc = "line " + std::to_string(options_.offset) + " of " + chip_name;
-    if (static_cast<unsigned>(options_.offset) >= lines) {
-      return fail(line_desc + ": the chip has only " + std::to_string(lines) + " lines (0.." +
-                  std::to_string(lines - 1) + ")");
-    }
-    line_ = gpiod_chip_get_line(chip_, static_cast<unsigned>(options_.offset));
-    if (line_ == nullptr) return fail(line_desc + ": " + std::strerror(errno));
-  } else {
-    line_desc = "line '" + options_.line_name + "' of " + chip_name;
-    errno = 0;
-    line_ = gpiod_chip_find_line(chip_, options_.line_name.c_str());
-    if (line_ == nullptr) {
-      return fail(line_desc + ": " +
-                  (errno == ENOENT || errno == 0 ? "no line of that name" : std::strerror(errno)));
-    }
-  }
+  std::string why;
+  if (!find_line(options_, &chip_, &line_, &line_desc, &why)) return fail(why);
   const int flags = options_.active_low ? GPIOD_LINE_REQUEST_FLAG_ACTIVE_LOW : 0;
   if (gpiod_line_request_output_flags(line_, options_.consumer.c_str(), flags, 0) != 0) {
     const int e = errno;
-    std::string why = line_desc + ": cannot request it as an output: " + std::strerror(e);
+    why = line_desc + ": cannot request it as an output: " + std::strerror(e);
     gpiod_line_update(line_);
     if (e == EBUSY && gpiod_line_consumer(line_) != nullptr) {
       why += std::string(" (held by '") + gpiod_line_consumer(line_) + "')";

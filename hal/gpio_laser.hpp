@@ -39,6 +39,10 @@ class GpioLaser final : public Laser {
   GpioLaser& operator=(const GpioLaser&) = delete;
 
   bool open(std::string* error) override;
+  // Opens the chip and looks the line up without requesting it (its level stays as it is):
+  // "line 2 of gpiochip0 (label) ('LASER_EN'): free, now an input (not requested)". A line
+  // another process holds is an error: open() would fail.
+  bool probe(std::string* found, std::string* error) override;
   bool set(bool on, std::uint64_t for_frame, LaserSwitch* record) override;
   bool is_on() const override { return on_.load(std::memory_order_acquire); }
 

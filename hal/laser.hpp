@@ -20,6 +20,14 @@ class Laser {
   virtual ~Laser() = default;
 
   virtual bool open(std::string* error) = 0;
+  // For --check-config: finds the hardware and says in one line what it found (*found) without
+  // driving it, or false with a one-line reason in *error. Without hardware (the simulated
+  // laser): true and *found empty.
+  virtual bool probe(std::string* found, std::string* error) {
+    (void)error;
+    if (found != nullptr) found->clear();
+    return true;
+  }
   // Switches the output; returns false when the hardware refused (the state is then unknown
   // and callers treat it as on until a later off succeeds).
   virtual bool set(bool on, std::uint64_t for_frame, LaserSwitch* record) = 0;

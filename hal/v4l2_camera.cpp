@@ -130,6 +130,47 @@ bool V4l2Camera::open(std::string* error) {
   return connect(error);
 }
 
+bool V4l2Camera::probe(std::string* found, std::string* error) {
+  const std::string& path = options_.device;
+  auto fail = [&](const std::string& why) {
+    if (error != nullptr) *error = path + ": " + why;
+    return false;
+  };
+  // Read only: QUERYCAP and ENUM_FMT change nothing on the device (no S_FMT, no buffers).
+  const int fd = ::open(path.c_str(), O_RDWR | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) return fail(std::string("cannot open: ") + std::strerror(errno));
+  v4l2_capability cap{};
+  if (xioctl(fd, VIDIOC_QUERYCAP, &cap) != 0) {
+    const int e = errno;
+    ::close(fd);
+    return fail(std::string("not a V4L2 device (QUERYCAP): ") + std::strerror(e));
+  }
+  const std::uint32_t caps =
+      (cap.capabilities & V4L2_CAP_DEVICE_CAPS) != 0 ? cap.device_caps : cap.capabilities;
+  std::string formats;
+  bool offered = false;
+  const std::uint32_t wanted =
+      pixel_format_index_ >= 0 ? kPixelFormats[pixel_format_index_].fourcc : 0;
+  v4l2_fmtdesc desc{};
+  desc.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
+  for (desc.index = 0; desc.index < 64 && xioctl(fd, VIDIOC_ENUM_FMT, &desc) == 0; ++desc.index) {
+    formats += (formats.empty() ? "" : ", ") + fourcc_name(desc.pixelformat);
+    offered = offered || desc.pixelformat == wanted;
+  }
+  ::close(fd);
+  const std::string what = std::string(reinterpret_cast<const char*>(cap.card)) + " (driver " +
+                           reinterpret_cast<const char*>(cap.driver) + ", " +
+                           reinterpret_cast<const char*>(cap.bus_info) + ")";
+  if ((caps & V4L2_CAP_VIDEO_CAPTURE) == 0) return fail(what + ": not a video capture device");
+  if ((caps & V4L2_CAP_STREAMING) == 0) return fail(what + ": does not support streaming I/O");
+  if (!formats.empty() && !offered) {
+    return fail(what + ": pixel_format '" + options_.pixel_format + "' is not among its formats (" +
+                formats + ")");
+  }
+  if (found != nullptr) *found = path + ": " + what + "; formats " + formats;
+  return true;
+}
+
 bool V4l2Camera::connect(std::string* error) {
   const std::string& path = options_.device;
   auto fail = [&](const std::string& why) {

@@ -59,6 +59,9 @@ class V4l2Camera final : public Camera {
   V4l2Camera& operator=(const V4l2Camera&) = delete;
 
   bool open(std::string* error) override;
+  // Opens the device node and reads its name, driver and formats (QUERYCAP, ENUM_FMT) without
+  // setting a format or mapping buffers; the configured pixel_format must be among them.
+  bool probe(std::string* found, std::string* error) override;
   FrameFormat format() const override { return format_; }
   GrabStatus grab(std::span<std::uint8_t> dst, FrameInfo& info,
                   std::chrono::milliseconds timeout) override;

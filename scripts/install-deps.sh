@@ -26,7 +26,8 @@ packages=(
   # network namespaces for the LCM tests and the demo
   iproute2 util-linux
   # the service: systemd-analyze verify/security and systemd-sysusers in the tests, the .deb
-  systemd dpkg-dev
+  # (file: how CPack tells the programs it strips and scans for their libraries)
+  systemd dpkg-dev file
 )
 
 sudo_cmd=()

@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
-# Builds the Debian package (preset "package", prefix /usr), installs it with dpkg, runs
-# laserlined --version, --help and --check-config from it, checks the installed unit with
-# `systemd-analyze verify` and `systemd-analyze security --offline`, then purges the package and
-# checks that none of its files is left. Needs root (dpkg); registered as the ctest test
-# package_deb. Prints the security exposure score.
+# Builds the Debian package (preset "package", prefix /usr) and its -dbgsym package, checks the
+# package's files before installing it (stripped programs whose debug information is in the
+# -dbgsym package, copyright, sysctl.d, both units through `systemd-analyze verify --root` on the
+# unpacked tree), installs it with dpkg, runs laserlined --version, --help and --check-config from
+# it, checks the installed units with `systemd-analyze verify` and `systemd-analyze security
+# --offline`, then purges the package and checks that none of its files is left. Needs root
+# (dpkg); registered as the ctest test package_deb. Prints the sizes and the exposure scores.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 if [ "$(id -u)" -ne 0 ]; then
@@ -25,7 +27,48 @@ cmake --build --preset package -j2 >/dev/null
 rm -f build/package/laserline_*.deb
 (cd build/package && cpack -G DEB >/dev/null)
 deb=$(ls build/package/laserline_*.deb)
-echo "test-package: built $deb"
+ddeb=$(ls build/package/laserline-dbgsym_*.ddeb)
+echo "test-package: built $deb ($(du -k "$deb" | cut -f1) kB, installed" \
+  "$(dpkg-deb -f "$deb" Installed-Size) kB) and $ddeb ($(du -k "$ddeb" | cut -f1) kB)"
+
+# ---- The package's files, before it is installed
+tree=$(mktemp -d)
+trap 'rm -rf "$tree"' EXIT
+dpkg-deb -x "$deb" "$tree"
+dpkg-deb -x "$ddeb" "$tree"
+for program in "$tree"/usr/bin/*; do
+  [ "$(head -c 4 "$program")" = $'\x7fELF' ] || continue
+  if readelf -S --wide "$program" | grep -q '\.debug_info'; then
+    fail "${program#"$tree"} carries debug information"
+  fi
+  id=$(readelf -n "$program" | sed -n 's/.*Build ID: \([0-9a-f]*\).*/\1/p')
+  [ -f "$tree/usr/lib/debug/.build-id/${id:0:2}/${id:2}.debug" ] ||
+    fail "no debug information for ${program#"$tree"} (build id $id) in $ddeb"
+done
+grep -q 'liblcm-bin' <<<"$(dpkg-deb -f "$deb" Recommends)" || fail "liblcm-bin is not recommended"
+copyright=$tree/usr/share/doc/laserline/copyright
+[ -f "$copyright" ] || fail "no /usr/share/doc/laserline/copyright"
+head -1 "$copyright" | grep -q '^Format: https://www.debian.org/doc/packaging-manuals/copyright-format/1.0/' ||
+  fail "the copyright file is not in the machine-readable format"
+grep -q '^License: Expat' "$copyright" || fail "the copyright file names no licence"
+sysctl_file=$tree/usr/lib/sysctl.d/60-laserline.conf
+[ -f "$sysctl_file" ] || fail "no /usr/lib/sysctl.d/60-laserline.conf"
+grep -q '^net.core.rmem_max' "$sysctl_file" || fail "60-laserline.conf does not set net.core.rmem_max"
+while read -r setting; do
+  grep -qxF "$setting" README.md || fail "60-laserline.conf sets '$setting', which README.md does not ask for"
+done < <(grep '^net\.' "$sysctl_file")
+# systemd-analyze --root resolves every unit and program inside the tree: the host's own units
+# stand in for the vehicle's (sysinit.target, ...), the package's programs are its own.
+cp -rn /usr/lib/systemd/system/. "$tree/usr/lib/systemd/system/"
+for unit in laserlined.service laserlined@port.service; do
+  verify=$(systemd-analyze verify --root="$tree" "$unit" 2>&1) ||
+    fail "systemd-analyze verify $unit before installation: $verify"
+  [ -z "$verify" ] || fail "systemd-analyze verify $unit before installation: $verify"
+done
+rm -rf "$tree"
+trap - EXIT
+echo "test-package: before installation: programs stripped, debug information in the -dbgsym" \
+  "package, copyright, sysctl.d, systemd-analyze verify of both units: OK"
 
 dpkg -i "$deb" >/dev/null
 trap 'dpkg --purge laserline >/dev/null 2>&1 || true' EXIT
@@ -35,6 +78,9 @@ expect_file() { [ -f "$1" ] || fail "$1 is not installed"; }
 expect_file /usr/bin/laserlined
 expect_file /usr/bin/laserline-listen
 expect_file /usr/lib/systemd/system/laserlined.service
+expect_file /usr/lib/systemd/system/laserlined@.service
+expect_file /usr/lib/sysctl.d/60-laserline.conf
+expect_file /usr/share/doc/laserline/copyright
 expect_file /usr/lib/sysusers.d/laserline.conf
 expect_file /usr/lib/udev/rules.d/60-laserline.rules
 expect_file /etc/laserline/laserline.yaml
@@ -60,16 +106,18 @@ version=$(/usr/bin/laserlined --version)
 getent passwd laserline >/dev/null || fail "postinst did not create the laserline user"
 echo "test-package: $version; --help, --check-config and the laserline user OK"
 
-# verify prints nothing for a clean unit.
-verify=$(systemd-analyze verify /usr/lib/systemd/system/laserlined.service 2>&1) ||
-  fail "systemd-analyze verify: $verify"
-[ -z "$verify" ] || fail "systemd-analyze verify: $verify"
-echo "test-package: systemd-analyze verify: clean"
-security=$(systemd-analyze security --offline=yes /usr/lib/systemd/system/laserlined.service 2>&1 || true)
-score=$(sed -n 's/.*Overall exposure level for laserlined.service: \([0-9.]*\) .*/\1/p' <<<"$security")
-[ -n "$score" ] || fail "no exposure score from systemd-analyze security: $security"
-echo "test-package: systemd-analyze security --offline: exposure $score"
-awk -v s="$score" 'BEGIN { exit !(s <= 3.0) }' || fail "exposure $score is above 3.0"
+# verify prints nothing for a clean unit; an instance of the template reads /etc/laserline/NAME.yaml.
+grep -qx 'ExecStart=/usr/bin/laserlined --config /etc/laserline/%i.yaml' \
+  /usr/lib/systemd/system/laserlined@.service || fail "laserlined@.service does not read NAME.yaml"
+for unit in laserlined.service laserlined@port.service; do
+  verify=$(systemd-analyze verify "$unit" 2>&1) || fail "systemd-analyze verify $unit: $verify"
+  [ -z "$verify" ] || fail "systemd-analyze verify $unit: $verify"
+  security=$(systemd-analyze security --offline=yes "$unit" 2>&1 || true)
+  score=$(sed -n "s/.*Overall exposure level for $unit: \([0-9.]*\) .*/\1/p" <<<"$security")
+  [ -n "$score" ] || fail "no exposure score for $unit from systemd-analyze security: $security"
+  echo "test-package: $unit: systemd-analyze verify clean, security --offline exposure $score"
+  awk -v s="$score" 'BEGIN { exit !(s <= 3.0) }' || fail "$unit: exposure $score is above 3.0"
+done
 
 dpkg --purge laserline >/dev/null
 trap - EXIT
@@ -80,4 +128,4 @@ for f in "${files[@]}"; do
 done
 [ ${#left[@]} -eq 0 ] || fail "left after purge: ${left[*]}"
 [ ! -e /etc/laserline ] || fail "/etc/laserline left after purge"
-echo "test-package: purged, no file left"
+echo "test-package: purged, no file left; ${SECONDS} s in all"

@@ -32,6 +32,7 @@
 #include "hal/laser_channel.hpp"
 #include "pixel_reference.hpp"
 #include "private_network.hpp"
+#include "run_command.hpp"
 #include "thread_allocations.hpp"
 
 namespace {
@@ -739,6 +740,83 @@ TEST_F(AravisTest, DaemonLaserStateMatchesTheLightInFramesOverGigE) {
   // Free-running, a frame exposed before its switch shows the old state (how many depends on the
   // machine's load; none on an idle one): most must match, not all.
   EXPECT_GT(matches, frames * (kSanitized ? 6 : 75) / (kSanitized ? 10 : 100));
+}
+
+// --check-config's look for the camera: the fake camera is found with its model, serial and
+// formats, and nothing is configured; an address nothing answers at (127.0.0.2 in this private
+// namespace) and a pixel format the camera lacks are one line each.
+TEST_F(AravisTest, ProbeFindsTheCameraOrSaysWhyNot) {
+  std::string found;
+  std::string error;
+  const auto started = std::chrono::steady_clock::now();
+  AravisCameraOptions unanswered = options(640, 480, 30);
+  unanswered.device = "127.0.0.2";
+  AravisCamera nobody(unanswered);
+  EXPECT_FALSE(nobody.probe(&found, &error));
+  const double took_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  EXPECT_EQ(error,
+            "device '127.0.0.2': not among the 0 cameras that answered the discovery, and nothing "
+            "answers at that address (Can't connect to device at address '127.0.0.2')");
+  EXPECT_LT(took_s, 6.0);
+  std::printf("no camera at 127.0.0.2: said so after %.1f s\n", took_s);
+  std::fflush(stdout);  // before the fake camera forks
+
+  FakeCamera fake;
+  ASSERT_TRUE(fake.wait_ready());
+  AravisCamera camera(options(640, 480, 30));
+  ASSERT_TRUE(camera.probe(&found, &error)) << error;
+  EXPECT_EQ(found.rfind("device '127.0.0.1': Aravis Fake, serial GV01, id Aravis-Fake-GV01; "
+                        "formats ",
+                        0),
+            0u)
+      << found;
+  EXPECT_NE(found.find("Mono8"), std::string::npos) << found;
+
+  AravisCameraOptions mono12 = options(640, 480, 30);
+  mono12.pixel_format = "Mono12";
+  AravisCamera no_format(mono12);
+  EXPECT_FALSE(no_format.probe(&found, &error));
+  EXPECT_EQ(error.rfind("device '127.0.0.1': Aravis Fake, serial GV01, id Aravis-Fake-GV01: "
+                        "pixel_format 'Mono12' is not among its formats (",
+                        0),
+            0u)
+      << error;
+}
+
+// The same through laserlined --check-config: one line for the camera, then the verdict.
+TEST_F(AravisTest, CheckConfigReportsTheCameraItFinds) {
+  const std::filesystem::path config = g_dir / "check.yaml";
+  auto check = [&](const std::string& device) {
+    std::ofstream(config) << "camera: {backend: aravis, device: " << device
+                          << ", width: 320, height: 240}\n"
+                             "calibration: {camera: {width: 320, height: 240, fx: 350, fy: 350}}\n"
+                             "detector: {name: maxvalue}\n";
+    return laserline::test_support::run_command(std::string(LASERLINED_PATH) +
+                                                " --check-config --config " + config.string());
+  };
+  const auto nobody = check("127.0.0.2");
+  EXPECT_EQ(nobody.exit_code, 1) << nobody.out;
+  EXPECT_EQ(nobody.out,
+            "laserlined: camera (aravis): device '127.0.0.2': not among the 0 cameras that "
+            "answered the discovery, and nothing answers at that address (Can't connect to "
+            "device at address '127.0.0.2')\n"
+            "laserlined: " +
+                config.string() +
+                ": configuration is valid, its hardware is not all there (--offline checks the "
+                "file alone)\n");
+  FakeCamera fake;
+  ASSERT_TRUE(fake.wait_ready());
+  const auto found = check("127.0.0.1");
+  EXPECT_EQ(found.exit_code, 0) << found.out;
+  EXPECT_EQ(found.out.rfind("laserlined: camera (aravis): device '127.0.0.1': Aravis Fake, serial "
+                            "GV01",
+                            0),
+            0u)
+      << found.out;
+  EXPECT_NE(found.out.find("\nlaserlined: " + config.string() + ": configuration is valid\n"),
+            std::string::npos)
+      << found.out;
 }
 
 }  // namespace

@@ -166,6 +166,55 @@ TEST_F(GpioLaserTest, MissingChipLineOrBusyLineIsAClearError) {
   EXPECT_FALSE(second.is_on());
 }
 
+// --check-config's look at the line: found by offset or name, never requested, so its level
+// cannot change; a missing chip or line and a held line are one line each, as open() says them.
+TEST_F(GpioLaserTest, ProbeFindsTheLineWithoutRequestingIt) {
+  use_log(log_);
+  std::string found;
+  std::string error;
+  GpioLaser by_name(GpioLaserOptions{"gpiochip0", -1, "LASER_EN", false, "laserlined"});
+  ASSERT_TRUE(by_name.probe(&found, &error)) << error;
+  EXPECT_EQ(found,
+            "line 'LASER_EN' of gpiochip0 (laserline-shim): free, now an input (not requested)");
+  GpioLaser by_offset(GpioLaserOptions{"gpiochip0", 2, "", false, "laserlined"});
+  ASSERT_TRUE(by_offset.probe(&found, &error)) << error;
+  EXPECT_EQ(found,
+            "line 2 of gpiochip0 (laserline-shim) ('LASER_EN'): free, now an input (not "
+            "requested)");
+  EXPECT_TRUE(pins().empty()) << "probing requested or drove the line:\n" << describe(pins());
+  EXPECT_FALSE(by_name.is_on());
+
+  GpioLaser no_chip(GpioLaserOptions{"gpiochip7", 0, "", false, "laserlined"});
+  EXPECT_FALSE(no_chip.probe(&found, &error));
+  EXPECT_EQ(error, "chip 'gpiochip7': cannot open: No such file or directory");
+  GpioLaser no_offset(GpioLaserOptions{"gpiochip0", 9, "", false, "laserlined"});
+  EXPECT_FALSE(no_offset.probe(&found, &error));
+  EXPECT_EQ(error, "line 9 of gpiochip0 (laserline-shim): the chip has only 4 lines (0..3)");
+  GpioLaser no_name(GpioLaserOptions{"gpiochip0", -1, "LASER", false, "laserlined"});
+  EXPECT_FALSE(no_name.probe(&found, &error));
+  EXPECT_EQ(error, "line 'LASER' of gpiochip0 (laserline-shim): no line of that name");
+
+  GpioLaser holder(GpioLaserOptions{"gpiochip0", 1, "", false, "other-daemon"});
+  ASSERT_TRUE(holder.open(&error)) << error;
+  ASSERT_TRUE(holder.set(true, 0, nullptr));
+  const std::size_t held_events = pins().size();
+  GpioLaser second(GpioLaserOptions{"gpiochip0", 1, "", false, "laserlined"});
+  EXPECT_FALSE(second.probe(&found, &error));
+  EXPECT_EQ(error,
+            "line 1 of gpiochip0 (laserline-shim) ('SPARE1'): in use by 'other-daemon' (laserlined "
+            "could not request it)");
+  EXPECT_EQ(pins().size(), held_events) << describe(pins());
+  EXPECT_EQ(pins().back().level, 1) << "the holder's level must stay";
+
+  GpioLaser running(GpioLaserOptions{"gpiochip0", -1, "STROBE", false, "laserlined"});
+  ASSERT_TRUE(running.open(&error)) << error;
+  GpioLaser checked(GpioLaserOptions{"gpiochip0", -1, "STROBE", false, "laserlined"});
+  EXPECT_FALSE(checked.probe(&found, &error));
+  EXPECT_EQ(error,
+            "line 'STROBE' of gpiochip0 (laserline-shim): in use by 'laserlined' (another "
+            "laserlined runs with it: stop that one first)");
+}
+
 TEST_F(GpioLaserTest, ConfigurationNamesTheMissingKey) {
   auto make = [](const std::string& text) {
     laserline::hal::YamlMap map(laserline::hal::load_yaml_text(text, "c.yaml"), "c.yaml", "laser");
@@ -584,6 +633,33 @@ std::string unit_laser_off_command(const std::filesystem::path& config) {
   return "false";
 }
 
+std::string read_unit(const std::string& path) {
+  std::ifstream in(path);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// laserlined@NAME.service is laserlined.service reading NAME.yaml: the same daemon, the same
+// hardening and the same ExecStopPost= that switches the laser off, for the instance's own file.
+TEST(ServiceUnits, TheTemplateIsTheUnitWithTheInstancesConfiguration) {
+  std::string unit_path = LASERLINE_UNIT_PATH;
+  const std::string unit = read_unit(unit_path);
+  std::string template_path = unit_path;
+  template_path.replace(template_path.rfind("laserlined.service"), 18, "laserlined@.service");
+  std::string instance = read_unit(template_path);
+  ASSERT_FALSE(unit.empty()) << unit_path;
+  ASSERT_FALSE(instance.empty()) << template_path;
+  EXPECT_NE(instance.find("\nExecStopPost="), std::string::npos);
+  EXPECT_NE(instance.find(" --laser-off --config "), std::string::npos);
+  std::size_t configs = 0;
+  for (std::size_t at; (at = instance.find("/%i.yaml")) != std::string::npos; ++configs)
+    instance.replace(at, 8, "/laserline.yaml");
+  EXPECT_EQ(configs, 2u) << "ExecStart= and ExecStopPost= read the instance's file";
+  const std::size_t description = instance.find(" daemon (%i)\n");
+  ASSERT_NE(description, std::string::npos);
+  instance.erase(description + 7, 5);
+  EXPECT_EQ(instance, unit);
+}
+
 // The pin's level as libgpiod's own gpioget reads it (a new process: the shim keeps the level
 // the last holder left, as the kernel does).
 std::string gpioget(const std::filesystem::path& pins) {
@@ -673,6 +749,47 @@ TEST_F(GpioLaserTest, DaemonStopsAtOnceWhileStarting) {
   for (const auto& e : events)
     EXPECT_EQ(e.level, 0) << describe(events);
 }
+// laserlined --check-config with the stand-in chip: the line is reported found and is left
+// alone (no request, no level); a chip that does not exist fails the check in one line, and
+// --offline checks the file alone.
+TEST_F(GpioLaserTest, CheckConfigLooksTheLineUpAndLeavesItAlone) {
+  const std::string config = daemon_config("mode: on", "", g_dir / "check.lcm");
+  const std::filesystem::path path = g_dir / "check.yaml";
+  std::ofstream(path) << config;
+  const auto check = laserline::test_support::run_command(
+      shim_environment(log_) + " " + LASERLINED_PATH + " --check-config --config " + path.string());
+  EXPECT_EQ(check.exit_code, 0) << check.out;
+  EXPECT_EQ(
+      check.out,
+      "laserlined: laser (gpiod): line 'LASER_EN' of gpiochip0 (laserline-shim): free, now an "
+      "input (not requested)\n"
+      "laserlined: " +
+          path.string() + ": configuration is valid\n");
+  EXPECT_TRUE(pins().empty()) << describe(pins());
+
+  std::string missing = config;
+  missing.replace(missing.find("chip: gpiochip0"), 15, "chip: gpiochip9");
+  std::ofstream(path) << missing;
+  const auto no_chip = laserline::test_support::run_command(
+      shim_environment(log_) + " " + LASERLINED_PATH + " --check-config --config " + path.string());
+  EXPECT_EQ(no_chip.exit_code, 1) << no_chip.out;
+  EXPECT_EQ(
+      no_chip.out,
+      "laserlined: laser (gpiod): chip 'gpiochip9': cannot open: No such file or directory\n"
+      "laserlined: " +
+          path.string() +
+          ": configuration is valid, its hardware is not all there (--offline checks the file "
+          "alone)\n");
+  const auto offline =
+      laserline::test_support::run_command(shim_environment(log_) + " " + LASERLINED_PATH +
+                                           " --check-config --offline --config " + path.string());
+  EXPECT_EQ(offline.exit_code, 0) << offline.out;
+  EXPECT_EQ(offline.out, "laserlined: " + path.string() +
+                             ": configuration is valid (--offline: camera and laser not looked "
+                             "for)\n");
+  EXPECT_TRUE(pins().empty()) << describe(pins());
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {

@@ -369,3 +369,95 @@ TEST_F(CheckConfigHostile, WhatTheCheckPassesStarts) {
 }
 
 }  // namespace
+
+// Journal priorities: under systemd, stdout and stderr are the journal's stream and
+// JOURNAL_STREAM names its device and inode; each line then starts with its syslog level, so
+// that `journalctl -p err` finds the errors. Here a file stands in for the stream.
+namespace {
+
+class JournalPriorities : public LaserlinedCli {
+ protected:
+  // Runs laserlined with stdout and stderr on the file `name`; JOURNAL_STREAM names
+  // `stream_file`'s device and inode when given. Returns what the file holds.
+  CliResult run_to_file(const std::string& args, const std::string& stream_file = "",
+                        const std::string& shell_after = "") {
+    const std::string out = (dir_ / "out.txt").string();
+    std::ofstream(out).close();
+    std::string env;
+    if (!stream_file.empty()) {
+      struct stat st {};
+      if (stat(stream_file.c_str(), &st) != 0) return {};
+      env = "JOURNAL_STREAM=" + std::to_string(st.st_dev) + ":" + std::to_string(st.st_ino) + " ";
+    }
+    CliResult r = laserline::test_support::run_command(env + LASERLINED_PATH + " " + args + " >>" +
+                                                       out + " 2>&1" + shell_after);
+    std::ifstream in(out);
+    r.out.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    return r;
+  }
+  std::string out_file() const { return (dir_ / "out.txt").string(); }
+};
+
+TEST_F(JournalPriorities, ErrorsAndInformationCarryTheirLevel) {
+  std::ofstream(out_file()).close();
+  CliResult r = run_to_file("--config /nonexistent/x.yaml", out_file());
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.out,
+            "<3>laserlined: /nonexistent/x.yaml: cannot be opened for reading: No such file or "
+            "directory\n");
+
+  const std::string good = file("good.yaml", "laser: {mode: alternate}\n");
+  r = run_to_file("--check-config --config " + good, out_file());
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_EQ(r.out, "<6>laserlined: " + good + ": configuration is valid\n");
+
+  // A message of several lines: every line carries the level.
+  r = run_to_file("--frobnicate", out_file());
+  EXPECT_EQ(r.exit_code, 2);
+  ASSERT_GT(lines(r.out), 3u) << r.out;
+  std::size_t at = 0;
+  for (std::size_t next; (next = r.out.find('\n', at)) != std::string::npos; at = next + 1)
+    EXPECT_EQ(r.out.compare(at, 3, "<3>"), 0) << r.out;
+}
+
+// A stop by a signal that is no request to stop (exit status 128 + its number) is a warning.
+TEST_F(JournalPriorities, StopByAFailureSignalIsAWarning) {
+  const std::string config = file("run.yaml", "lcm: {url: 'memq://'}\n");
+  std::ofstream(out_file()).close();
+  const CliResult r =
+      run_to_file("--config " + config, out_file(),
+                  " & pid=$!; for i in $(seq 200); do grep -q running " + out_file() +
+                      " && break; sleep 0.05; done; kill -USR1 $pid; wait $pid");
+  EXPECT_EQ(r.exit_code, 128 + SIGUSR1) << r.out;
+  EXPECT_EQ(r.out.rfind("<6>laserlined: running sim camera", 0), 0u) << r.out;
+  EXPECT_NE(r.out.find("\n<4>laserlined: stopped (SIGUSR1) after "), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\n<6>laserlined: laser sim: "), std::string::npos) << r.out;
+}
+
+TEST_F(JournalPriorities, NoPrefixOutsideTheJournal) {
+  // No JOURNAL_STREAM: a terminal, a file, a pipe.
+  CliResult r = run_to_file("--config /nonexistent/x.yaml");
+  EXPECT_EQ(r.out,
+            "laserlined: /nonexistent/x.yaml: cannot be opened for reading: No such file or "
+            "directory\n");
+  // JOURNAL_STREAM inherited, but stderr redirected elsewhere: not the journal's stream.
+  r = run_to_file("--config /nonexistent/x.yaml", file("other.txt", ""));
+  EXPECT_EQ(r.out,
+            "laserlined: /nonexistent/x.yaml: cannot be opened for reading: No such file or "
+            "directory\n");
+  r = laserline::test_support::run_command(
+      "JOURNAL_STREAM=garbage " + std::string(LASERLINED_PATH) + " --config /nonexistent/x.yaml");
+  EXPECT_EQ(r.out.rfind("laserlined: ", 0), 0u) << r.out;
+}
+
+}  // namespace
+
+namespace {
+
+TEST_F(LaserlinedCli, OfflineGoesWithCheckConfig) {
+  const CliResult r = run("--offline");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(r.out, "laserlined: --offline goes with --check-config\n");
+}
+
+}  // namespace

@@ -328,6 +328,30 @@ TEST(V4l2, MissingDeviceOrUnsupportedFormatIsAClearError) {
                        "got 321x240");
 }
 
+// --check-config's look at the device: its name, driver and formats, read without setting a
+// format; a missing node and a format the device lacks are one line each.
+TEST(V4l2, ProbeReadsTheDeviceWithoutConfiguringIt) {
+  std::string found;
+  std::string error;
+  V4l2Camera missing(options((g_dir / "nothing").string(), "GREY", 320, 240));
+  EXPECT_FALSE(missing.probe(&found, &error));
+  EXPECT_EQ(error, (g_dir / "nothing").string() + ": cannot open: No such file or directory");
+
+  StandIn device("GREY", 320, 240, 30);
+  if (const std::string problem = device.wait_ready(); !problem.empty()) GTEST_SKIP() << problem;
+  V4l2Camera camera(options(device.device(), "GREY", 320, 240));
+  ASSERT_TRUE(camera.probe(&found, &error)) << error;
+  EXPECT_EQ(found,
+            device.device() + ": V4L2 stand-in (driver laserline-fuse, fuse:0); formats GREY");
+  V4l2Camera yuyv(options(device.device(), "YUYV", 320, 240));
+  EXPECT_FALSE(yuyv.probe(&found, &error));
+  EXPECT_EQ(error, device.device() +
+                       ": V4L2 stand-in (driver laserline-fuse, fuse:0): pixel_format 'YUYV' is "
+                       "not among its formats (GREY)");
+  // Probing left the device as it was: it still opens and streams.
+  ASSERT_TRUE(camera.open(&error)) << error;
+}
+
 TEST(V4l2, ReconnectsWhenTheDeviceDisappearsAndReturns) {
   auto device = std::make_unique<StandIn>("GREY", 160, 120, 50);
   if (const std::string problem = device->wait_ready(); !problem.empty()) GTEST_SKIP() << problem;
