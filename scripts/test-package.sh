@@ -55,7 +55,7 @@ sysctl_file=$tree/usr/lib/sysctl.d/60-laserline.conf
 [ -f "$sysctl_file" ] || fail "no /usr/lib/sysctl.d/60-laserline.conf"
 grep -q '^net.core.rmem_max' "$sysctl_file" || fail "60-laserline.conf does not set net.core.rmem_max"
 while read -r setting; do
-  grep -qxF "$setting" README.md || fail "60-laserline.conf sets '$setting', which README.md does not ask for"
+  grep -qxF "$setting" docs/hardware.md || fail "60-laserline.conf sets '$setting', which docs/hardware.md does not ask for"
 done < <(grep '^net\.' "$sysctl_file")
 # systemd-analyze --root resolves every unit and program inside the tree: the host's own units
 # stand in for the vehicle's (sysinit.target, ...), the package's programs are its own.
