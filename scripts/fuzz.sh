@@ -9,7 +9,7 @@ seconds=${1:-20}
 shift || true
 harnesses=("$@")
 [ ${#harnesses[@]} -gt 0 ] || harnesses=(profile status point image_message image_payload lcm_log
-                                          config calibration)
+                                          config calibration poses)
 build=build/fuzz
 CC=clang-16 CXX=clang++-16 cmake -S tests/fuzz -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
 cmake --build "$build" -j2 --target make_fuzz_seeds "${harnesses[@]/#/fuzz_}"
@@ -17,7 +17,10 @@ cmake --build "$build" -j2 --target make_fuzz_seeds "${harnesses[@]/#/fuzz_}"
 seeds=$build/seeds
 rm -rf "$seeds"
 "$build/make_fuzz_seeds" "$seeds"
-mkdir -p "$seeds/config" "$seeds/calibration"
+mkdir -p "$seeds/config" "$seeds/calibration" "$seeds/poses"
+# A navigation log as laserline-extract --poses reads it: a header, a turn about z, a gap.
+printf 'timestamp,x,y,z,qw,qx,qy,qz\n0.0,0,0,0,1,0,0,0\n0.5,0.1,0,-2,0.9238795,0,0,0.3826834\n2.0,0.4,0.05,-2.1,0.7071068,0,0,0.7071068\n' \
+  >"$seeds/poses/turn.csv"
 cp config/laserline.yaml "$seeds/config/"
 # The calibration section of the configuration, as a calibration file of its own.
 sed -n '/^calibration:/,/^[a-z]/p' config/laserline.yaml | sed '1d;$d;s/^  //' \

@@ -100,6 +100,10 @@ PoseLog PoseLog::load(const std::string& path) {
   if (!in) {
     throw PointCloudError(path + ": cannot be read: " + std::strerror(errno));
   }
+  return parse(in, path);
+}
+
+PoseLog PoseLog::parse(std::istream& in, const std::string& path) {
   PoseLog log;
   log.path_ = path;
   std::string line;

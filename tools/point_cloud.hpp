@@ -3,6 +3,7 @@
 #include <array>
 #include <cstdint>
 #include <cstdio>
+#include <istream>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -29,6 +30,8 @@ class PoseLog {
  public:
   // Throws PointCloudError "FILE:LINE: problem" for the first bad row.
   static PoseLog load(const std::string& path);
+  // The same from a stream; `name` stands for the file in messages.
+  static PoseLog parse(std::istream& in, const std::string& name);
 
   const std::string& path() const { return path_; }
   std::size_t size() const { return rows_.size(); }
