@@ -23,6 +23,7 @@
 
 #include "lcmtypes/checked_decode.hpp"
 #include "lcmtypes/lcm_log.hpp"
+#include "tools/cli.hpp"
 
 namespace {
 
@@ -338,15 +339,17 @@ int main(int argc, char** argv) {
   double duration_s = 0, quiet_s = 2.0;
   std::string overlay, profile_channel = "LASERLINE_PROFILE", image_channel = "LASERLINE_IMAGE",
                        status_channel = "LASERLINE_STATUS";
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "laserline-listen: %s: missing value\n%s", arg.c_str(), kUsage);
-        std::exit(2);
-      }
-      return argv[++i];
-    };
+  laserline::cli::Arguments args(argc, argv, "laserline-listen", kUsage,
+                                 {{"url", true},
+                                  {"duration", true},
+                                  {"quiet", true},
+                                  {"overlay", true},
+                                  {"profile-channel", true},
+                                  {"image-channel", true},
+                                  {"status-channel", true}});
+  while (args.next()) {
+    const std::string& arg = args.name();
+    auto value = [&]() -> std::string { return args.value(); };
     auto seconds = [&]() {
       const std::string text = value();
       char* end = nullptr;
@@ -372,12 +375,8 @@ int main(int argc, char** argv) {
       image_channel = value();
     } else if (arg == "--status-channel") {
       status_channel = value();
-    } else if (arg == "--help" || arg == "-h") {
-      std::fputs(kUsage, stdout);
-      return 0;
     } else {
-      std::fprintf(stderr, "laserline-listen: unknown argument '%s'\n%s", arg.c_str(), kUsage);
-      return 2;
+      args.fail("unexpected argument '" + args.value() + "'");
     }
   }
   signal(SIGINT, on_signal);
