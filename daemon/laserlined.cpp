@@ -28,6 +28,7 @@
 #include "daemon/service_notifier.hpp"
 #include "daemon/thread_priorities.hpp"
 #include "hal/clock.hpp"
+#include "tools/cli.hpp"
 
 namespace {
 
@@ -37,14 +38,14 @@ using laserline::daemon::log;
 using laserline::daemon::LogLevel;
 
 constexpr const char* kUsage =
-    "usage: laserlined [--config FILE] [--duration SECONDS] [--check-config [--offline]]\n"
+    "usage: laserlined [--config FILE] [--duration SECONDS] [--check-config [--probe]]\n"
     "                  [--laser-off] [--print-default-config] [--help] [--version]\n"
     "  --config FILE          YAML configuration (default: built-in, the simulated scanner)\n"
     "  --duration SECONDS     stop by itself after this long, 0.001 to 1e9 (default: until a\n"
     "                         stop signal)\n"
-    "  --check-config         validate the configuration and backends, find the camera and the\n"
-    "                         laser's GPIO line (read only: the laser stays as it is), then exit\n"
-    "  --offline              with --check-config: the file alone, no hardware looked for\n"
+    "  --check-config         validate the configuration and its backends' options, then exit\n"
+    "  --probe                with --check-config: also open the camera and the laser's GPIO\n"
+    "                         line and report what was found (the laser stays as it is)\n"
     "  --laser-off            drive the configured laser line to off, release it and exit (for\n"
     "                         a supervisor once the daemon is gone: the unit's ExecStopPost=)\n"
     "  --print-default-config print the built-in configuration and exit\n";
@@ -58,7 +59,8 @@ struct Options {
   std::optional<std::string> config_path;
   double duration_s = 0;  // 0 = run until signalled
   bool check_only = false;
-  bool offline = false;  // --check-config without looking for the hardware
+  bool probe = false;    // --check-config also looks for the hardware
+  bool offline = false;  // accepted for compatibility: the file alone, the default
   bool laser_off = false;
 };
 
@@ -156,29 +158,28 @@ int wait_for_stop_signal(std::chrono::milliseconds timeout) {
   return g_stop.signal;
 }
 
-[[noreturn]] void usage_error(const std::string& message) {
-  log(LogLevel::kError, "laserlined: %s\n%s", message.c_str(), kUsage);
-  std::exit(2);
-}
-
-// A flag's value that cannot be used: one line naming the flag.
-[[noreturn]] void value_error(const std::string& message) {
-  log(LogLevel::kError, "laserlined: %s", message.c_str());
-  std::exit(2);
-}
-
 Options parse_args(int argc, char** argv) {
   Options o;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&](const char* flag) -> std::string {
-      if (i + 1 >= argc) value_error(std::string(flag) + ": missing value");
-      return argv[++i];
-    };
+  laserline::cli::Arguments args(argc, argv, "laserlined", kUsage,
+                                 {{"config", true},
+                                  {"duration", true},
+                                  {"check-config", false},
+                                  {"probe", false},
+                                  {"offline", false},
+                                  {"laser-off", false},
+                                  {"print-default-config", false}});
+  args.set_error_writer([](const std::string& line) { log(LogLevel::kError, "%s", line.c_str()); });
+  // A flag's value that cannot be used: one line naming the flag.
+  auto value_error = [](const std::string& message) {
+    log(LogLevel::kError, "laserlined: %s", message.c_str());
+    std::exit(2);
+  };
+  while (args.next()) {
+    const std::string& arg = args.name();
     if (arg == "--config") {
-      o.config_path = value("--config");
+      o.config_path = args.value();
     } else if (arg == "--duration") {
-      const std::string text = value("--duration");
+      const std::string& text = args.value();
       char* end = nullptr;
       o.duration_s = std::strtod(text.c_str(), &end);
       // Written so that NaN fails it too.
@@ -189,6 +190,8 @@ Options parse_args(int argc, char** argv) {
       }
     } else if (arg == "--check-config") {
       o.check_only = true;
+    } else if (arg == "--probe") {
+      o.probe = true;
     } else if (arg == "--offline") {
       o.offline = true;
     } else if (arg == "--laser-off") {
@@ -196,17 +199,13 @@ Options parse_args(int argc, char** argv) {
     } else if (arg == "--print-default-config") {
       std::fputs(laserline::daemon::builtin_config_text(), stdout);
       std::exit(0);
-    } else if (arg == "--help" || arg == "-h") {
-      std::fputs(kUsage, stdout);
-      std::exit(0);
-    } else if (arg == "--version") {
-      std::puts("laserlined " LASERLINE_VERSION);
-      std::exit(0);
     } else {
-      usage_error("unknown argument '" + arg + "'");
+      args.fail("unexpected argument '" + args.value() + "'");
     }
   }
+  if (o.probe && !o.check_only) value_error("--probe goes with --check-config");
   if (o.offline && !o.check_only) value_error("--offline goes with --check-config");
+  if (o.offline && o.probe) value_error("--offline and --probe contradict each other");
   return o;
 }
 
@@ -261,13 +260,11 @@ int switch_laser_off(const DaemonConfig& config, laserline::hal::Laser& laser) {
 }
 
 // --check-config: the file and every backend option were validated when the backends were
-// created; unless offline, the camera and the laser line are then found and read, neither
+// created; with --probe the camera and the laser line are then found and read, neither
 // configured nor driven. Exit status 2: the file; 1: the hardware; 0: both good.
-int check_config(const DaemonConfig& config, Backends& backends, bool offline) {
-  if (offline) {
-    log(LogLevel::kInfo,
-        "laserlined: %s: configuration is valid (--offline: camera and laser not looked for)",
-        config.source.c_str());
+int check_config(const DaemonConfig& config, Backends& backends, bool probe) {
+  if (!probe) {
+    log(LogLevel::kInfo, "laserlined: %s: configuration is valid", config.source.c_str());
     return 0;
   }
   bool found_all = true;
@@ -289,13 +286,12 @@ int check_config(const DaemonConfig& config, Backends& backends, bool offline) {
   ok = backends.laser->probe(&found, &error);
   report("laser", config.laser_backend, ok, found, error);
   if (!found_all) {
-    log(LogLevel::kError,
-        "laserlined: %s: configuration is valid, its hardware is not all there (--offline checks "
-        "the file alone)",
+    log(LogLevel::kError, "laserlined: %s: configuration is valid, its hardware is not all there",
         config.source.c_str());
     return 1;
   }
-  log(LogLevel::kInfo, "laserlined: %s: configuration is valid", config.source.c_str());
+  log(LogLevel::kInfo, "laserlined: %s: configuration is valid, its hardware is there",
+      config.source.c_str());
   return 0;
 }
 
@@ -330,7 +326,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   if (options.laser_off) return switch_laser_off(config, *backends.laser);
-  if (options.check_only) return check_config(config, backends, options.offline);
+  if (options.check_only) return check_config(config, backends, options.probe);
 
   std::string error;
   const std::unique_ptr<lcm::LCM> lcm = laserline::daemon::open_lcm(config.lcm_url, &error);

@@ -2,9 +2,9 @@
 # Builds the Debian package (preset "package", prefix /usr) and its -dbgsym package, checks the
 # package's files before installing it (stripped programs whose debug information is in the
 # -dbgsym package, copyright, sysctl.d, both units through `systemd-analyze verify --root` on the
-# unpacked tree), installs it with dpkg, runs laserlined --version, --help and --check-config from
-# it, checks the installed units with `systemd-analyze verify` and `systemd-analyze security
-# --offline`, then purges the package and checks that none of its files is left. Needs root
+# unpacked tree), installs it with dpkg, runs laserlined --version, --help and --check-config
+# (with --probe as the service's user) from it, checks the installed units with `systemd-analyze
+# verify` and `systemd-analyze security --offline`, then purges the package and checks that none of its files is left. Needs root
 # (dpkg); registered as the ctest test package_deb. Prints the sizes and the exposure scores.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
@@ -104,6 +104,9 @@ version=$(/usr/bin/laserlined --version)
 /usr/bin/laserlined --check-config --config /etc/laserline/laserline.yaml >/dev/null ||
   fail "the installed configuration does not validate"
 getent passwd laserline >/dev/null || fail "postinst did not create the laserline user"
+runuser -u laserline -- /usr/bin/laserlined --check-config --probe \
+  --config /etc/laserline/laserline.yaml >/dev/null ||
+  fail "--check-config --probe as the laserline user failed on the installed configuration"
 echo "test-package: $version; --help, --check-config and the laserline user OK"
 
 # verify prints nothing for a clean unit; an instance of the template reads /etc/laserline/NAME.yaml.

@@ -784,7 +784,8 @@ TEST_F(AravisTest, ProbeFindsTheCameraOrSaysWhyNot) {
       << error;
 }
 
-// The same through laserlined --check-config: one line for the camera, then the verdict.
+// The same through laserlined --check-config --probe: one line for the camera, then the verdict;
+// without --probe the file alone is checked, and an absent camera passes.
 TEST_F(AravisTest, CheckConfigReportsTheCameraItFinds) {
   const std::filesystem::path config = g_dir / "check.yaml";
   auto check = [&](const std::string& device) {
@@ -792,8 +793,8 @@ TEST_F(AravisTest, CheckConfigReportsTheCameraItFinds) {
                           << ", width: 320, height: 240}\n"
                              "calibration: {camera: {width: 320, height: 240, fx: 350, fy: 350}}\n"
                              "detector: {name: maxvalue}\n";
-    return laserline::test_support::run_command(std::string(LASERLINED_PATH) +
-                                                " --check-config --config " + config.string());
+    return laserline::test_support::run_command(
+        std::string(LASERLINED_PATH) + " --check-config --probe --config " + config.string());
   };
   const auto nobody = check("127.0.0.2");
   EXPECT_EQ(nobody.exit_code, 1) << nobody.out;
@@ -802,9 +803,11 @@ TEST_F(AravisTest, CheckConfigReportsTheCameraItFinds) {
             "answered the discovery, and nothing answers at that address (Can't connect to "
             "device at address '127.0.0.2')\n"
             "laserlined: " +
-                config.string() +
-                ": configuration is valid, its hardware is not all there (--offline checks the "
-                "file alone)\n");
+                config.string() + ": configuration is valid, its hardware is not all there\n");
+  const auto file_alone = laserline::test_support::run_command(
+      std::string(LASERLINED_PATH) + " --check-config --config " + config.string());
+  EXPECT_EQ(file_alone.exit_code, 0) << file_alone.out;
+  EXPECT_EQ(file_alone.out, "laserlined: " + config.string() + ": configuration is valid\n");
   FakeCamera fake;
   ASSERT_TRUE(fake.wait_ready());
   const auto found = check("127.0.0.1");
@@ -814,7 +817,8 @@ TEST_F(AravisTest, CheckConfigReportsTheCameraItFinds) {
                             0),
             0u)
       << found.out;
-  EXPECT_NE(found.out.find("\nlaserlined: " + config.string() + ": configuration is valid\n"),
+  EXPECT_NE(found.out.find("\nlaserlined: " + config.string() +
+                           ": configuration is valid, its hardware is there\n"),
             std::string::npos)
       << found.out;
 }

@@ -749,44 +749,43 @@ TEST_F(GpioLaserTest, DaemonStopsAtOnceWhileStarting) {
   for (const auto& e : events)
     EXPECT_EQ(e.level, 0) << describe(events);
 }
-// laserlined --check-config with the stand-in chip: the line is reported found and is left
-// alone (no request, no level); a chip that does not exist fails the check in one line, and
-// --offline checks the file alone.
+// laserlined --check-config --probe with the stand-in chip: the line is reported found and is
+// left alone (no request, no level); a chip that does not exist fails the check in one line.
+// Without --probe (or with --offline, kept for old scripts) the file alone is checked.
 TEST_F(GpioLaserTest, CheckConfigLooksTheLineUpAndLeavesItAlone) {
   const std::string config = daemon_config("mode: on", "", g_dir / "check.lcm");
   const std::filesystem::path path = g_dir / "check.yaml";
   std::ofstream(path) << config;
-  const auto check = laserline::test_support::run_command(
-      shim_environment(log_) + " " + LASERLINED_PATH + " --check-config --config " + path.string());
+  const auto check =
+      laserline::test_support::run_command(shim_environment(log_) + " " + LASERLINED_PATH +
+                                           " --check-config --probe --config " + path.string());
   EXPECT_EQ(check.exit_code, 0) << check.out;
   EXPECT_EQ(
       check.out,
       "laserlined: laser (gpiod): line 'LASER_EN' of gpiochip0 (laserline-shim): free, now an "
       "input (not requested)\n"
       "laserlined: " +
-          path.string() + ": configuration is valid\n");
+          path.string() + ": configuration is valid, its hardware is there\n");
   EXPECT_TRUE(pins().empty()) << describe(pins());
 
   std::string missing = config;
   missing.replace(missing.find("chip: gpiochip0"), 15, "chip: gpiochip9");
   std::ofstream(path) << missing;
-  const auto no_chip = laserline::test_support::run_command(
-      shim_environment(log_) + " " + LASERLINED_PATH + " --check-config --config " + path.string());
-  EXPECT_EQ(no_chip.exit_code, 1) << no_chip.out;
-  EXPECT_EQ(
-      no_chip.out,
-      "laserlined: laser (gpiod): chip 'gpiochip9': cannot open: No such file or directory\n"
-      "laserlined: " +
-          path.string() +
-          ": configuration is valid, its hardware is not all there (--offline checks the file "
-          "alone)\n");
-  const auto offline =
+  const auto no_chip =
       laserline::test_support::run_command(shim_environment(log_) + " " + LASERLINED_PATH +
-                                           " --check-config --offline --config " + path.string());
-  EXPECT_EQ(offline.exit_code, 0) << offline.out;
-  EXPECT_EQ(offline.out, "laserlined: " + path.string() +
-                             ": configuration is valid (--offline: camera and laser not looked "
-                             "for)\n");
+                                           " --check-config --probe --config " + path.string());
+  EXPECT_EQ(no_chip.exit_code, 1) << no_chip.out;
+  EXPECT_EQ(no_chip.out,
+            "laserlined: laser (gpiod): chip 'gpiochip9': cannot open: No such file or directory\n"
+            "laserlined: " +
+                path.string() + ": configuration is valid, its hardware is not all there\n");
+  for (const char* file_alone :
+       {" --check-config --config ", " --check-config --offline --config "}) {
+    const auto r = laserline::test_support::run_command(
+        shim_environment(log_) + " " + LASERLINED_PATH + file_alone + path.string());
+    EXPECT_EQ(r.exit_code, 0) << file_alone << r.out;
+    EXPECT_EQ(r.out, "laserlined: " + path.string() + ": configuration is valid\n") << file_alone;
+  }
   EXPECT_TRUE(pins().empty()) << describe(pins());
 }
 

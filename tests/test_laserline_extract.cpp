@@ -862,15 +862,14 @@ TEST_F(LaserlineExtract, ProgressBarOnlyOnATerminal) {
 TEST_F(LaserlineExtract, BadArgumentsAndConfiguration) {
   RunResult r = run_command(std::string(LASERLINE_EXTRACT_PATH) + " --frobnicate");
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_EQ(r.out.rfind("laserline-extract: unknown argument '--frobnicate'\nusage:", 0), 0u)
-      << r.out;
+  EXPECT_EQ(r.out, "laserline-extract: unknown option '--frobnicate' (see --help)\n");
   r = run_command(std::string(LASERLINE_EXTRACT_PATH) + " --calib " + calib_ +
                   " --detector maxvalue --output " + path("p.csv"));
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_EQ(r.out.rfind("laserline-extract: no INPUT given\nusage:", 0), 0u) << r.out;
+  EXPECT_EQ(r.out, "laserline-extract: no INPUT given (see --help)\n");
   r = run_command(std::string(LASERLINE_EXTRACT_PATH) + " --calib");
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_EQ(r.out.rfind("laserline-extract: --calib: missing value\nusage:", 0), 0u) << r.out;
+  EXPECT_EQ(r.out, "laserline-extract: --calib: missing value (see --help)\n");
   r = run_command(std::string(LASERLINE_EXTRACT_PATH) + " --help");
   EXPECT_EQ(r.exit_code, 0);
   EXPECT_EQ(r.out.rfind("usage: laserline-extract", 0), 0u) << r.out;
@@ -1061,7 +1060,7 @@ TEST_F(LaserlineExtract, PlyPointCloudFusedWithPosesByFrameNumber) {
             "laserline-extract: " + path("bad.csv") + ":2: y 'abc' is not a finite number\n");
   r = extract("--poses " + path("poses.csv") + inputs);
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_EQ(r.out.rfind("laserline-extract: --poses needs --ply\nusage:", 0), 0u) << r.out;
+  EXPECT_EQ(r.out, "laserline-extract: --poses needs --ply (see --help)\n");
 }
 
 // LCM frames carry their exposure time: the pose is interpolated at it.

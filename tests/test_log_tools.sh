@@ -217,6 +217,19 @@ PY
 done
 echo "test_log_tools: 30 randomly damaged logs read without a crash or a traceback"
 
+# Files that are no log: one line each naming the file, exit status 1, no traceback.
+: >"$dir/empty.lcmlog"
+for bad in "$dir/nonexistent.lcmlog:No such file or directory" "$dir:Is a directory" \
+  "$dir/config.yaml:not an LCM log (none of its" "$dir/empty.lcmlog:empty file, not an LCM log"; do
+  path=${bad%%:*} reason=${bad#*:}
+  status=0
+  python3 "$reader" "$path" --types "$types" >"$dir/bad.out" 2>&1 || status=$?
+  [ $status -eq 1 ] && [ "$(wc -l <"$dir/bad.out")" -eq 1 ] &&
+    grep -q "^laserline-log-reader: $path: $reason" "$dir/bad.out" ||
+    fail "reader on $path: exit status $status: $(cat "$dir/bad.out")"
+done
+echo "test_log_tools: a missing file, a directory, an empty file and a YAML file: one line each"
+
 # Two daemons on the same channels (their logs one after the other): told apart by instance id.
 sed -i "s|dive.lcmlog?mode=w|second.lcmlog?mode=w|" "$dir/config.yaml"
 "$laserlined" --config "$dir/config.yaml" --duration 1 >"$dir/daemon2.out" 2>&1 ||
@@ -227,6 +240,11 @@ grep -q "LASERLINE_PROFILE: messages from two daemons (instance ids [0-9a-f]* an
   "$dir/two.out" || fail "listen did not see two daemons: $(cat "$dir/two.out")"
 "$listen" --url "file://$dir/dive.lcmlog" >"$dir/one.out" 2>&1 || fail "listen: $(cat "$dir/one.out")"
 ! grep -q "two daemons" "$dir/one.out" || fail "listen saw two daemons in one: $(cat "$dir/one.out")"
+# A log's latency from its own times (when the daemon wrote each message), not the reading's.
+logged=$(sed -n "s/^  latency exposure -> logged (the log's own times): p50 \([0-9.]*\) ms.*/\1/p" \
+  "$dir/one.out")
+[ -n "$logged" ] && awk -v p50="$logged" 'BEGIN { exit !(p50 >= 0 && p50 < 1000) }' ||
+  fail "listen: no latency from the log's times: $(cat "$dir/one.out")"
 python3 "$reader" "$dir/two.lcmlog" --types "$types" >"$dir/two.out" 2>&1 || true
 grep -q "LASERLINE_STATUS: messages from two daemons" "$dir/two.out" ||
   fail "reader did not see two daemons: $(cat "$dir/two.out")"

@@ -11,6 +11,7 @@
 
 #include "hal/calibration.hpp"
 #include "hal/laser_channel.hpp"
+#include "tools/cli.hpp"
 #include "tools/laser_plane_calibration.hpp"
 
 namespace {
@@ -57,7 +58,7 @@ constexpr const char* kUsage =
     "Exit status: 0 written, 1 the views do not give a calibration, 2 bad arguments.\n";
 
 [[noreturn]] void usage_error(const std::string& message) {
-  std::fprintf(stderr, "laserline-calibrate: %s\n%s", message.c_str(), kUsage);
+  std::fprintf(stderr, "laserline-calibrate: %s (see --help)\n", message.c_str());
   std::exit(2);
 }
 
@@ -150,16 +151,24 @@ int main(int argc, char** argv) {
   laserline::hal::LaserSide side = laserline::hal::LaserSide::kAbove;
   bool side_given = false;
   bool board_given = false, square_given = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> const char* {
-      if (i + 1 >= argc) usage_error(arg + " needs a value");
-      return argv[++i];
-    };
-    if (arg == "-h" || arg == "--help") {
-      std::fputs(kUsage, stdout);
-      return 0;
-    } else if (arg == "--board") {
+  laserline::cli::Arguments args(argc, argv, "laserline-calibrate", kUsage,
+                                 {{"board", true},
+                                  {"square-m", true},
+                                  {"calib", true},
+                                  {"laser-off", true},
+                                  {"distortion-terms", true},
+                                  {"detector", true},
+                                  {"saturation-level", true},
+                                  {"channel", true},
+                                  {"laser-side", true},
+                                  {"baseline-m", true},
+                                  {"angle-deg", true},
+                                  {"sheet-width-m", true},
+                                  {"output", true}});
+  while (args.next()) {
+    const std::string& arg = args.name();
+    auto value = [&]() -> const char* { return args.value().c_str(); };
+    if (arg == "--board") {
       const std::string text = value();
       int cols = 0, rows = 0;
       char x = 0, extra = 0;
@@ -215,10 +224,8 @@ int main(int argc, char** argv) {
       sheet_width = parse_number(arg, value(), 1e-5, 0.1);
     } else if (arg == "--output") {
       output = value();
-    } else if (!arg.empty() && arg[0] == '-') {
-      usage_error("unknown option " + arg);
     } else {
-      inputs.push_back(arg);
+      inputs.push_back(args.value());
     }
   }
   if (!board_given) usage_error("--board is required");

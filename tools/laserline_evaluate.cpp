@@ -11,27 +11,26 @@
 #include <vector>
 
 #include "pipeline/detector.hpp"
+#include "tools/cli.hpp"
 #include "tools/evaluation.hpp"
 
 namespace {
 
-void usage(std::FILE* out) {
-  std::fprintf(out,
-               "usage: laserline-evaluate [--tolerance PX] [--frames N] [--size WxH] "
-               "[--overlay-dir DIR] [--detector NAME]... [--scenario NAME]...\n"
-               "                          [--validation chain_code|image_features] [--markdown]\n"
-               "       laserline-evaluate --list\n"
-               "       laserline-evaluate --turbidity-plot FILE.png [--frames N]\n"
-               "Scores detectors on simulated scenarios (ground truth exact): recall, precision\n"
-               "within the tolerance (default 2 px), RMS error and bias of the found points.\n"
-               "--validation: how backprojection associates segments between frames (default\n"
-               "chain_code, the paper's; image_features tracks the segment's box in the image).\n"
-               "--markdown: one row per scenario, recall / precision of each detector.\n"
-               "--list: the scenarios, one line each: name and description.\n"
-               "--turbidity-plot: the paper's Fig. 7: the SNR of the detected line against\n"
-               "turbidity (0 to 12 FTU, the wall 1.4 m away) for band-pass widths 2, 3, 4.5 and 6\n"
-               "(passband_ratio), and each detector's recall, as FILE.png and FILE.csv.\n");
-}
+constexpr const char* kUsage =
+    "usage: laserline-evaluate [--tolerance PX] [--frames N] [--size WxH] "
+    "[--overlay-dir DIR] [--detector NAME]... [--scenario NAME]...\n"
+    "                          [--validation chain_code|image_features] [--markdown]\n"
+    "       laserline-evaluate --list\n"
+    "       laserline-evaluate --turbidity-plot FILE.png [--frames N]\n"
+    "Scores detectors on simulated scenarios (ground truth exact): recall, precision\n"
+    "within the tolerance (default 2 px), RMS error and bias of the found points.\n"
+    "--validation: how backprojection associates segments between frames (default\n"
+    "chain_code, the paper's; image_features tracks the segment's box in the image).\n"
+    "--markdown: one row per scenario, recall / precision of each detector.\n"
+    "--list: the scenarios, one line each: name and description.\n"
+    "--turbidity-plot: the paper's Fig. 7: the SNR of the detected line against\n"
+    "turbidity (0 to 12 FTU, the wall 1.4 m away) for band-pass widths 2, 3, 4.5 and 6\n"
+    "(passband_ratio), and each detector's recall, as FILE.png and FILE.csv.\n";
 
 }  // namespace
 
@@ -44,15 +43,20 @@ int main(int argc, char** argv) {
   bool markdown = false;
   std::vector<std::string> detectors, scenarios;
   pipeline::DetectorOptions options;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "laserline-evaluate: %s needs a value\n", arg.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
+  cli::Arguments args(argc, argv, "laserline-evaluate", kUsage,
+                      {{"tolerance", true},
+                       {"frames", true},
+                       {"size", true},
+                       {"overlay-dir", true},
+                       {"detector", true},
+                       {"validation", true},
+                       {"markdown", false},
+                       {"list", false},
+                       {"turbidity-plot", true},
+                       {"scenario", true}});
+  while (args.next()) {
+    const std::string& arg = args.name();
+    auto value = [&]() -> std::string { return args.value(); };
     try {
       if (arg == "--tolerance") {
         tolerance = std::stod(value());
@@ -87,13 +91,8 @@ int main(int argc, char** argv) {
         turbidity_plot = value();
       } else if (arg == "--scenario") {
         scenarios.push_back(value());
-      } else if (arg == "--help" || arg == "-h") {
-        usage(stdout);
-        return 0;
       } else {
-        std::fprintf(stderr, "laserline-evaluate: unknown option %s\n", arg.c_str());
-        usage(stderr);
-        return 2;
+        args.fail("unexpected argument '" + args.value() + "'");
       }
     } catch (const std::exception&) {
       std::fprintf(stderr, "laserline-evaluate: bad value for %s\n", arg.c_str());

@@ -18,6 +18,7 @@
 #include <string>
 
 #include "lcmtypes/checked_decode.hpp"
+#include "tools/cli.hpp"
 
 namespace {
 
@@ -67,10 +68,23 @@ void on_status(const lcm::ReceiveBuffer* rbuf, const std::string& channel, void*
       s->cpu_percent, static_cast<long long>(s->bad_messages + s->bad_frames));
 }
 
+constexpr const char* kUsage =
+    "usage: laserline-example-subscriber [LCM_URL]\n"
+    "Prints one line per laserline profile and status message until interrupted, or to the\n"
+    "end of a file:// log.\n"
+    "  LCM_URL  where to listen (default udpm://239.255.76.67:7667?ttl=0); e.g.\n"
+    "           'file://dive.lcmlog?speed=0' reads a recording\n";
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::string url = argc > 1 ? argv[1] : "udpm://239.255.76.67:7667?ttl=0";
+  std::string url = "udpm://239.255.76.67:7667?ttl=0";
+  int urls = 0;
+  laserline::cli::Arguments args(argc, argv, "laserline-example-subscriber", kUsage, {});
+  while (args.next()) {
+    if (!args.name().empty() || ++urls > 1) args.fail("unexpected argument '" + args.value() + "'");
+    url = args.value();
+  }
   lcm::LCM lcm(url);
   if (!lcm.good()) {
     std::fprintf(stderr, "laserline-example-subscriber: cannot open LCM '%s'\n", url.c_str());

@@ -36,6 +36,7 @@
 #include "lcmtypes/checked_decode.hpp"
 #include "lcmtypes/lcm_log.hpp"
 #include "pipeline/detector.hpp"
+#include "tools/cli.hpp"
 #include "tools/frame_channel.hpp"
 #include "tools/natural_order.hpp"
 #include "tools/point_cloud.hpp"
@@ -596,7 +597,7 @@ void extract_log(Extractor& x, const std::string& path, std::size_t input, std::
 }
 
 [[noreturn]] void usage_error(const std::string& line) {
-  std::fprintf(stderr, "laserline-extract: %s\n%s", line.c_str(), kUsage);
+  std::fprintf(stderr, "laserline-extract: %s (see --help)\n", line.c_str());
   std::exit(2);
 }
 
@@ -614,17 +615,28 @@ std::string detector_list() {
 
 Options parse_arguments(int argc, char** argv) {
   Options o;
-  bool only_inputs = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    if (only_inputs || arg.empty() || arg[0] != '-' || arg == "-") {
-      o.inputs.push_back(arg);
+  laserline::cli::Arguments args(argc, argv, "laserline-extract",
+                                 std::string(kUsage) + "detectors: " + detector_list() + "\n",
+                                 {{"calib", true},
+                                  {"config", true},
+                                  {"detector", true},
+                                  {"threshold", true},
+                                  {"channel", true},
+                                  {"roi", true},
+                                  {"mask", true},
+                                  {"laser-pattern", true},
+                                  {"overlay-dir", true},
+                                  {"output", true},
+                                  {"ply", true},
+                                  {"poses", true},
+                                  {"all-candidates", false}});
+  while (args.next()) {
+    const std::string& arg = args.name();
+    if (arg.empty()) {
+      o.inputs.push_back(args.value());
       continue;
     }
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) usage_error(arg + ": missing value");
-      return argv[++i];
-    };
+    auto value = [&]() -> std::string { return args.value(); };
     if (arg == "--calib") {
       o.calib = value();
     } else if (arg == "--config") {
@@ -667,13 +679,6 @@ Options parse_arguments(int argc, char** argv) {
       o.poses = value();
     } else if (arg == "--all-candidates") {
       o.all_candidates = true;
-    } else if (arg == "--") {
-      only_inputs = true;
-    } else if (arg == "--help" || arg == "-h") {
-      std::printf("%sdetectors: %s\n", kUsage, detector_list().c_str());
-      std::exit(0);
-    } else {
-      usage_error("unknown argument '" + arg + "'");
     }
   }
   if (o.calib.empty()) usage_error("--calib is required");

@@ -23,6 +23,7 @@
 
 #include "lcmtypes/checked_decode.hpp"
 #include "lcmtypes/lcm_log.hpp"
+#include "tools/cli.hpp"
 
 namespace {
 
@@ -50,6 +51,12 @@ double now_s(clockid_t clock) {
   clock_gettime(clock, &ts);
   return static_cast<double>(ts.tv_sec) + static_cast<double>(ts.tv_nsec) * 1e-9;
 }
+
+// A live daemon's frames are dropped long before this age (its frame timeout, the rings): an
+// older exposure time is a replay's, or another computer's clock.
+constexpr double kReplayedAfterMs = 10'000;
+// How long a live listener waits for a first message before it says why nothing may come.
+constexpr double kSilenceWarningS = 3.0;
 
 double percentile(std::vector<double> values, double q) {
   if (values.empty()) return NAN;
@@ -227,13 +234,24 @@ void report(const Listener& l, const std::string& url) {
                 sum / static_cast<double>(l.points_per_profile.size()),
                 *std::min_element(l.points_per_profile.begin(), l.points_per_profile.end()),
                 *std::max_element(l.points_per_profile.begin(), l.points_per_profile.end()));
+    const double p50 = percentile(l.receive_latency_ms, 0.5);
+    const double p99 = percentile(l.receive_latency_ms, 0.99);
+    const double max = *std::max_element(l.receive_latency_ms.begin(), l.receive_latency_ms.end());
     if (url.rfind("file://", 0) == 0) {
-      // Read from a log: receive times are the reading's, not the vehicle's.
-      std::printf("  latency exposure -> received here: not meaningful when reading a log\n");
+      // A log's event times are when its logger received each message: the latency there.
+      std::printf(
+          "  latency exposure -> logged (the log's own times): p50 %.2f ms, p99 %.2f ms, max "
+          "%.2f ms\n",
+          p50, p99, max);
+    } else if (std::fabs(p50) > kReplayedAfterMs) {
+      std::printf(
+          "  latency exposure -> received here: not meaningful, the exposure times are %.1f s "
+          "from this computer's clock (a replayed log, or clocks not synchronised); "
+          "--url file://LOG gives a log's own latency\n",
+          p50 * 1e-3);
     } else {
       std::printf("  latency exposure -> received here: p50 %.2f ms, p99 %.2f ms, max %.2f ms\n",
-                  percentile(l.receive_latency_ms, 0.5), percentile(l.receive_latency_ms, 0.99),
-                  *std::max_element(l.receive_latency_ms.begin(), l.receive_latency_ms.end()));
+                  p50, p99, max);
     }
   }
   if (!l.statuses.empty()) {
@@ -338,15 +356,17 @@ int main(int argc, char** argv) {
   double duration_s = 0, quiet_s = 2.0;
   std::string overlay, profile_channel = "LASERLINE_PROFILE", image_channel = "LASERLINE_IMAGE",
                        status_channel = "LASERLINE_STATUS";
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "laserline-listen: %s: missing value\n%s", arg.c_str(), kUsage);
-        std::exit(2);
-      }
-      return argv[++i];
-    };
+  laserline::cli::Arguments args(argc, argv, "laserline-listen", kUsage,
+                                 {{"url", true},
+                                  {"duration", true},
+                                  {"quiet", true},
+                                  {"overlay", true},
+                                  {"profile-channel", true},
+                                  {"image-channel", true},
+                                  {"status-channel", true}});
+  while (args.next()) {
+    const std::string& arg = args.name();
+    auto value = [&]() -> std::string { return args.value(); };
     auto seconds = [&]() {
       const std::string text = value();
       char* end = nullptr;
@@ -372,12 +392,8 @@ int main(int argc, char** argv) {
       image_channel = value();
     } else if (arg == "--status-channel") {
       status_channel = value();
-    } else if (arg == "--help" || arg == "-h") {
-      std::fputs(kUsage, stdout);
-      return 0;
     } else {
-      std::fprintf(stderr, "laserline-listen: unknown argument '%s'\n%s", arg.c_str(), kUsage);
-      return 2;
+      args.fail("unexpected argument '" + args.value() + "'");
     }
   }
   signal(SIGINT, on_signal);
@@ -405,9 +421,21 @@ int main(int argc, char** argv) {
   lcm.subscribeFunction(status_channel, &Listener::on_status, &listener);
 
   const double start = now_s(CLOCK_MONOTONIC);
+  bool warned_silence = false;
   while (g_stop == 0) {
     if (lcm.handleTimeout(100) < 0) break;
     const double now = now_s(CLOCK_MONOTONIC);
+    const bool received = listener.last_message_s > 0 || listener.decode_errors > 0;
+    if (!received && !warned_silence && now - start >= kSilenceWarningS) {
+      warned_silence = true;
+      std::fprintf(stderr,
+                   "laserline-listen: nothing received on %s (%s, %s, %s) in %.0f s: is laserlined "
+                   "running, with this lcm.url and these channels? from another computer its "
+                   "lcm.url needs ttl=1 and this one a route for multicast (ip route add "
+                   "224.0.0.0/4 dev IFACE); see docs/messages.md\n",
+                   url.c_str(), profile_channel.c_str(), image_channel.c_str(),
+                   status_channel.c_str(), kSilenceWarningS);
+    }
     if (duration_s > 0 && now - start >= duration_s) break;
     if (listener.last_message_s > 0 && now - listener.last_message_s >= quiet_s) break;
   }

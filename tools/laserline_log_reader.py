@@ -25,11 +25,21 @@ HEADER = struct.Struct(">IqqII")  # marker, event number, timestamp, channel len
 MAX_CHANNEL = 256
 
 
+class NotALogError(Exception):
+    """The file holds no LCM event at all: another kind of file."""
+
+
 def read_events(path, report, totals):
     """Yields (event number, timestamp, channel, data); damage goes to report(message) and is
     added up in totals (regions, records, bytes, first offset)."""
     with open(path, "rb") as f:
         blob = f.read()
+    marker = struct.pack(">I", EVENT_MARKER)
+    if not blob:
+        raise NotALogError("empty file, not an LCM log")
+    if marker not in blob:
+        raise NotALogError("not an LCM log (none of its %d bytes is an event marker %08X)"
+                           % (len(blob), EVENT_MARKER))
     pos, good_end = 0, 0
     failed_markers = 0
 
@@ -39,7 +49,6 @@ def read_events(path, report, totals):
         totals["bytes"] += end - start
         if totals["first"] is None:
             totals["first"] = start
-    marker = struct.pack(">I", EVENT_MARKER)
     while pos < len(blob):
         event = None
         if pos + HEADER.size <= len(blob):
@@ -161,6 +170,8 @@ def main():
                 images.append((msg.width, msg.height, msg.compression))
     except OSError as e:
         sys.exit("laserline-log-reader: %s: %s" % (args.log, e.strerror or e))
+    except NotALogError as e:
+        sys.exit("laserline-log-reader: %s: %s" % (args.log, e))
     finally:
         if points_out:
             points_out.close()
