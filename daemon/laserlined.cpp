@@ -457,5 +457,11 @@ int main(int argc, char** argv) {
       config.laser_backend.c_str(), static_cast<long long>(s.laser_switches),
       static_cast<long long>(s.laser_late_switches), static_cast<long long>(s.laser_safety_offs));
   g_laser = nullptr;
+  if (path.source_ended() && s.frames_captured == 0 && exit_status == 0) {
+    // A replay that replayed nothing failed, even though it ended as recordings do.
+    log(LogLevel::kError, "laserlined: %s: the recording gave no frame to process",
+        config.camera_backend.c_str());
+    exit_status = 1;
+  }
   return exit_status;
 }

@@ -258,7 +258,9 @@ TEST(LcmCameraLog, DamageIsReportedWithWhereAndTheRestIsReplayed) {
       << r.errors;
   EXPECT_EQ(r.errors.find("SOMEONE_ELSE"), r.errors.rfind("SOMEONE_ELSE")) << "reported once";
   EXPECT_NE(r.errors.find("event 3 at byte"), std::string::npos) << r.errors;
-  EXPECT_NE(r.errors.find("frame 18x8 differs from the calibrated camera's 16x8; frame skipped"),
+  EXPECT_NE(r.errors.find(
+                "the recorded frame (18x8, image_downscale 1, compression none) does not fit the "
+                "calibration's 16x8 frame; frame skipped"),
             std::string::npos)
       << r.errors;
   EXPECT_NE(r.errors.find("not a valid laserline.image_t: 4 bytes are too short"),
@@ -331,6 +333,50 @@ TEST(LcmCameraLog, HostileMessagesAreCountedAndReportedAtALimitedRate) {
   for (char c : r.errors)
     lines += c == '\n' ? 1 : 0;
   EXPECT_LE(lines, 10u) << r.errors;
+}
+
+// A log recorded with the defaults (downscaled, JPEG): nothing fits the calibration; the end says
+// why in one line (the recorded frame against the calibration's) and what records frames that
+// replay.
+TEST(LcmCameraLog, FramesThatDoNotFitTheCalibrationAreExplainedInOneLine) {
+  TempDir dir;
+  const std::string path = dir / "downscaled.lcmlog";
+  {
+    lcm::LogFile log(path, "w");
+    for (std::int64_t s = 0; s < 4; ++s) {
+      laserline::image_t m;
+      std::vector<std::uint8_t> bytes = encode_image(s, kW / 2, kH / 2);
+      ASSERT_GE(m.decode(bytes.data(), 0, static_cast<int>(bytes.size())), 0);
+      m.downscale = 2;
+      m.compression = laserline::image_t::COMPRESSION_JPEG;
+      bytes.resize(static_cast<std::size_t>(m.getEncodedSize()));
+      m.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+      write_event(log, "LASERLINE_IMAGE", bytes);
+    }
+  }
+  const Replayed r = replay(path);
+  EXPECT_EQ(r.counts.frames, 0);
+  EXPECT_EQ(r.counts.bad_frames, 4);
+  const std::string why =
+      "4 recorded frames do not fit the calibration's 16x8 frame (recorded: 8x4, image_downscale "
+      "2, compression jpeg); frames that replay are recorded with lcm.image_every_n: 1, "
+      "lcm.image_downscale: 1, no lcm.image_roi and lcm.image_compression none, zlib or png";
+  EXPECT_NE(r.errors.find(why), std::string::npos) << r.errors;
+}
+
+TEST(LcmCameraLog, LogWithoutRawFramesSaysHowToRecordThem) {
+  TempDir dir;
+  const std::string path = dir / "profiles_only.lcmlog";
+  {
+    lcm::LogFile log(path, "w");
+    write_event(log, "LASERLINE_STATUS", {1, 2, 3});
+  }
+  const Replayed r = replay(path);
+  EXPECT_EQ(r.counts.frames, 0);
+  EXPECT_NE(r.errors.find("the log holds no raw frame on 'LASERLINE_IMAGE' (recorded with "
+                          "lcm.image_every_n: 0?); frames that replay are recorded with"),
+            std::string::npos)
+      << r.errors;
 }
 
 TEST(LcmCameraLog, MissingLogIsOneClearLine) {
@@ -407,6 +453,35 @@ class Replay : public ::testing::Test {
   TempDir dir_;
 };
 
+// The daemon records with the default raw-frame settings (every 30th frame, downscaled, JPEG) to
+// a log file; replaying it gives no frame: one line says why and the exit status is not 0.
+TEST(ReplayDefaults, DownscaledJpegRecordingFailsWithTheReasonAndTheRemedy) {
+  TempDir dir;
+  const std::string dive = dir / "defaults.lcmlog";
+  const std::string rec = dir / "record.yaml";
+  std::ofstream(rec) << scanner_config("  backend: sim\n  frame_rate_hz: 20\n  sim: {seed: 3}",
+                                       "{url: \"file://" + dive + "?mode=w\", image_every_n: 5}");
+  Child recorder({LASERLINED_PATH, "--config", rec, "--duration", "1.5"}, dir / "record.out");
+  ASSERT_EQ(recorder.wait(30), 0) << recorder.output();
+  ASSERT_GE(events_on(dive, "LASERLINE_IMAGE"), 2u);
+
+  const std::string cfg = dir / "replay.yaml";
+  std::ofstream(cfg) << scanner_config(
+      "  backend: lcm\n  lcm: {url: \"file://" + dive + "\"}",
+      "{url: \"file://" + (dir / "out.lcmlog") + "?mode=w\", image_every_n: 0}");
+  Child daemon({LASERLINED_PATH, "--config", cfg}, dir / "replay.out");
+  EXPECT_EQ(daemon.wait(30), 1) << daemon.output();
+  const std::string out = daemon.output();
+  EXPECT_NE(out.find(" frames replayed, "), std::string::npos) << out;
+  EXPECT_NE(out.find("recorded frames do not fit the calibration's 320x256 frame (recorded: "
+                     "160x128, image_downscale 2, compression jpeg); frames that replay are "
+                     "recorded with lcm.image_every_n: 1, lcm.image_downscale: 1"),
+            std::string::npos)
+      << out;
+  EXPECT_NE(out.find("laserlined: lcm: the recording gave no frame to process"), std::string::npos)
+      << out;
+}
+
 TEST_F(Replay, RecordedRunReplaysIdenticallyOfflineTwiceAndLive) {
   // 1. Record 3 s of the simulated scanner, every raw frame, with the real lcm-logger.
   const std::string dive = dir_ / "dive.lcmlog";
@@ -428,6 +503,24 @@ TEST_F(Replay, RecordedRunReplaysIdenticallyOfflineTwiceAndLive) {
   const std::size_t recorded_frames = events_on(dive, "LASERLINE_IMAGE");
   const auto recorded = profiles_of(dive);
   ASSERT_GE(recorded_frames, 20u);
+
+  // laserline-extract reads every zlib frame of the real recording (issue 16: "unknown
+  // compression 3", 0 frames).
+  {
+    const std::string calib = dir_ / "calib.yaml";
+    std::ofstream(calib)
+        << "camera: {width: 320, height: 256, fx: 350, fy: 350, cx: 159.5, cy: "
+           "127.5}\nlaser: {baseline_m: 0.2, angle_deg: 80, sheet_width_m: 0.003}\n";
+    Child extract({LASERLINE_EXTRACT_PATH, "--calib", calib, "--detector", "maxvalue",
+                   "--threshold", "60", "--output", dir_ / "points.csv", dive},
+                  dir_ / "extract.out");
+    EXPECT_EQ(extract.wait(60), 0) << extract.output();
+    EXPECT_NE(extract.output().find("laserline-extract: " + std::to_string(recorded_frames) +
+                                    " frames from 1 inputs, " + std::to_string(recorded_frames) +
+                                    " processed"),
+              std::string::npos)
+        << extract.output();
+  }
 
   // 2. Offline, twice, as fast as possible.
   auto offline = [&](const std::string& name) {
