@@ -457,6 +457,7 @@ FramePathSummary FramePath::summary() const {
   s.profiles_published = profiles_published_.load();
   s.profiles_dropped = counters_.profiles_dropped.load();
   s.images_published = images_published_.load();
+  s.images_dropped = counters_.images_dropped.load();
   s.grab_timeouts = counters_.grab_timeouts.load();
   s.grab_errors = counters_.grab_errors.load();
   s.publish_errors = publish_errors_.load();

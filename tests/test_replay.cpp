@@ -14,6 +14,7 @@
 #include <unistd.h>
 #include <laserline/image_t.hpp>
 #include <laserline/profile_t.hpp>
+#include <laserline/status_t.hpp>
 #include <lcm/lcm-cpp.hpp>
 
 #include <cstdio>
@@ -482,6 +483,51 @@ TEST(ReplayDefaults, DownscaledJpegRecordingFailsWithTheReasonAndTheRemedy) {
       << out;
 }
 
+// Raw frames the daemon cannot encode in time (full-size PNG at 120 Hz, two image slots) are
+// dropped: it warns once while it runs, and the count is in its periodic line, its stop line,
+// its status messages and laserline-listen's summary of the log.
+TEST(RecordDrops, DroppedRawFramesAreToldWhileRunningAndCounted) {
+  TempDir dir;
+  const std::string dive = dir / "png.lcmlog";
+  const std::string rec = dir / "png.yaml";
+  std::ofstream(rec) << "camera: {backend: sim, frame_rate_hz: 120}\npipeline: {image_slots: 2}\n"
+                        "lcm: {url: \"file://"
+                     << dive
+                     << "?mode=w\", image_every_n: 1, image_downscale: 1, image_compression: png, "
+                        "status_period_s: 0.5}\n";
+  Child daemon({LASERLINED_PATH, "--config", rec, "--duration", "2"}, dir / "record.out");
+  ASSERT_EQ(daemon.wait(30), 0) << daemon.output();
+  const std::string out = daemon.output();
+  std::size_t warnings = 0;
+  for (std::size_t at = out.find("laserlined: raw frames dropped: the image ring");
+       at != std::string::npos;
+       at = out.find("laserlined: raw frames dropped: the image ring", at + 1))
+    ++warnings;
+  EXPECT_EQ(warnings, 1u) << "one warning while it runs: " << out;
+  const std::size_t at = out.find(" raw frames published, ");
+  ASSERT_NE(at, std::string::npos) << out;
+  const long long dropped = std::stoll(out.substr(at + 23));
+  EXPECT_GT(dropped, 0) << out;
+  EXPECT_NE(out.find(std::to_string(dropped) + " raw frames dropped;"), std::string::npos) << out;
+
+  std::int64_t status_dropped = -1;
+  {
+    lcm::LogFile log(dive, "r");
+    while (const lcm::LogEvent* e = log.readNextEvent()) {
+      if (e->channel != "LASERLINE_STATUS") continue;
+      laserline::status_t st;
+      ASSERT_GE(st.decode(e->data, 0, e->datalen), 0);
+      status_dropped = st.images_dropped;
+    }
+  }
+  EXPECT_GT(status_dropped, 0) << "status_t.images_dropped is filled";
+  Child listen({LASERLINE_LISTEN_PATH, "--url", "file://" + dive}, dir / "listen.out");
+  EXPECT_EQ(listen.wait(30), 0) << listen.output();
+  EXPECT_NE(listen.output().find(" published, " + std::to_string(status_dropped) + " dropped\n"),
+            std::string::npos)
+      << listen.output();
+}
+
 TEST_F(Replay, RecordedRunReplaysIdenticallyOfflineTwiceAndLive) {
   // 1. Record 3 s of the simulated scanner, every raw frame, with the real lcm-logger.
   const std::string dive = dir_ / "dive.lcmlog";
@@ -576,6 +622,46 @@ TEST_F(Replay, RecordedRunReplaysIdenticallyOfflineTwiceAndLive) {
   EXPECT_TRUE(live == first) << "live replay gives the offline replay's profiles";
   RecordProperty("frames", std::to_string(recorded_frames));
   RecordProperty("live_profiles", std::to_string(live.size()));
+}
+
+// config/record.yaml as shipped (the simulated scanner at 1280x1024, 30 Hz, every frame zlib)
+// recorded by the real lcm-logger: the daemon drops no raw frame, the logger has every one it
+// published, and the replay takes every one of them (exit status 0).
+TEST_F(Replay, RecordYamlRecordingReplaysWhole) {
+  const std::string dive = dir_ / "dive.lcmlog";
+  std::int64_t published = 0;
+  {
+    Child logger({LCM_LOGGER_PATH, "-f", std::string("--lcm-url=") + kRecordUrl, dive},
+                 dir_ / "logger.out");
+    ASSERT_TRUE(wait_for_file(dive, 10)) << logger.output();
+    Child daemon({LASERLINED_PATH, "--config", LASERLINE_SOURCE_DIR "/config/record.yaml",
+                  "--duration", "3"},
+                 dir_ / "record.out");
+    ASSERT_EQ(daemon.wait(30), 0) << daemon.output();
+    usleep(500'000);  // the last messages reach the logger
+    ASSERT_EQ(logger.stop(SIGINT, 10), 0) << logger.output();
+    const std::string out = daemon.output();
+    EXPECT_NE(out.find(" raw frames published, 0 raw frames dropped"), std::string::npos) << out;
+    EXPECT_EQ(out.find("raw frames dropped:"), std::string::npos) << "no drop warning: " << out;
+    const std::size_t at = out.find(" profiles published, ");
+    ASSERT_NE(at, std::string::npos) << out;
+    published = std::stoll(out.substr(at + 21));
+  }
+  const auto recorded_frames = static_cast<std::int64_t>(events_on(dive, "LASERLINE_IMAGE"));
+  EXPECT_GE(recorded_frames, 60);
+  EXPECT_EQ(recorded_frames, published) << "the logger has every raw frame the daemon published";
+
+  const std::string cfg =
+      config("replay.yaml", "camera: {backend: lcm, lcm: {url: \"file://" + dive +
+                                "\"}}\nlcm: {url: \"file://" + (dir_ / "out.lcmlog") +
+                                "?mode=w\", image_every_n: 0}\n");
+  Child replay({LASERLINED_PATH, "--config", cfg}, dir_ / "replay.out");
+  EXPECT_EQ(replay.wait(120), 0) << replay.output();
+  EXPECT_NE(replay.output().find("end of log: " + std::to_string(recorded_frames) +
+                                 " frames replayed, 0 skipped"),
+            std::string::npos)
+      << replay.output();
+  RecordProperty("frames", std::to_string(recorded_frames));
 }
 
 // Live over UDP: crafted messages on the raw-frame channel (issue 15: a negative or huge
