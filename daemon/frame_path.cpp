@@ -114,7 +114,8 @@ bool FramePath::start(std::string* error) {
   }
   publisher_ = std::make_unique<LcmPublisher>(
       lcm_, image_lcm_.get(),
-      PublisherChannels{config_.profile_channel, config_.image_channel, config_.status_channel},
+      PublisherChannels{config_.profile_channel, config_.image_channel, config_.status_channel,
+                        config_.profile_all_points},
       config_.detector, max_points, format_);
   publisher_->status().camera_backend = config_.camera_backend;
   encoder_ = std::make_unique<RawFrameEncoder>(config_.raw_frames, format_);
