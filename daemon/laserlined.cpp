@@ -457,9 +457,8 @@ int main(int argc, char** argv) {
   log(exit_status == 0 ? LogLevel::kInfo : LogLevel::kWarning,
       "laserlined: stopped (%s) after %.1f s: %lld frames captured, %lld processed, %lld dropped, "
       "%lld profiles published, %lld raw frames published, %lld raw frames dropped; latency "
-      "exposure->published p50 %.2f "
-      "ms p99 %.2f ms max %.2f ms, arrival->published p50 %.2f ms p99 %.2f ms max %.2f ms, over "
-      "%lld frames",
+      "exposure->published p50 %.2f ms p99 %.2f ms max %.2f ms, arrival->published p50 %.2f ms "
+      "p99 %.2f ms max %.2f ms, over %lld frames",
       reason, static_cast<double>(laserline::hal::monotonic_ns() - start) * 1e-9,
       static_cast<long long>(s.frames_captured), static_cast<long long>(s.frames_processed),
       static_cast<long long>(s.frames_dropped), static_cast<long long>(s.profiles_published),

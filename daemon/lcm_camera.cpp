@@ -226,6 +226,10 @@ bool LcmCamera::take_frame(const void* data, int size, const std::string& where,
   // The recorded exposure becomes the frame's exposure, so the replay's profiles carry the
   // original utime; on this host the frame is exposed (as far as latency goes) when it arrives.
   const std::int64_t now = hal::monotonic_ns();
+  if (frames_.load(std::memory_order_relaxed) > 0 && image_.sequence > last_sequence_ + 1) {
+    missing_frames_ += image_.sequence - last_sequence_ - 1;
+  }
+  last_sequence_ = image_.sequence;
   info.sequence = static_cast<std::uint64_t>(image_.sequence);
   info.camera_ns = image_.camera_timestamp_ns;
   info.laser_on = image_.laser_on;
@@ -267,6 +271,12 @@ void LcmCamera::report_end() {
                  "frame (recorded: %s); %s\n",
                  path_.c_str(), static_cast<long long>(unfit_frames_.load()), calibrated.c_str(),
                  unfit_frame_.c_str(), kRecordForReplay);
+  } else if (missing_frames_ > 0) {
+    std::fprintf(stderr,
+                 "laserlined: replay %s: %lld frames are missing between the replayed ones (gaps "
+                 "in their sequence numbers: recorded with lcm.image_every_n above 1, or raw "
+                 "frames dropped); %s\n",
+                 path_.c_str(), static_cast<long long>(missing_frames_), kRecordForReplay);
   } else if (c.frames == 0 && c.frames_skipped == 0) {
     std::fprintf(stderr,
                  "laserlined: replay %s: the log holds no raw frame on '%s' (recorded with "

@@ -211,6 +211,8 @@ TEST(LcmCameraLog, ReplaysEveryFrameWithItsRecordedTimes) {
   EXPECT_EQ(r.counts.damaged_regions, 0);
   EXPECT_NE(r.errors.find("end of log: 5 frames replayed, 0 skipped"), std::string::npos)
       << r.errors;
+  EXPECT_EQ(r.errors.find("missing"), std::string::npos)
+      << "starting at 100 is no gap: " << r.errors;
 }
 
 TEST(LcmCameraLog, DamageIsReportedWithWhereAndTheRestIsReplayed) {
@@ -363,6 +365,24 @@ TEST(LcmCameraLog, FramesThatDoNotFitTheCalibrationAreExplainedInOneLine) {
       "2, compression jpeg); frames that replay are recorded with lcm.image_every_n: 1, "
       "lcm.image_downscale: 1, no lcm.image_roi and lcm.image_compression none, zlib or png";
   EXPECT_NE(r.errors.find(why), std::string::npos) << r.errors;
+}
+
+// Every 3rd frame recorded (image_every_n: 3): replayed, and the gaps are said with the remedy.
+TEST(LcmCameraLog, GapsInTheRecordedSequenceAreSaid) {
+  TempDir dir;
+  const std::string path = dir / "every_third.lcmlog";
+  {
+    lcm::LogFile log(path, "w");
+    for (std::int64_t s = 0; s < 12; s += 3)
+      write_event(log, "LASERLINE_IMAGE", encode_image(s, kW, kH));
+  }
+  const Replayed r = replay(path);
+  EXPECT_EQ(r.counts.frames, 4);
+  EXPECT_NE(r.errors.find("6 frames are missing between the replayed ones (gaps in their sequence "
+                          "numbers: recorded with lcm.image_every_n above 1, or raw frames "
+                          "dropped); frames that replay are recorded with"),
+            std::string::npos)
+      << r.errors;
 }
 
 TEST(LcmCameraLog, LogWithoutRawFramesSaysHowToRecordThem) {
@@ -641,14 +661,18 @@ TEST_F(Replay, RecordYamlRecordingReplaysWhole) {
     usleep(500'000);  // the last messages reach the logger
     ASSERT_EQ(logger.stop(SIGINT, 10), 0) << logger.output();
     const std::string out = daemon.output();
-    EXPECT_NE(out.find(" raw frames published, 0 raw frames dropped"), std::string::npos) << out;
-    EXPECT_EQ(out.find("raw frames dropped:"), std::string::npos) << "no drop warning: " << out;
     const std::size_t at = out.find(" profiles published, ");
     ASSERT_NE(at, std::string::npos) << out;
     published = std::stoll(out.substr(at + 21));
+#ifndef LASERLINE_SANITIZED
+    // Sanitized code (several times slower) cannot encode 39 MB/s; the rest holds there too.
+    EXPECT_NE(out.find(" raw frames published, 0 raw frames dropped"), std::string::npos) << out;
+    EXPECT_EQ(out.find("raw frames dropped:"), std::string::npos) << "no drop warning: " << out;
+    EXPECT_GE(published, 80) << "every frame of 3 s at 30 Hz: " << out;
+#endif
   }
   const auto recorded_frames = static_cast<std::int64_t>(events_on(dive, "LASERLINE_IMAGE"));
-  EXPECT_GE(recorded_frames, 60);
+  ASSERT_GT(recorded_frames, 0);
   EXPECT_EQ(recorded_frames, published) << "the logger has every raw frame the daemon published";
 
   const std::string cfg =
