@@ -515,9 +515,16 @@ TEST(RecordDrops, DroppedRawFramesAreToldWhileRunningAndCounted) {
                      << dive
                      << "?mode=w\", image_every_n: 1, image_downscale: 1, image_compression: png, "
                         "status_period_s: 0.5}\n";
-  Child daemon({LASERLINED_PATH, "--config", rec, "--duration", "2"}, dir / "record.out");
+  // 5.5 s: the periodic line goes to the log every 5 s.
+  Child daemon({LASERLINED_PATH, "--config", rec, "--duration", "5.5"}, dir / "record.out");
   ASSERT_EQ(daemon.wait(30), 0) << daemon.output();
   const std::string out = daemon.output();
+  const std::size_t periodic = out.find("laserlined: camera streaming, ");
+  ASSERT_NE(periodic, std::string::npos) << out;
+  const std::string periodic_line = out.substr(periodic, out.find('\n', periodic) - periodic);
+  EXPECT_NE(periodic_line.find(" raw frames "), std::string::npos) << periodic_line;
+  EXPECT_EQ(periodic_line.find("published, 0 dropped"), std::string::npos)
+      << "the periodic line counts the dropped raw frames: " << periodic_line;
   std::size_t warnings = 0;
   for (std::size_t at = out.find("laserlined: raw frames dropped: the image ring");
        at != std::string::npos;
