@@ -411,6 +411,7 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
     // LCM carries channel names in the packet header, which caps them at 63 bytes.
     if (channel->empty() || channel->size() > 63) lcm.fail(key, "must be 1 to 63 characters");
   }
+  c.profile_all_points = lcm.choice("profile_points", "accepted", {"accepted", "all"}) == "all";
   c.image_every_n = static_cast<int>(lcm.integer("image_every_n", c.image_every_n, 0, 1000000));
   RawFrameOptions& raw = c.raw_frames;
   raw.every_n = c.image_every_n;

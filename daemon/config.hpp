@@ -74,6 +74,7 @@ struct DaemonConfig {
 
   std::string lcm_url = "udpm://239.255.76.67:7667?ttl=0";
   std::string profile_channel = "LASERLINE_PROFILE";
+  bool profile_all_points = false;  // lcm.profile_points: all (rejected candidates too) | accepted
   std::string image_channel = "LASERLINE_IMAGE";
   std::string status_channel = "LASERLINE_STATUS";
   int image_every_n = 30;  // = raw_frames.every_n, kept for the existing readers

@@ -114,7 +114,8 @@ bool FramePath::start(std::string* error) {
   }
   publisher_ = std::make_unique<LcmPublisher>(
       lcm_, image_lcm_.get(),
-      PublisherChannels{config_.profile_channel, config_.image_channel, config_.status_channel},
+      PublisherChannels{config_.profile_channel, config_.image_channel, config_.status_channel,
+                        config_.profile_all_points},
       config_.detector, max_points, format_);
   publisher_->status().camera_backend = config_.camera_backend;
   encoder_ = std::make_unique<RawFrameEncoder>(config_.raw_frames, format_);
@@ -457,6 +458,7 @@ FramePathSummary FramePath::summary() const {
   s.profiles_published = profiles_published_.load();
   s.profiles_dropped = counters_.profiles_dropped.load();
   s.images_published = images_published_.load();
+  s.images_dropped = counters_.images_dropped.load();
   s.grab_timeouts = counters_.grab_timeouts.load();
   s.grab_errors = counters_.grab_errors.load();
   s.publish_errors = publish_errors_.load();

@@ -28,6 +28,7 @@ struct FramePathSummary {
   std::int64_t profiles_published = 0;
   std::int64_t profiles_dropped = 0;
   std::int64_t images_published = 0;
+  std::int64_t images_dropped = 0;  // raw frames lost: image ring full (encoder too slow), stop
   std::int64_t grab_timeouts = 0;
   std::int64_t grab_errors = 0;
   std::int64_t publish_errors = 0;
@@ -66,6 +67,9 @@ class FramePath {
   void enforce_laser_safety();
   FramePathSummary summary() const;
   const FramePathCounters& counters() const { return counters_; }
+  std::int64_t images_published() const {
+    return images_published_.load(std::memory_order_relaxed);
+  }
   // True once the camera ended by itself (a replayed recording reached its end).
   bool source_ended() const { return source_ended_.load(std::memory_order_acquire); }
 

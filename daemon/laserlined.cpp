@@ -224,18 +224,21 @@ class HealthLine {
         seconds > 0 ? static_cast<double>(processed - last_processed_) / seconds : 0;
     last_ns_ = now_ns;
     last_processed_ = processed;
-    char line[320];
+    char line[400];
     std::snprintf(
         line, sizeof line,
         "camera %s, %.1f frames/s, %lld processed, %lld dropped, %lld over budget, %lld grab "
-        "timeouts, %lld grab errors, laser %s, CPU %.0f%%",
+        "timeouts, %lld grab errors, laser %s, CPU %.0f%%, raw frames %lld published, %lld "
+        "dropped",
         laserline::daemon::to_string(c.camera_state.load(std::memory_order_relaxed)), rate,
         static_cast<long long>(processed),
         static_cast<long long>(c.frames_dropped.load(std::memory_order_relaxed)),
         static_cast<long long>(c.frames_over_budget.load(std::memory_order_relaxed)),
         static_cast<long long>(c.grab_timeouts.load(std::memory_order_relaxed)),
         static_cast<long long>(c.grab_errors.load(std::memory_order_relaxed)),
-        laser_on ? "on" : "off", cpu_.percent_since_last());
+        laser_on ? "on" : "off", cpu_.percent_since_last(),
+        static_cast<long long>(path.images_published()),
+        static_cast<long long>(c.images_dropped.load(std::memory_order_relaxed)));
     return line;
   }
 
@@ -399,6 +402,7 @@ int main(int argc, char** argv) {
   std::int64_t next_journal = start + kJournalPeriodNs;
   std::string signal_reason;
   int exit_status = 0;
+  bool warned_image_drop = false;
   while (true) {
     if (const int sig = wait_for_stop_signal(std::chrono::milliseconds(50)); sig != 0) {
       signal_reason = signal_name(sig);
@@ -415,6 +419,16 @@ int main(int argc, char** argv) {
       notifier.ready("streaming, " + std::to_string(processed) + " frames processed");
     }
     notifier.progress(processed, now);
+    if (!warned_image_drop && path.counters().images_dropped.load(std::memory_order_relaxed) > 0) {
+      // Once; the periodic line then carries the count. Raw frames lost make a recording that
+      // does not replay whole.
+      warned_image_drop = true;
+      log(LogLevel::kWarning,
+          "laserlined: raw frames dropped: the image ring (pipeline.image_slots %d) is full, "
+          "encoding and publishing (lcm.image_compression) does not keep up with the frame "
+          "rate; a recording of them will not replay whole (none or zlib at level 1 is fastest)",
+          config.image_slots);
+    }
     if (now >= next_status) {
       const std::string line = health.update(path, backends.laser->is_on(), now);
       notifier.status(line);
@@ -438,20 +452,26 @@ int main(int argc, char** argv) {
   // A stop by a signal that asks for no stop (exit status non-zero) is worth a warning.
   log(exit_status == 0 ? LogLevel::kInfo : LogLevel::kWarning,
       "laserlined: stopped (%s) after %.1f s: %lld frames captured, %lld processed, %lld dropped, "
-      "%lld profiles published, %lld raw frames published; latency exposure->published p50 %.2f "
-      "ms p99 %.2f ms max %.2f ms, arrival->published p50 %.2f ms p99 %.2f ms max %.2f ms, over "
-      "%lld frames",
+      "%lld profiles published, %lld raw frames published, %lld raw frames dropped; latency "
+      "exposure->published p50 %.2f ms p99 %.2f ms max %.2f ms, arrival->published p50 %.2f ms "
+      "p99 %.2f ms max %.2f ms, over %lld frames",
       reason, static_cast<double>(laserline::hal::monotonic_ns() - start) * 1e-9,
       static_cast<long long>(s.frames_captured), static_cast<long long>(s.frames_processed),
       static_cast<long long>(s.frames_dropped), static_cast<long long>(s.profiles_published),
-      static_cast<long long>(s.images_published), s.latency.p50_ms, s.latency.p99_ms,
-      s.latency.max_ms, s.pipeline.p50_ms, s.pipeline.p99_ms, s.pipeline.max_ms,
-      static_cast<long long>(s.latency.samples));
+      static_cast<long long>(s.images_published), static_cast<long long>(s.images_dropped),
+      s.latency.p50_ms, s.latency.p99_ms, s.latency.max_ms, s.pipeline.p50_ms, s.pipeline.p99_ms,
+      s.pipeline.max_ms, static_cast<long long>(s.latency.samples));
   log(LogLevel::kInfo,
       "laserlined: laser %s: %lld switches, %lld came after their frame's exposure began, %lld "
       "forced off because frames stopped",
       config.laser_backend.c_str(), static_cast<long long>(s.laser_switches),
       static_cast<long long>(s.laser_late_switches), static_cast<long long>(s.laser_safety_offs));
   g_laser = nullptr;
+  if (path.source_ended() && s.frames_captured == 0 && exit_status == 0) {
+    // A replay that replayed nothing failed, even though it ended as recordings do.
+    log(LogLevel::kError, "laserlined: %s: the recording gave no frame to process",
+        config.camera_backend.c_str());
+    exit_status = 1;
+  }
   return exit_status;
 }

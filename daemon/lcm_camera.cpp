@@ -15,6 +15,34 @@ namespace {
 
 constexpr std::int64_t kMs = 1'000'000;
 constexpr std::size_t kMaxReportedChannels = 32;
+constexpr const char* kRecordForReplay =
+    "frames that replay are recorded with lcm.image_every_n: 1, lcm.image_downscale: 1, no "
+    "lcm.image_roi and lcm.image_compression none, zlib or png (config/record.yaml)";
+
+const char* compression_name(std::int8_t compression) {
+  switch (compression) {
+    case laserline::image_t::COMPRESSION_NONE:
+      return "none";
+    case laserline::image_t::COMPRESSION_ZLIB:
+      return "zlib";
+    case laserline::image_t::COMPRESSION_PNG:
+      return "png";
+    case laserline::image_t::COMPRESSION_JPEG:
+      return "jpeg";
+    default:
+      return "unknown";
+  }
+}
+
+// "160x128, image_downscale 2, compression jpeg" (and the region's corner when cropped).
+std::string recorded_frame(const laserline::image_t& m) {
+  std::string s = std::to_string(m.width) + "x" + std::to_string(m.height) + ", image_downscale " +
+                  std::to_string(m.downscale);
+  if (m.roi_x != 0 || m.roi_y != 0) {
+    s += ", image_roi at " + std::to_string(m.roi_x) + "," + std::to_string(m.roi_y);
+  }
+  return s + ", compression " + compression_name(m.compression);
+}
 
 }  // namespace
 
@@ -166,16 +194,22 @@ bool LcmCamera::take_frame(const void* data, int size, const std::string& where,
                       "pixel format " + std::to_string(image_.pixelformat) +
                           " is not 8-bit grey (PIXEL_FORMAT_GRAY)");
   }
-  if (image_.width != format_.width || image_.height != format_.height) {
+  if (image_.width != format_.width || image_.height != format_.height || image_.downscale > 1 ||
+      image_.roi_x != 0 || image_.roi_y != 0) {
+    const std::string recorded = recorded_frame(image_);
+    if (unfit_frame_.empty()) unfit_frame_ = recorded;
+    unfit_frames_.fetch_add(1);
     return skip_frame(false, channel + " frame size", where,
-                      "frame " + std::to_string(image_.width) + "x" +
-                          std::to_string(image_.height) + " differs from the calibrated camera's " +
-                          std::to_string(format_.width) + "x" + std::to_string(format_.height));
+                      "the recorded frame (" + recorded + ") does not fit the calibration's " +
+                          std::to_string(format_.width) + "x" + std::to_string(format_.height) +
+                          " frame");
   }
-  if (image_.downscale > 1 || image_.roi_x != 0 || image_.roi_y != 0) {
-    return skip_frame(false, channel + " region", where,
-                      "a downscaled or cropped raw frame cannot be replayed (record with "
-                      "lcm.image_downscale 1 and no lcm.image_roi)");
+  if (image_.compression == laserline::image_t::COMPRESSION_JPEG && !jpeg_reported_) {
+    jpeg_reported_ = true;
+    std::fprintf(stderr,
+                 "laserlined: replay %s: frames are JPEG (lossy): the profiles differ from the "
+                 "original run's; %s\n",
+                 where.c_str(), kRecordForReplay);
   }
   if (!messages::unpack_image(image_, limits_, cv::IMREAD_GRAYSCALE, &pixels_, &problem)) {
     return skip_frame(false, channel + " pixels", where, problem);
@@ -192,6 +226,10 @@ bool LcmCamera::take_frame(const void* data, int size, const std::string& where,
   // The recorded exposure becomes the frame's exposure, so the replay's profiles carry the
   // original utime; on this host the frame is exposed (as far as latency goes) when it arrives.
   const std::int64_t now = hal::monotonic_ns();
+  if (frames_.load(std::memory_order_relaxed) > 0 && image_.sequence > last_sequence_ + 1) {
+    missing_frames_ += image_.sequence - last_sequence_ - 1;
+  }
+  last_sequence_ = image_.sequence;
   info.sequence = static_cast<std::uint64_t>(image_.sequence);
   info.camera_ns = image_.camera_timestamp_ns;
   info.laser_on = image_.laser_on;
@@ -224,6 +262,27 @@ void LcmCamera::report_end() {
                path_.c_str(), static_cast<long long>(c.frames),
                static_cast<long long>(c.frames_skipped), static_cast<long long>(c.other_events),
                static_cast<long long>(c.damaged_regions), static_cast<long long>(c.damaged_bytes));
+  // Why a replay gave nothing (or lost frames for their size), in one line with the remedy.
+  const std::string calibrated =
+      std::to_string(format_.width) + "x" + std::to_string(format_.height);
+  if (!unfit_frame_.empty()) {
+    std::fprintf(stderr,
+                 "laserlined: replay %s: %lld recorded frames do not fit the calibration's %s "
+                 "frame (recorded: %s); %s\n",
+                 path_.c_str(), static_cast<long long>(unfit_frames_.load()), calibrated.c_str(),
+                 unfit_frame_.c_str(), kRecordForReplay);
+  } else if (missing_frames_ > 0) {
+    std::fprintf(stderr,
+                 "laserlined: replay %s: %lld frames are missing between the replayed ones (gaps "
+                 "in their sequence numbers: recorded with lcm.image_every_n above 1, or raw "
+                 "frames dropped); %s\n",
+                 path_.c_str(), static_cast<long long>(missing_frames_), kRecordForReplay);
+  } else if (c.frames == 0 && c.frames_skipped == 0) {
+    std::fprintf(stderr,
+                 "laserlined: replay %s: the log holds no raw frame on '%s' (recorded with "
+                 "lcm.image_every_n: 0?); %s\n",
+                 path_.c_str(), options_.channel.c_str(), kRecordForReplay);
+  }
 }
 
 void register_lcm_camera() {

@@ -98,6 +98,11 @@ class LcmCamera : public hal::Camera {
   std::unique_ptr<lcm::LCM> lcm_;
   laserline::image_t image_;  // decode target, reused
   std::vector<std::string> reported_channels_;
+  std::string unfit_frame_;  // the first recorded frame that does not fit the calibration
+  std::atomic<std::int64_t> unfit_frames_{0};
+  bool jpeg_reported_ = false;
+  std::int64_t last_sequence_ = 0;   // of the last frame replayed
+  std::int64_t missing_frames_ = 0;  // sequence numbers skipped between replayed frames
   std::atomic<bool> stopping_{false};
   bool ended_ = false;
 

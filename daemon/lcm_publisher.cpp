@@ -140,9 +140,10 @@ bool LcmPublisher::publish_profile(const ProfileSlot& slot) {
   std::copy(axes.along.begin(), axes.along.end(), profile_.search_along);
   const auto& points = slot.profile.points();
   profile_.points.resize(points.size());  // within the capacity reserved at construction
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    const pipeline::ProfilePoint& p = points[i];
-    laserline::point_t& out = profile_.points[i];
+  std::size_t n = 0;
+  for (const pipeline::ProfilePoint& p : points) {
+    if (!p.valid && !channels_.all_points) continue;
+    laserline::point_t& out = profile_.points[n++];
     out.u = static_cast<std::int16_t>(p.u);
     out.v = p.v;
     out.snr_db = p.snr_db;
@@ -150,7 +151,8 @@ bool LcmPublisher::publish_profile(const ProfileSlot& slot) {
     out.valid = p.valid;
     std::copy(p.xyz.begin(), p.xyz.end(), out.xyz);
   }
-  profile_.num_points = static_cast<std::int32_t>(points.size());
+  profile_.points.resize(n);
+  profile_.num_points = static_cast<std::int32_t>(n);
   return publish(lcm_, channels_.profile, profile_, buffer_);
 }
 

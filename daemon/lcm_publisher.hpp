@@ -20,6 +20,8 @@ struct PublisherChannels {
   std::string profile = "LASERLINE_PROFILE";
   std::string image = "LASERLINE_IMAGE";
   std::string status = "LASERLINE_STATUS";
+  // lcm.profile_points: false sends only the accepted points, true the rejected candidates too.
+  bool all_points = false;
 };
 
 // Turns slots into LCM messages. Messages and the encode buffer are sized at construction for the

@@ -167,6 +167,17 @@ TEST(Config, ReplayCameraNeedsAUrl) {
       << "the log is opened with the camera, not when the configuration is checked";
 }
 
+TEST(Config, ProfilePoints) {
+  auto parse = [](const std::string& text) {
+    return parse_config(hal::load_yaml_text(text, "test.yaml"), "test.yaml");
+  };
+  EXPECT_FALSE(parse("{}\n").profile_all_points) << "default: accepted points only";
+  EXPECT_FALSE(parse("lcm: {profile_points: accepted}\n").profile_all_points);
+  EXPECT_TRUE(parse("lcm: {profile_points: all}\n").profile_all_points);
+  EXPECT_EQ(error_of("lcm:\n  profile_points: valid\n"),
+            "test.yaml:2: lcm.profile_points: must be one of accepted, all, got 'valid'");
+}
+
 TEST(Config, RawFrameOptions) {
   EXPECT_EQ(error_of("lcm:\n  image_compression: gzip\n"),
             "test.yaml:2: lcm.image_compression: must be one of none, zlib, png, jpeg, got 'gzip'");

@@ -297,6 +297,43 @@ TEST_F(DaemonOverLcm, ProfilesMatchTheSimulatorGroundTruth) {
 
 // The paper's background detector in the daemon: a pan-tilt unit sweeping a wall lit as brightly
 // as the laser, where the maximum-value assumption fails.
+// lcm.profile_points: by default only the accepted points go out; `all` adds the rejected
+// candidates (point_t.valid false), and the accepted points are the same either way.
+TEST_F(DaemonOverLcm, ProfilesCarryTheAcceptedPointsUnlessAllAreAskedFor) {
+  auto count = [](const Received& rx, std::int64_t* valid, std::int64_t* rejected) {
+    *valid = *rejected = 0;
+    for (const auto& p : rx.profiles) {
+      for (const auto& pt : p.points)
+        ++(pt.valid ? *valid : *rejected);
+    }
+  };
+  // The background detector rejects candidates on this textured wall; maxvalue hardly does.
+  std::string base = test_config();
+  const std::string maxvalue = "detector: {name: maxvalue, maxvalue: {threshold: 60}}";
+  ASSERT_NE(base.find(maxvalue), std::string::npos);
+  base.replace(base.find(maxvalue), maxvalue.size(), "detector: {name: background}");
+  std::int64_t valid = 0, rejected = 0;
+  const Received accepted = run_daemon(base, 1.5, SIGTERM);
+  count(accepted, &valid, &rejected);
+  EXPECT_GT(valid, 0);
+  EXPECT_EQ(rejected, 0) << "the default sends only accepted points";
+  const double valid_per_profile =
+      static_cast<double>(valid) / static_cast<double>(accepted.profiles.size());
+
+  std::string all_config = base;
+  const std::size_t at = all_config.find("image_every_n: 10");
+  ASSERT_NE(at, std::string::npos);
+  all_config.insert(at, "profile_points: all, ");
+  const Received all = run_daemon(all_config, 1.5, SIGTERM);
+  count(all, &valid, &rejected);
+  EXPECT_GT(rejected, 0) << "profile_points: all keeps the rejected candidates";
+  EXPECT_NEAR(static_cast<double>(valid) / static_cast<double>(all.profiles.size()),
+              valid_per_profile, 0.1 * valid_per_profile)
+      << "the same accepted points either way";
+  RecordProperty("rejected_per_profile", std::to_string(static_cast<double>(rejected) /
+                                                        static_cast<double>(all.profiles.size())));
+}
+
 TEST_F(DaemonOverLcm, BackgroundDetectorFindsTheLineUnderStrongAmbientLight) {
   std::string config_text = test_config();
   config_text.replace(config_text.find("ambient: 25"), 11, "ambient: 150");

@@ -286,7 +286,16 @@ void report(const Listener& l, const std::string& url) {
   } else {
     std::printf("  status: none received\n");
   }
-  std::printf("  raw frames: %lld\n", static_cast<long long>(l.images));
+  if (l.statuses.empty()) {
+    std::printf("  raw frames: %lld\n", static_cast<long long>(l.images));
+  } else {
+    // The daemon's own count of what it could not publish: a recording missing them does not
+    // replay whole.
+    const auto& s = l.statuses.back();
+    std::printf("  raw frames: %lld received; daemon: %lld published, %lld dropped\n",
+                static_cast<long long>(l.images), static_cast<long long>(s.images_published),
+                static_cast<long long>(s.images_dropped));
+  }
   if (l.decode_errors > 0) {
     std::printf("  undecodable messages: %lld\n", static_cast<long long>(l.decode_errors));
   }

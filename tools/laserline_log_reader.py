@@ -199,10 +199,11 @@ def main():
     if statuses:
         s = statuses[-1]
         print("%s: %d messages; last: camera %s, %d frames processed, %d dropped, laser %s, "
-              "CPU %.0f%%, %d bad input messages, %d bad frames, instance %016x"
+              "CPU %.0f%%, %d bad input messages, %d bad frames, raw frames %d published, "
+              "%d dropped, instance %016x"
               % (args.status_channel, len(statuses), s.camera_state, s.frames_processed,
                  s.frames_dropped, "on" if s.laser_on else "off", s.cpu_percent, s.bad_messages,
-                 s.bad_frames, s.instance_id & (2**64 - 1)))
+                 s.bad_frames, s.images_published, s.images_dropped, s.instance_id & (2**64 - 1)))
     if images:
         names = {0: "none", 1: "png", 2: "jpeg", 3: "zlib"}
         w, h, c = images[-1]
