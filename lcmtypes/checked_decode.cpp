@@ -6,6 +6,8 @@
 #include <exception>
 #include <opencv2/imgcodecs.hpp>
 
+#include "lcmtypes/big_endian.hpp"
+
 namespace laserline::messages {
 
 namespace {
@@ -16,13 +18,6 @@ using laserline::image_t;
 constexpr std::size_t kI8 = 1, kBool = 1, kI16 = 2, kI32 = 4, kF32 = 4, kI64 = 8, kF64 = 8;
 constexpr std::size_t kPointBytes = kI16 + kF32 + kF32 + kI32 + kBool + 3 * kF32;
 constexpr std::size_t kMaxProblemKinds = 64;
-
-std::uint64_t big_endian(const std::uint8_t* p, int bytes) {
-  std::uint64_t v = 0;
-  for (int i = 0; i < bytes; ++i)
-    v = (v << 8) | p[i];
-  return v;
-}
 
 // Walks an encoded message field by field without building it.
 class Walker {

@@ -7,6 +7,8 @@
 #include <cstring>
 #include <filesystem>
 
+#include "lcmtypes/big_endian.hpp"
+
 namespace laserline::messages {
 
 namespace {
@@ -14,13 +16,6 @@ namespace {
 // Sync word, event number, timestamp, channel length, data length: the LCM log event header.
 constexpr std::int64_t kEventHeaderBytes = 4 + 8 + 8 + 4 + 4;
 constexpr std::uint32_t kEventMarker = 0xEDA1DA01;
-
-std::uint64_t big_endian(const std::uint8_t* p, int bytes) {
-  std::uint64_t v = 0;
-  for (int i = 0; i < bytes; ++i)
-    v = (v << 8) | p[i];
-  return v;
-}
 
 }  // namespace
 

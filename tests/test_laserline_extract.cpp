@@ -166,6 +166,18 @@ cv::Mat render(hal::SimScene& scene, std::uint64_t sequence, bool laser_on = tru
   return image;
 }
 
+// Frames 0 .. frames-1 of `scene` as a Motion JPEG video at the best quality; false when this
+// OpenCV cannot write one.
+bool write_motion_jpeg(const std::string& video, hal::SimScene& scene, int frames) {
+  cv::VideoWriter writer(video, cv::CAP_FFMPEG, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 30,
+                         cv::Size(kWidth, kHeight), false);
+  if (!writer.isOpened()) return false;
+  writer.set(cv::VIDEOWRITER_PROP_QUALITY, 100);
+  for (int k = 0; k < frames; ++k)
+    writer.write(render(scene, static_cast<std::uint64_t>(k)));
+  return true;
+}
+
 hal::SimGroundTruth truth_of(const hal::SimScene& scene, std::uint64_t sequence) {
   hal::SimGroundTruth truth;
   scene.ground_truth(sequence, true, truth);
@@ -389,14 +401,7 @@ TEST_F(LaserlineExtract, Video) {
 TEST_F(LaserlineExtract, MotionJpegVideo) {
   hal::SimScene scene(options_);
   const std::string video = path("scan.avi");
-  {
-    cv::VideoWriter writer(video, cv::CAP_FFMPEG, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 30,
-                           cv::Size(kWidth, kHeight), false);
-    ASSERT_TRUE(writer.isOpened()) << "this OpenCV cannot write MJPG video";
-    writer.set(cv::VIDEOWRITER_PROP_QUALITY, 100);
-    for (int k = 0; k < 2; ++k)
-      writer.write(render(scene, k));
-  }
+  ASSERT_TRUE(write_motion_jpeg(video, scene, 2)) << "this OpenCV cannot write MJPG video";
   const RunResult r = extract(video);
   EXPECT_EQ(r.exit_code, 0) << r.out;
   expect_frames_match(read_csv(path("points.csv")), {{0, 0}, {1, 1}}, scene);
@@ -707,14 +712,7 @@ TEST_F(LaserlineExtract, DamagedImagesAreNamedAndSkippedTheGoodOnesKept) {
 TEST_F(LaserlineExtract, VideoCutShortIsReportedItsFramesKept) {
   hal::SimScene scene(options_);
   const std::string video = path("scan.avi");
-  {
-    cv::VideoWriter writer(video, cv::CAP_FFMPEG, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 30,
-                           cv::Size(kWidth, kHeight), false);
-    ASSERT_TRUE(writer.isOpened()) << "this OpenCV cannot write MJPG video";
-    writer.set(cv::VIDEOWRITER_PROP_QUALITY, 100);
-    for (int k = 0; k < 30; ++k)
-      writer.write(render(scene, static_cast<std::uint64_t>(k)));
-  }
+  ASSERT_TRUE(write_motion_jpeg(video, scene, 30)) << "this OpenCV cannot write MJPG video";
   std::vector<std::uint8_t> bytes = read_bytes(video);
   bytes.resize(bytes.size() / 2);
   write_bytes(path("cut.avi"), bytes);
