@@ -129,7 +129,9 @@ struct StopRequest {
   int signal = 0;        // the first stop signal taken once running
   bool running = false;  // from here on the frame path may switch the laser on
 };
-StopRequest g_stop;
+// Never destroyed: the signal thread is detached and may still be in notify_all() while exit()
+// runs the static destructors.
+StopRequest& g_stop = *new StopRequest;
 
 // The signal thread: takes every stop signal with sigwaitinfo. While the daemon is still
 // starting (opening a camera may take seconds) nothing can have switched the laser on: it ends
