@@ -1,6 +1,8 @@
 #include "hal/yaml_reader.hpp"
 
 #include <yaml-cpp/depthguard.h>
+#include <yaml-cpp/eventhandler.h>
+#include <yaml-cpp/parser.h>
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -148,6 +150,57 @@ std::string escape_control_characters(const std::string& text) {
   return out;
 }
 
+namespace {
+
+// Notes where a document's first node is, if it has one. Used only to find a second document.
+class FirstNodeFinder final : public YAML::EventHandler {
+ public:
+  bool found = false;
+  YAML::Mark mark;
+
+  void OnDocumentStart(const YAML::Mark&) override {}
+  void OnDocumentEnd() override {}
+  void OnNull(const YAML::Mark&, YAML::anchor_t) override {}
+  void OnAlias(const YAML::Mark& at, YAML::anchor_t) override { note(at); }
+  void OnScalar(const YAML::Mark& at, const std::string&, YAML::anchor_t,
+                const std::string&) override {
+    note(at);
+  }
+  void OnSequenceStart(const YAML::Mark& at, const std::string&, YAML::anchor_t,
+                       YAML::EmitterStyle::value) override {
+    note(at);
+  }
+  void OnSequenceEnd() override {}
+  void OnMapStart(const YAML::Mark& at, const std::string&, YAML::anchor_t,
+                  YAML::EmitterStyle::value) override {
+    note(at);
+  }
+  void OnMapEnd() override {}
+
+ private:
+  void note(const YAML::Mark& at) {
+    if (!found) mark = at;
+    found = true;
+  }
+};
+
+// Where a second document with content begins, if the stream has one. Not YAML::LoadAll: on some
+// malformed streams (a lone ',') yaml-cpp 0.7 yields empty documents forever without consuming
+// input, growing without bound (jbeder/yaml-cpp#1040, fixed after 0.7). Only two documents are
+// read here, and an empty second one holds nothing that could be lost.
+bool find_second_document(const std::string& text, YAML::Mark& mark) {
+  std::istringstream stream(text);
+  YAML::Parser parser(stream);
+  FirstNodeFinder first;
+  if (!parser.HandleNextDocument(first)) return false;
+  FirstNodeFinder second;
+  if (!parser.HandleNextDocument(second) || !second.found) return false;
+  mark = second.mark;
+  return true;
+}
+
+}  // namespace
+
 ConfigError::ConfigError(const std::string& message)
     : std::runtime_error(escape_control_characters(message)) {}
 
@@ -157,9 +210,12 @@ YAML::Node load_yaml_text(const std::string& text, const std::string& source_nam
                       ": not a configuration or calibration");
   }
   refuse_nul_bytes(text, source_name);
-  std::vector<YAML::Node> documents;
+  YAML::Node root;
+  YAML::Mark second_document;
+  bool has_second_document = false;
   try {
-    documents = YAML::LoadAll(text);
+    root = YAML::Load(text);
+    has_second_document = find_second_document(text, second_document);
   } catch (const YAML::DeepRecursion& e) {
     // yaml-cpp's own guard against overflowing the stack, far beyond kMaxYamlDepth.
     throw ConfigError(line_prefix(source_name, e.mark) + "nested more than " +
@@ -167,16 +223,15 @@ YAML::Node load_yaml_text(const std::string& text, const std::string& source_nam
   } catch (const YAML::ParserException& e) {
     throw ConfigError(line_prefix(source_name, e.mark) + "not valid YAML: " + e.msg);
   }
-  if (documents.size() > 1) {
+  if (has_second_document) {
     // A second document would be ignored, and with it whatever the user meant by it.
-    throw ConfigError(line_prefix(source_name, documents[1].Mark()) +
+    throw ConfigError(line_prefix(source_name, second_document) +
                       "a second YAML document (after '---'): only one is read, give all keys in "
                       "one");
   }
-  if (documents.empty() || documents[0].IsNull()) {
+  if (!root || root.IsNull()) {
     throw ConfigError(source_name + ": has no keys (empty, or only comments)");
   }
-  const YAML::Node& root = documents[0];
   if (!root.IsMap()) {
     throw ConfigError(line_prefix(source_name, root.Mark()) +
                       "the top level must be a mapping of keys");

@@ -35,7 +35,8 @@ for h in "${harnesses[@]}"; do
   mkdir -p "$corpus"
   # -rss_limit_mb and -malloc_limit_mb: a decoder that allocates beyond its limits is a failure.
   log=$build/$h.log
-  if ! "$build/fuzz_$h" "$corpus" "$seeds/$h" -max_total_time="$seconds" -rss_limit_mb=1024 \
+  # timeout: a harness stopped by its own memory limit has been seen to hang while reporting it.
+  if ! timeout --signal=KILL $((seconds * 2 + 120)) "$build/fuzz_$h" "$corpus" "$seeds/$h" -max_total_time="$seconds" -rss_limit_mb=1024 \
       -malloc_limit_mb=512 -max_len=65536 -timeout=10 -print_final_stats=1 \
       -artifact_prefix="$build/crashes/$h-" >"$log" 2>&1; then
     tail -n 40 "$log" >&2

@@ -475,6 +475,17 @@ TEST_F(HostileConfigFile, OneDocumentOnly) {
       "one");
 }
 
+// yaml-cpp 0.7's LoadAll never ends on a stream that starts with a ',' (it yields empty documents
+// without consuming input and grows until memory runs out); found by tests/fuzz/fuzz_config.
+TEST_F(HostileConfigFile, ALoneCommaEndsWithAnError) {
+  EXPECT_EQ(error_of_file(write("comma.yaml", ",")),
+            "comma.yaml: has no keys (empty, or only comments)");
+  EXPECT_EQ(error_of_file(write("comment.yaml", "# a comment\n ,\n")),
+            "comment.yaml: has no keys (empty, or only comments)");
+  // An empty second document holds nothing that would be lost.
+  EXPECT_EQ(error_of_file(write("empty_second.yaml", "lcm: {url: 'memq://'}\n---\n")), "");
+}
+
 TEST_F(HostileConfigFile, NulBytesAreRefusedAndShownEscaped) {
   EXPECT_EQ(
       error_of_file(write("raw.yaml", std::string("lcm:\n  profile_channel: LASER\0X\n", 31))),
