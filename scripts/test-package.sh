@@ -92,6 +92,9 @@ expect_file /usr/lib/python3/dist-packages/laserline/profile_t.py
 expect_file /usr/share/java/laserline-lcmtypes.jar
 expect_file /usr/bin/laserline-log-reader
 expect_file /usr/bin/laserline-example-subscriber
+expect_file /usr/bin/laserline-spy
+[ "$(/usr/bin/laserline-spy --classpath | cut -d: -f1)" = /usr/share/java/laserline-lcmtypes.jar ] ||
+  fail "laserline-spy does not find the installed types: $(/usr/bin/laserline-spy --classpath 2>&1)"
 /usr/bin/python3 -c 'import laserline; laserline.profile_t.decode(laserline.profile_t().encode())' ||
   fail "the installed Python types do not work with the system python3"
 grep -qx /etc/laserline/laserline.yaml /var/lib/dpkg/info/laserline.conffiles ||
