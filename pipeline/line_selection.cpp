@@ -91,8 +91,16 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
       }
       if (persistent) unary += bonus;
       // A new piece of curve after the best path so far, or the continuation of a piece that
-      // ended at most max_gap lines before.
+      // ended at most max_gap lines before. A new piece far from where that path ended pays the
+      // jump cost too, up to a second restart: glints and texture edges start anywhere, the
+      // laser resumes near where it was seen (beyond an occlusion, or after a depth jump).
       float best = running_best - restart;
+      if (running_at >= 0) {
+        const float lines_between = static_cast<float>(line - running_at / k);
+        const float jump =
+            std::abs(c.position - candidates[static_cast<std::size_t>(running_at)].position);
+        best -= std::min(restart, jump_cost * std::max(0.0f, jump - free * lines_between));
+      }
       std::int32_t from = running_at;
       for (int gap = 0; gap <= o.max_gap && line - 1 - gap >= 0; ++gap) {
         const int before = line - 1 - gap;

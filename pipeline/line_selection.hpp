@@ -16,7 +16,8 @@ namespace laserline::pipeline {
 //   sum of (amplitude in dB - threshold, + previous_bonus_db where the previous frame had a
 //           candidate within previous_tolerance_px on that line)
 //   - (jump beyond jump_free_px per line step) * jump_cost_db_per_px - skipped lines * gap_cost_db
-//   - restart_cost_db for every new piece of curve,
+//   - restart_cost_db for every new piece of curve, plus the jump cost from where the best path
+//     before it ended (at most restart_cost_db more),
 // by dynamic programming along the lines (as industrial profile sensors trace their line). A piece
 // of curve apart from the rest is kept only when its points earn twice restart_cost_db.
 struct LineSelectionOptions {
