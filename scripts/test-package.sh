@@ -92,6 +92,9 @@ expect_file /usr/lib/python3/dist-packages/laserline/profile_t.py
 expect_file /usr/share/java/laserline-lcmtypes.jar
 expect_file /usr/bin/laserline-log-reader
 expect_file /usr/bin/laserline-example-subscriber
+expect_file /usr/bin/laserline-view
+/usr/bin/laserline-view --help | grep -q '^usage: laserline-view' ||
+  fail "laserline-view --help printed no usage (its HTTP library missing from Depends?)"
 /usr/bin/python3 -c 'import laserline; laserline.profile_t.decode(laserline.profile_t().encode())' ||
   fail "the installed Python types do not work with the system python3"
 grep -qx /etc/laserline/laserline.yaml /var/lib/dpkg/info/laserline.conffiles ||
