@@ -161,6 +161,7 @@ struct Channel {
 struct CloudChunk {
   std::int64_t index;
   Clock::time_point received;
+  std::int64_t utime;  // exposure: profiles are spaced as exposed, not as they arrived in bursts
   std::vector<float> xyz_mm;
 };
 
@@ -268,7 +269,7 @@ class LiveState {
   }
 
   void store_profile(std::shared_ptr<laserline::profile_t> p) {
-    CloudChunk chunk{0, Clock::now(), {}};
+    CloudChunk chunk{0, Clock::now(), p->utime, {}};
     std::size_t with_xyz = 0;
     for (const auto& pt : p->points) {
       if (pt.valid && std::isfinite(pt.xyz[0]) && std::isfinite(pt.xyz[1]) &&
@@ -394,8 +395,12 @@ std::string LiveState::profile_json(const laserline::profile_t& p, std::int64_t 
   for (const auto& chunk : cloud_) {
     if (chunk.index <= cloud_after) continue;
     if (cloud.size() > 1) cloud += ',';
+    // Ages by exposure time from the newest profile, and that one's by the clock here (a replay's
+    // or another computer's clock is not this one's).
+    const CloudChunk& newest = cloud_.back();
     const double age_ms =
-        std::chrono::duration<double, std::milli>(Clock::now() - chunk.received).count();
+        std::chrono::duration<double, std::milli>(Clock::now() - newest.received).count() +
+        std::max(0.0, static_cast<double>(newest.utime - chunk.utime) * 1e-3);
     cloud += JsonObject().number("age_ms", age_ms, 0).raw("xyz", numbers(chunk.xyz_mm, 0)).str();
     *cloud_sent = chunk.index;
   }

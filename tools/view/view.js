@@ -264,17 +264,28 @@ function drawCloud(now) {
   const cx = (minX + maxX) / 2, cz = (minZ + maxZ) / 2;
   const yaw = 0.5 * Math.sin(now / 5000), pitch = 0.75;
   const cosY = Math.cos(yaw), sinY = Math.sin(yaw), cosP = Math.cos(pitch), sinP = Math.sin(pitch);
-  const scale = 0.62 * Math.min(cw / spanX, ch / spanX);
+  // Projected first, then fitted to the canvas.
+  const projected = new Float32Array(3 * n);
+  let k = 0, minU = Infinity, maxU = -Infinity, minV = Infinity, maxV = -Infinity;
   for (const c of cloud) {
     const along = (now - c.at - historyMs / 2) * alongPerMs;  // newest at the front (bottom)
     for (let i = 0; i + 2 < c.xyz.length; i += 3) {
       const a = c.xyz[i] - cx, h = cz - c.xyz[i + 2];
-      const sx = cosY * a + sinY * along, depth = -sinY * a + cosY * along;
-      const sy = -depth * cosP - h * sinP;
-      const hue = 240 * (c.xyz[i + 2] - minZ) / spanZ;
-      cloudContext.fillStyle = 'hsl(' + hue.toFixed(0) + ',90%,55%)';
-      cloudContext.fillRect(cw / 2 + sx * scale, ch / 2 + sy * scale, 1.5, 1.5);
+      const u = cosY * a + sinY * along, depth = -sinY * a + cosY * along;
+      const v = -depth * cosP - h * sinP;
+      projected[k++] = u;
+      projected[k++] = v;
+      projected[k++] = c.xyz[i + 2];
+      minU = Math.min(minU, u); maxU = Math.max(maxU, u);
+      minV = Math.min(minV, v); maxV = Math.max(maxV, v);
     }
+  }
+  const scale = 0.9 * Math.min(cw / Math.max(maxU - minU, 1), (ch - 24) / Math.max(maxV - minV, 1));
+  const u0 = cw / 2 - scale * (minU + maxU) / 2, v0 = (ch - 24) / 2 - scale * (minV + maxV) / 2;
+  for (let i = 0; i < k; i += 3) {
+    const hue = 240 * (projected[i + 2] - minZ) / spanZ;
+    cloudContext.fillStyle = 'hsl(' + hue.toFixed(0) + ',90%,55%)';
+    cloudContext.fillRect(u0 + projected[i] * scale, v0 + projected[i + 1] * scale, 1.5, 1.5);
   }
   cloudContext.fillStyle = '#8d98a5';
   cloudContext.fillText(n + ' points; range ' + fixed(minZ, 0) + '–' + fixed(maxZ, 0) +
