@@ -10,6 +10,7 @@
 #include <unistd.h>
 #include <lcm/lcm-cpp.hpp>
 
+#include <atomic>
 #include <cctype>
 #include <chrono>
 #include <cstdio>
@@ -319,6 +320,44 @@ TEST_F(LiveView, BadListenAddressAndPortInUseAreOneLine) {
             std::string::npos)
       << r.out;
   EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 1) << r.out;
+}
+
+// Eight browsers watch at once; a ninth is told so, and the page still loads meanwhile.
+TEST_F(LiveView, StreamsAreLimitedAndThePageStillLoads) {
+  // The earlier tests' streams end when a write to them fails (within two events).
+  std::this_thread::sleep_for(std::chrono::milliseconds(2500));
+  std::vector<std::thread> watchers;
+  std::atomic<int> streaming{0};
+  for (int i = 0; i < 8; ++i) {
+    watchers.emplace_back([&streaming] {
+      httplib::Client client(kHost, kPort);
+      const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(4);
+      bool counted = false;
+      client.Get("/events", [&](const char*, std::size_t) {
+        if (!counted) ++streaming;
+        counted = true;
+        return std::chrono::steady_clock::now() < end;
+      });
+    });
+  }
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(3);
+  while (streaming < 8 && std::chrono::steady_clock::now() < give_up)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  EXPECT_EQ(streaming, 8);
+  httplib::Client client(kHost, kPort);
+  const auto ninth = client.Get("/events");
+  ASSERT_TRUE(ninth);
+  EXPECT_EQ(ninth->status, 503);
+  EXPECT_EQ(ninth->body, "laserline-view: 8 live views are open already; close one\n");
+  const auto page = client.Get("/");
+  ASSERT_TRUE(page);
+  EXPECT_EQ(page->status, 200);
+  const auto frame = client.Get("/frame.jpg");
+  ASSERT_TRUE(frame);
+  EXPECT_EQ(frame->status, 200);
+  for (auto& w : watchers)
+    w.join();
+  std::this_thread::sleep_for(std::chrono::milliseconds(2500));  // for the next test's browser
 }
 
 // Chromium opens the page: no console message or failed load, the stream fills the page, and

@@ -224,7 +224,6 @@ class LiveState {
   // arrived or it does not decode (then *problem says why).
   std::shared_ptr<const EncodedFrame> frame_jpeg(std::string* problem);
 
-  int open_streams() const { return open_streams_; }
   std::atomic<int> open_streams_{0};
 
  private:
@@ -732,6 +731,8 @@ int main(int argc, char** argv) {
     server.Get(std::string(asset.path), serve);
     if (asset.path == "/index.html") server.Get("/", serve);
   }
+  // GET only: the view watches. Commands to the daemon, when there are any, belong on a POST route
+  // registered only when asked for on the command line, behind a token given there.
   server.Get("/frame.jpg", [&state](const httplib::Request&, httplib::Response& res) {
     std::string problem;
     const auto frame = state.frame_jpeg(&problem);
