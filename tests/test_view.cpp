@@ -31,6 +31,11 @@ namespace {
 std::string g_namespace_problem;
 constexpr const char* kUrl = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304";
 constexpr int kPort = 18090;
+#ifdef LASERLINE_SANITIZED
+constexpr int kSlowdown = 3;  // the daemon under the sanitizers may not reach the rate limits
+#else
+constexpr int kSlowdown = 1;
+#endif
 constexpr const char* kHost = "127.0.0.1";
 
 // 640 x 480 frames, every third sent whole as JPEG; the projector sweeps the wall.
@@ -216,10 +221,10 @@ TEST_F(LiveView, EventStreamDeliversStatusProfilesAndFrames) {
               profiles, frames, viewers);
   // The latest status at once, then the daemon's 1 Hz; profiles at the 10 Hz limit of the
   // 30 Hz published; frames at the 5 Hz limit of the 10 Hz published.
-  EXPECT_GE(statuses, 3) << logs();
-  EXPECT_GE(profiles, 20) << logs();
+  EXPECT_GE(statuses, 3 - (kSlowdown > 1 ? 1 : 0)) << logs();
+  EXPECT_GE(profiles, 20 / kSlowdown) << logs();
   EXPECT_LE(profiles, 36);
-  EXPECT_GE(frames, 10) << logs();
+  EXPECT_GE(frames, 10 / kSlowdown) << logs();
   EXPECT_LE(frames, 18);
   EXPECT_GE(viewers, 3);
   bool status_checked = false, frame_checked = false, profile_checked = false;
