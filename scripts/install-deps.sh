@@ -18,6 +18,8 @@ packages=(
   libeigen3-dev
   libsystemd-dev
   zlib1g-dev
+  # laserline-view's HTTP server
+  libcpp-httplib-dev
   # hardware backends: GPIO laser (libgpiod 1.6), GigE Vision cameras (Aravis; its pkg-config
   # file needs libusb's), V4L2 stand-in device (FUSE)
   libgpiod-dev gpiod
@@ -25,6 +27,8 @@ packages=(
   libfuse3-dev fuse3
   # tests and benchmarks; the fuzz harnesses (clang 16 with libFuzzer and the sanitizers)
   libgtest-dev libgmock-dev libbenchmark-dev clang-16 libclang-rt-16-dev
+  # laserline-view's test in a real browser (headless, driven over its DevTools protocol)
+  chromium
   # network namespaces for the LCM tests and the demo
   iproute2 util-linux
   # the service: systemd-analyze verify/security and systemd-sysusers in the tests, the .deb

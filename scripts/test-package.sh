@@ -95,6 +95,9 @@ expect_file /usr/bin/laserline-example-subscriber
 expect_file /usr/bin/laserline-spy
 [ "$(/usr/bin/laserline-spy --classpath | cut -d: -f1)" = /usr/share/java/laserline-lcmtypes.jar ] ||
   fail "laserline-spy does not find the installed types: $(/usr/bin/laserline-spy --classpath 2>&1)"
+expect_file /usr/bin/laserline-view
+/usr/bin/laserline-view --help | grep -q '^usage: laserline-view' ||
+  fail "laserline-view --help printed no usage (its HTTP library missing from Depends?)"
 /usr/bin/python3 -c 'import laserline; laserline.profile_t.decode(laserline.profile_t().encode())' ||
   fail "the installed Python types do not work with the system python3"
 grep -qx /etc/laserline/laserline.yaml /var/lib/dpkg/info/laserline.conffiles ||

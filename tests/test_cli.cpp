@@ -28,6 +28,7 @@ const std::vector<Tool>& tools() {
       {"laserline-calibrate", LASERLINE_CALIBRATE_PATH, "--board"},
       {"laserline-evaluate", LASERLINE_EVALUATE_PATH, "--frames"},
       {"laserline-example-subscriber", LASERLINE_EXAMPLE_SUBSCRIBER_PATH, nullptr},
+      {"laserline-view", LASERLINE_VIEW_PATH, "--listen"},
   };
   return all;
 }

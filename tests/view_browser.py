@@ -1,0 +1,196 @@
+#!/usr/bin/env python3
+"""Opens laserline-view's page in a real headless Chromium driven over the DevTools protocol
+(standard library only: a minimal WebSocket client), and reports as JSON on stdout: the console
+messages and exceptions at warning level or worse (the browser's own log too: blocked loads,
+failed requests), the page's state (body data attributes, the frame canvas's place), the load
+time, and two screenshots some seconds apart (PNG files in OUT_DIR).
+
+usage: view_browser.py URL OUT_DIR [SECONDS_BETWEEN_SCREENSHOTS]
+"""
+import base64
+import json
+import os
+import shutil
+import socket
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+
+
+class DevTools:
+    def __init__(self, ws_url):
+        assert ws_url.startswith("ws://")
+        host_port, path = ws_url[5:].split("/", 1)
+        host, port = host_port.rsplit(":", 1)
+        self.sock = socket.create_connection((host, int(port)), timeout=30)
+        key = base64.b64encode(os.urandom(16)).decode()
+        self.sock.sendall((f"GET /{path} HTTP/1.1\r\nHost: {host_port}\r\nUpgrade: websocket\r\n"
+                           f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+                           "Sec-WebSocket-Version: 13\r\n\r\n").encode())
+        response = b""
+        while b"\r\n\r\n" not in response:
+            chunk = self.sock.recv(4096)
+            if not chunk:
+                raise RuntimeError("DevTools closed the WebSocket handshake")
+            response += chunk
+        head, self.buffer = response.split(b"\r\n\r\n", 1)
+        if b" 101 " not in head.split(b"\r\n")[0]:
+            raise RuntimeError("DevTools refused the WebSocket: " + head.decode(errors="replace"))
+        self.next_id = 0
+        self.events = []
+
+    def _read(self, n):
+        while len(self.buffer) < n:
+            chunk = self.sock.recv(1 << 20)
+            if not chunk:
+                raise RuntimeError("DevTools closed the connection")
+            self.buffer += chunk
+        data, self.buffer = self.buffer[:n], self.buffer[n:]
+        return data
+
+    def _receive(self):
+        message = b""
+        while True:
+            b0, b1 = self._read(2)
+            length = b1 & 0x7F
+            if length == 126:
+                length = struct.unpack(">H", self._read(2))[0]
+            elif length == 127:
+                length = struct.unpack(">Q", self._read(8))[0]
+            payload = self._read(length)
+            message += payload
+            if b0 & 0x80:
+                return json.loads(message)
+
+    def _send(self, text):
+        payload = text.encode()
+        header = bytes([0x81])
+        if len(payload) < 126:
+            header += bytes([0x80 | len(payload)])
+        elif len(payload) < 1 << 16:
+            header += bytes([0x80 | 126]) + struct.pack(">H", len(payload))
+        else:
+            header += bytes([0x80 | 127]) + struct.pack(">Q", len(payload))
+        mask = os.urandom(4)
+        self.sock.sendall(header + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload)))
+
+    def call(self, method, **params):
+        self.next_id += 1
+        self._send(json.dumps({"id": self.next_id, "method": method, "params": params}))
+        while True:
+            message = self._receive()
+            if message.get("id") == self.next_id:
+                if "error" in message:
+                    raise RuntimeError(f"{method}: {message['error']}")
+                return message.get("result", {})
+            if "method" in message:
+                self.events.append(message)
+
+    def wait(self, seconds):
+        """Collects events for `seconds`."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.sock.settimeout(max(0.05, end - time.monotonic()))
+            try:
+                message = self._receive()
+            except (socket.timeout, TimeoutError):
+                break
+            finally:
+                self.sock.settimeout(30)
+            if "method" in message:
+                self.events.append(message)
+
+
+def problems(events):
+    """Console messages and exceptions at warning level or worse, and the browser's own log."""
+    found = []
+    for e in events:
+        method, p = e["method"], e.get("params", {})
+        if method == "Runtime.consoleAPICalled" and p.get("type") in ("error", "warning", "assert"):
+            found.append("console." + p["type"] + ": " +
+                         " ".join(str(a.get("value", a.get("description", ""))) for a in p.get("args", [])))
+        elif method == "Runtime.exceptionThrown":
+            d = p.get("exceptionDetails", {})
+            found.append("exception: " + d.get("text", "") + " " +
+                         str(d.get("exception", {}).get("description", "")))
+        elif method == "Log.entryAdded" and p.get("entry", {}).get("level") in ("error", "warning"):
+            entry = p["entry"]
+            found.append(f"log {entry.get('source')} {entry['level']}: {entry.get('text')} "
+                         f"{entry.get('url', '')}")
+    return found
+
+
+def main():
+    url, out_dir = sys.argv[1], sys.argv[2]
+    between_s = float(sys.argv[3]) if len(sys.argv) > 3 else 3.0
+    chromium = shutil.which("chromium")
+    if chromium is None:
+        print(json.dumps({"skip": "chromium is not installed (scripts/install-deps.sh installs it)"}))
+        return 0
+    profile = tempfile.mkdtemp(prefix="laserline_view_chromium_")
+    browser = subprocess.Popen(
+        [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync",
+         "--disable-dev-shm-usage", "--hide-scrollbars", "--window-size=1300,940",
+         "--remote-debugging-port=0", "--remote-debugging-address=127.0.0.1",
+         f"--user-data-dir={profile}", "about:blank"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        port_file = os.path.join(profile, "DevToolsActivePort")
+        deadline = time.monotonic() + 30
+        while not os.path.exists(port_file) or os.path.getsize(port_file) == 0:
+            if browser.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError("chromium did not open its DevTools port: " +
+                                   browser.stderr.read().decode(errors="replace")[-2000:])
+            time.sleep(0.1)
+        with open(port_file) as f:
+            port, browser_path = f.read().split("\n")[:2]
+        # A page target: ask the browser for a new one.
+        browser_tools = DevTools(f"ws://127.0.0.1:{port}{browser_path}")
+        target = browser_tools.call("Target.createTarget", url="about:blank")["targetId"]
+        page = DevTools(f"ws://127.0.0.1:{port}/devtools/page/{target}")
+        for domain in ("Runtime", "Log", "Page", "Network"):
+            page.call(domain + ".enable")
+        page.call("Emulation.setDeviceMetricsOverride", width=1300, height=940,
+                  deviceScaleFactor=1, mobile=False)
+        started = time.monotonic()
+        page.call("Page.navigate", url=url)
+        load_s = None
+        while time.monotonic() - started < 20:
+            page.wait(0.1)
+            if any(e["method"] == "Page.loadEventFired" for e in page.events):
+                load_s = time.monotonic() - started
+                break
+        page.wait(3.0)  # the stream's first events, a frame, a status
+        state_js = "JSON.stringify(Object.assign({}, document.body.dataset, " \
+                   "{rect: document.getElementById('frame').dataset.rect, " \
+                   "status: document.getElementById('status').innerText, " \
+                   "frame_info: document.getElementById('frame-info').textContent}))"
+        first = json.loads(page.call("Runtime.evaluate", expression=state_js)["result"]["value"])
+        shots = []
+        for i in range(2):
+            if i > 0:
+                page.wait(between_s)
+            data = page.call("Page.captureScreenshot", format="png")["data"]
+            path = os.path.join(out_dir, f"view_{i + 1}.png")
+            with open(path, "wb") as f:
+                f.write(base64.b64decode(data))
+            shots.append(path)
+        second = json.loads(page.call("Runtime.evaluate", expression=state_js)["result"]["value"])
+        print(json.dumps({"load_s": load_s, "first": first, "second": second, "screenshots": shots,
+                          "problems": problems(page.events)}))
+        return 0
+    finally:
+        browser.terminate()
+        try:
+            browser.wait(10)
+        except subprocess.TimeoutExpired:
+            browser.kill()
+            browser.wait()
+        shutil.rmtree(profile, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
