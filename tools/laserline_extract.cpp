@@ -534,6 +534,7 @@ std::string id_text(std::int64_t id) {
 // What a log says of its calibration before its frames: its first laserline.calibration_t (the
 // daemon publishes one at start, before any profile, and every few seconds), and the
 // calibration_id of the first profile when that comes first (a logger started after the daemon).
+// Reading stops at the first calibration_t: only a log without one is read to its end.
 struct LogCalibration {
   std::optional<laserline::hal::Calibration> calibration;
   std::uint64_t id = 0;
@@ -561,13 +562,12 @@ LogCalibration first_log_calibration(const std::string& path) {
         laserline::messages::decode(event.data.data(), event.data.size(), &message, limits,
                                     &problem) &&
         laserline::daemon::calibration_from_message(message, &calibration, &problem)) {
-      if (found.where.empty() || found.id == static_cast<std::uint64_t>(message.calibration_id)) {
-        found.calibration = calibration;
-      }
+      const auto id = static_cast<std::uint64_t>(message.calibration_id);
       if (found.where.empty()) {
-        found.id = static_cast<std::uint64_t>(message.calibration_id);
+        found.id = id;
         found.where = where;
       }
+      if (found.id == id) found.calibration = calibration;
       return found;
     }
     if (found.where.empty() && hash == laserline::profile_t::getHash() &&
