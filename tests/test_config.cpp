@@ -39,6 +39,8 @@ TEST(Config, BuiltInDefaultIsValidAndRunsTheSimulator) {
   EXPECT_EQ(config.profile_channel, "LASERLINE_PROFILE");
   EXPECT_EQ(config.image_channel, "LASERLINE_IMAGE");
   EXPECT_EQ(config.status_channel, "LASERLINE_STATUS");
+  EXPECT_EQ(config.calibration_channel, "LASERLINE_CALIBRATION");
+  EXPECT_EQ(config.calibration_period_s, 5.0);
   Backends backends = create_backends(config);
   EXPECT_EQ(backends.camera->format().width, 1280);
   EXPECT_EQ(backends.camera->format().height, 1024);
@@ -289,6 +291,10 @@ TEST(Config, LcmChannelsAndUrl) {
       hal::load_yaml_text("lcm: {profile_channel: SCAN_A, url: 'memq://'}\n", "t"), "t");
   EXPECT_EQ(config.profile_channel, "SCAN_A");
   EXPECT_EQ(config.status_channel, "LASERLINE_STATUS");
+  EXPECT_EQ(error_of("lcm:\n  calibration_channel: ''\n"),
+            "test.yaml:2: lcm.calibration_channel: must be 1 to 63 characters");
+  EXPECT_EQ(error_of("lcm:\n  calibration_period_s: 0\n"),
+            "test.yaml:2: lcm.calibration_period_s: must be between 0.05 and 3600, got 0");
 }
 
 TEST(Config, Realtime) {
