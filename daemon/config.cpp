@@ -406,7 +406,8 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
   }
   for (auto [key, channel] : {std::pair{"profile_channel", &c.profile_channel},
                               std::pair{"image_channel", &c.image_channel},
-                              std::pair{"status_channel", &c.status_channel}}) {
+                              std::pair{"status_channel", &c.status_channel},
+                              std::pair{"calibration_channel", &c.calibration_channel}}) {
     *channel = lcm.string(key, *channel);
     // LCM carries channel names in the packet header, which caps them at 63 bytes.
     if (channel->empty() || channel->size() > 63) lcm.fail(key, "must be 1 to 63 characters");
@@ -448,6 +449,7 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
   raw.jpeg_quality = static_cast<int>(lcm.integer("image_jpeg_quality", 90, 1, 100));
   raw.zlib_level = static_cast<int>(lcm.integer("image_zlib_level", 1, 1, 9));
   c.status_period_s = lcm.number("status_period_s", c.status_period_s, 0.05, 3600.0);
+  c.calibration_period_s = lcm.number("calibration_period_s", c.calibration_period_s, 0.05, 3600.0);
   lcm.finish();
 
   root.finish();

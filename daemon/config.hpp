@@ -77,9 +77,11 @@ struct DaemonConfig {
   bool profile_all_points = false;  // lcm.profile_points: all (rejected candidates too) | accepted
   std::string image_channel = "LASERLINE_IMAGE";
   std::string status_channel = "LASERLINE_STATUS";
+  std::string calibration_channel = "LASERLINE_CALIBRATION";
   int image_every_n = 30;  // = raw_frames.every_n, kept for the existing readers
   RawFrameOptions raw_frames;
   double status_period_s = 1.0;
+  double calibration_period_s = 5.0;  // laserline.calibration_t: at start and this often
 };
 
 // Reads the options of every detector from the `detector:` section (all keys but `name`).

@@ -115,8 +115,8 @@ bool FramePath::start(std::string* error) {
   publisher_ = std::make_unique<LcmPublisher>(
       lcm_, image_lcm_.get(),
       PublisherChannels{config_.profile_channel, config_.image_channel, config_.status_channel,
-                        config_.profile_all_points},
-      config_.detector, max_points, format_);
+                        config_.calibration_channel, config_.profile_all_points},
+      config_.detector, max_points, format_, config_.calibration);
   publisher_->status().camera_backend = config_.camera_backend;
   encoder_ = std::make_unique<RawFrameEncoder>(config_.raw_frames, format_);
   // Enough room for every frame of a status period at 4x the nominal rate.
@@ -387,9 +387,14 @@ void FramePath::publisher_loop() {
   const auto period_ns = static_cast<std::int64_t>(config_.status_period_s * 1e9);
   std::int64_t last_status = hal::monotonic_ns();
   std::int64_t next_status = last_status + period_ns;
+  // The calibration first, before any profile that names it; then periodically, so that a log
+  // started later (or a subscriber that joined late) has it too. It cannot change while running.
+  const auto calibration_period_ns = static_cast<std::int64_t>(config_.calibration_period_s * 1e9);
+  if (!publisher_->publish_calibration()) publish_errors_.fetch_add(1, std::memory_order_relaxed);
+  std::int64_t next_calibration = last_status + calibration_period_ns;
   while (true) {
-    const std::int64_t wait_ns =
-        std::clamp<std::int64_t>(next_status - hal::monotonic_ns(), 0, 100 * kMs);
+    const std::int64_t wait_ns = std::clamp<std::int64_t>(
+        std::min(next_status, next_calibration) - hal::monotonic_ns(), 0, 100 * kMs);
     profiles_->wait(wait_ns);
     while (ProfileSlot* slot = profiles_->front()) {
       if (publisher_->publish_profile(*slot)) {
@@ -411,6 +416,13 @@ void FramePath::publisher_loop() {
                           // not when stopped: a frame being compressed must not hold it back.
                           (images_done_.load(std::memory_order_acquire) ||
                            stop_requested_.load(std::memory_order_relaxed));
+    if (now >= next_calibration) {
+      if (!publisher_->publish_calibration()) {
+        publish_errors_.fetch_add(1, std::memory_order_relaxed);
+      }
+      next_calibration =
+          std::max(next_calibration + calibration_period_ns, now + calibration_period_ns / 2);
+    }
     if (now >= next_status || finished) {
       fill_status(now, now - last_status);
       if (!publisher_->publish_status()) publish_errors_.fetch_add(1, std::memory_order_relaxed);

@@ -233,6 +233,8 @@ bool LcmCamera::take_frame(const void* data, int size, const std::string& where,
   info.sequence = static_cast<std::uint64_t>(image_.sequence);
   info.camera_ns = image_.camera_timestamp_ns;
   info.laser_on = image_.laser_on;
+  info.exposure_us = image_.exposure_us;
+  info.gain_db = image_.gain_db;
   info.arrival_mono_ns = now;
   info.exposure_mono_ns = now;
   info.arrival_wall_ns = image_.utime * 1000;

@@ -4,9 +4,12 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <random>
+
+#include "hal/clock.hpp"
 
 namespace laserline::daemon {
 
@@ -81,9 +84,80 @@ std::int64_t process_instance_id() {
   return id;
 }
 
+laserline::calibration_t calibration_message(const hal::Calibration& calibration,
+                                             std::int64_t instance_id) {
+  laserline::calibration_t m{};
+  const hal::CameraIntrinsics& c = calibration.camera;
+  m.calibration_id = static_cast<std::int64_t>(hal::calibration_id(calibration));
+  m.width = c.width;
+  m.height = c.height;
+  m.fx = c.fx;
+  m.fy = c.fy;
+  m.cx = c.cx;
+  m.cy = c.cy;
+  std::copy(c.distortion.begin(), c.distortion.end(), m.distortion);
+  const std::array<double, 4> plane = calibration.laser.plane_coefficients();
+  std::copy(plane.begin(), plane.end(), m.laser_plane);
+  m.sheet_width_m = calibration.laser.sheet_width_m;
+  m.instance_id = instance_id;
+  return m;
+}
+
+bool calibration_from_message(const laserline::calibration_t& m, hal::Calibration* calibration,
+                              std::string* problem) {
+  // The ranges of hal/calibration.cpp's reader.
+  auto outside = [&](const char* field, double value, double min, double max) {
+    if (value >= min && value <= max) return false;  // NaN is outside
+    if (problem != nullptr) {
+      char line[160];
+      std::snprintf(line, sizeof line, "%s %g outside %g..%g", field, value, min, max);
+      *problem = line;
+    }
+    return true;
+  };
+  if (outside("width", m.width, 16, 16384) || outside("height", m.height, 16, 16384) ||
+      outside("fx", m.fx, 1, 1e6) || outside("fy", m.fy, 1, 1e6) ||
+      outside("cx", m.cx, -1e5, 1e5) || outside("cy", m.cy, -1e5, 1e5) ||
+      outside("sheet_width_m", m.sheet_width_m, 1e-5, 0.1)) {
+    return false;
+  }
+  for (double k : m.distortion) {
+    if (outside("distortion", k, -1e6, 1e6)) return false;
+  }
+  for (double p : m.laser_plane) {
+    if (outside("laser_plane", p, -1e6, 1e6)) return false;
+  }
+  const double* n = m.laser_plane;
+  if (std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) < 1e-9) {
+    if (problem != nullptr) *problem = "laser_plane: the normal (a, b, c) is zero";
+    return false;
+  }
+  hal::Calibration c;
+  c.camera.width = m.width;
+  c.camera.height = m.height;
+  c.camera.fx = m.fx;
+  c.camera.fy = m.fy;
+  c.camera.cx = m.cx;
+  c.camera.cy = m.cy;
+  std::copy(std::begin(m.distortion), std::end(m.distortion), c.camera.distortion.begin());
+  c.laser.plane = std::array<double, 4>{n[0], n[1], n[2], n[3]};
+  c.laser.sheet_width_m = m.sheet_width_m;
+  const std::uint64_t id = hal::calibration_id(c);
+  if (id != static_cast<std::uint64_t>(m.calibration_id)) {
+    if (problem != nullptr) {
+      *problem = "calibration_id " +
+                 hal::calibration_id_text(static_cast<std::uint64_t>(m.calibration_id)) +
+                 " is not the id of its content (" + hal::calibration_id_text(id) + ")";
+    }
+    return false;
+  }
+  *calibration = c;
+  return true;
+}
+
 LcmPublisher::LcmPublisher(lcm::LCM& lcm, lcm::LCM* image_lcm, PublisherChannels channels,
                            const std::string& detector, std::size_t max_points,
-                           const hal::FrameFormat& format)
+                           const hal::FrameFormat& format, const hal::Calibration& calibration)
     : lcm_(lcm),
       image_lcm_(image_lcm != nullptr ? *image_lcm : lcm),
       channels_(std::move(channels)) {
@@ -96,6 +170,8 @@ LcmPublisher::LcmPublisher(lcm::LCM& lcm, lcm::LCM* image_lcm, PublisherChannels
   status_.camera_state = "starting";
   status_.instance_id = process_instance_id();
   profile_.instance_id = status_.instance_id;
+  calibration_ = calibration_message(calibration, status_.instance_id);
+  profile_.calibration_id = calibration_.calibration_id;
   const std::size_t largest =
       std::max({static_cast<std::size_t>(profile_.getEncodedSize()), std::size_t{4096}});
   // Room for longer status strings than the ones measured here.
@@ -129,6 +205,8 @@ bool LcmPublisher::publish_profile(const ProfileSlot& slot) {
   profile_.sequence = static_cast<std::int64_t>(slot.info.sequence);
   profile_.camera_timestamp_ns = slot.info.camera_ns;
   profile_.laser_on = slot.info.laser_on;
+  profile_.exposure_us = slot.info.exposure_us;
+  profile_.gain_db = slot.info.gain_db;
   profile_.width = slot.width;
   profile_.height = slot.height;
   profile_.background_sequence = slot.profile.background_sequence();
@@ -161,12 +239,19 @@ bool LcmPublisher::publish_image(const ImageSlot& slot, RawFrameEncoder& encoder
   image_.sequence = static_cast<std::int64_t>(slot.info.sequence);
   image_.camera_timestamp_ns = slot.info.camera_ns;
   image_.laser_on = slot.info.laser_on;
+  image_.exposure_us = slot.info.exposure_us;
+  image_.gain_db = slot.info.gain_db;
   if (!encoder.encode(slot, &image_)) return false;
   return publish(image_lcm_, channels_.image, image_, image_buffer_);
 }
 
 bool LcmPublisher::publish_status() {
   return publish(lcm_, channels_.status, status_, buffer_);
+}
+
+bool LcmPublisher::publish_calibration() {
+  calibration_.utime = hal::wall_ns() / 1000;
+  return publish(lcm_, channels_.calibration, calibration_, buffer_);
 }
 
 }  // namespace laserline::daemon

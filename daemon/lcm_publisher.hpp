@@ -1,5 +1,6 @@
 #pragma once
 
+#include <laserline/calibration_t.hpp>
 #include <laserline/image_t.hpp>
 #include <laserline/profile_t.hpp>
 #include <laserline/status_t.hpp>
@@ -12,6 +13,7 @@
 
 #include "daemon/frame_slots.hpp"
 #include "daemon/raw_frame_encoder.hpp"
+#include "hal/calibration.hpp"
 #include "hal/frame.hpp"
 
 namespace laserline::daemon {
@@ -20,6 +22,7 @@ struct PublisherChannels {
   std::string profile = "LASERLINE_PROFILE";
   std::string image = "LASERLINE_IMAGE";
   std::string status = "LASERLINE_STATUS";
+  std::string calibration = "LASERLINE_CALIBRATION";
   // lcm.profile_points: false sends only the accepted points, true the rejected candidates too.
   bool all_points = false;
 };
@@ -34,8 +37,11 @@ class LcmPublisher {
   // `image_lcm`, when given, carries the raw frames: LCM's UDP publish holds one lock while it
   // sends all fragments of a message, so a megabyte frame on the same instance would hold up
   // the profile published after it.
+  // `calibration`: the one in force, published by publish_calibration() and named by its id in
+  // every profile.
   LcmPublisher(lcm::LCM& lcm, lcm::LCM* image_lcm, PublisherChannels channels,
-               const std::string& detector, std::size_t max_points, const hal::FrameFormat& format);
+               const std::string& detector, std::size_t max_points, const hal::FrameFormat& format,
+               const hal::Calibration& calibration);
 
   bool publish_profile(const ProfileSlot& slot);
   // Thread context: the image thread (its own message and buffer; lcm_publish is thread-safe).
@@ -43,6 +49,7 @@ class LcmPublisher {
   // The caller fills status() and then publishes it.
   laserline::status_t& status() { return status_; }
   bool publish_status();
+  bool publish_calibration();
 
  private:
   template <typename Message>
@@ -55,6 +62,7 @@ class LcmPublisher {
   laserline::profile_t profile_;
   laserline::image_t image_;
   laserline::status_t status_;
+  laserline::calibration_t calibration_;
   std::vector<std::uint8_t> buffer_;        // profiles and status (publisher thread)
   std::vector<std::uint8_t> image_buffer_;  // raw frames (image thread)
 };
@@ -69,6 +77,16 @@ std::unique_ptr<lcm::LCM> open_lcm(const std::string& url, std::string* error);
 // This process's id in status_t and profile_t: 64 random bits drawn once, never 0, so that two
 // daemons publishing on the same channels can be told apart.
 std::int64_t process_instance_id();
+
+// The calibration as a message (utime left 0): its values and calibration_id.
+laserline::calibration_t calibration_message(const hal::Calibration& calibration,
+                                             std::int64_t instance_id);
+
+// The calibration a message carries, or false with a one-line reason in *problem (the field and
+// what is wrong) when a value is out of the range a calibration file allows, or its
+// calibration_id is not the id of its content.
+bool calibration_from_message(const laserline::calibration_t& message,
+                              hal::Calibration* calibration, std::string* problem);
 
 // Microseconds since the Unix epoch of a frame's exposure (LCM's utime convention).
 std::int64_t frame_utime(const hal::FrameInfo& info);

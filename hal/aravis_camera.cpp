@@ -4,6 +4,7 @@
 #include <time.h>
 
 #include <algorithm>
+#include <limits>
 
 #include "hal/clock.hpp"
 
@@ -254,6 +255,7 @@ bool AravisCamera::configure(std::string* error) {
     arv_device_set_features_from_string(device, (name + "=" + value).c_str(), &e);
     if (failed("features." + name)) return false;
   }
+  read_exposure_and_gain(camera);
   const guint payload = arv_camera_get_payload(camera, &e);
   if (failed("payload size")) return false;
   if (payload != payload_bytes_) {
@@ -265,6 +267,29 @@ bool AravisCamera::configure(std::string* error) {
     return false;
   }
   return true;
+}
+
+void AravisCamera::read_exposure_and_gain(_ArvCamera* camera) {
+  // Read once, as configured: a register read per frame would be a network round trip on the
+  // frame path. Under the camera's automatic control the value changes from frame to frame, so
+  // none is reported then. A camera without the feature answers with an error: not known.
+  GError* e = nullptr;
+  auto known = [&e](double value) {
+    const bool ok = e == nullptr;
+    g_clear_error(&e);
+    return ok ? value : std::numeric_limits<double>::quiet_NaN();
+  };
+  auto automatic = [&e](ArvAuto mode) {
+    const bool ok = e == nullptr;
+    g_clear_error(&e);
+    return ok && mode != ARV_AUTO_OFF;
+  };
+  const bool exposure_auto = automatic(arv_camera_get_exposure_time_auto(camera, &e));
+  const double exposure = known(arv_camera_get_exposure_time(camera, &e));
+  const bool gain_auto = automatic(arv_camera_get_gain_auto(camera, &e));
+  const double gain = known(arv_camera_get_gain(camera, &e));
+  exposure_us_ = exposure_auto ? std::numeric_limits<double>::quiet_NaN() : exposure;
+  gain_db_ = gain_auto ? std::numeric_limits<double>::quiet_NaN() : gain;
 }
 
 bool AravisCamera::connect(std::string* error) {
@@ -485,6 +510,8 @@ GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
     info.exposure_mono_ns = camera_ns + offset_ns_;
     info.arrival_mono_ns = arrival_mono;
     info.arrival_wall_ns = arrival_wall;
+    info.exposure_us = exposure_us_;
+    info.gain_db = gain_db_;
     update_stream_statistics();
     return GrabStatus::kOk;
   }

@@ -101,6 +101,7 @@ class AravisCamera final : public Camera {
   bool connect(std::string* error);
   void disconnect();
   bool configure(std::string* error);
+  void read_exposure_and_gain(_ArvCamera* camera);
   void count_bad_buffer(int status);
   void update_stream_statistics();
   static void on_control_lost(_ArvDevice* device, void* self);
@@ -122,6 +123,8 @@ class AravisCamera final : public Camera {
   std::int64_t silent_ns_ = 0;  // time spent waiting for a frame since the last one
   std::int64_t next_reconnect_mono_ns_ = 0;
   int reconnect_delay_ms_ = 0;
+  double exposure_us_ = 0;  // as read after configure(); NaN: not known or automatic
+  double gain_db_ = 0;
   std::int64_t offset_ns_ = 0;  // host monotonic - camera time, tracked
   bool offset_valid_ = false;
   std::uint64_t last_frame_id_ = 0;

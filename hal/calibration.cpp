@@ -1,7 +1,9 @@
 #include "hal/calibration.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 #include <sstream>
 
@@ -44,6 +46,50 @@ std::array<double, 4> LaserMount::plane_coefficients() const {
       break;
   }
   return {0.0, 1.0, -t, baseline_m};
+}
+
+namespace {
+
+class Fnv1a64 {
+ public:
+  void bytes(std::uint64_t value, int count) {
+    for (int i = 0; i < count; ++i) {
+      hash_ ^= (value >> (8 * i)) & 0xffu;
+      hash_ *= 0x100000001b3u;
+    }
+  }
+  void integer(int value) { bytes(static_cast<std::uint32_t>(value), 4); }
+  void number(double value) {
+    if (value == 0.0) value = 0.0;  // -0 and 0 triangulate alike
+    bytes(std::bit_cast<std::uint64_t>(value), 8);
+  }
+  std::uint64_t value() const { return hash_; }
+
+ private:
+  std::uint64_t hash_ = 0xcbf29ce484222325u;
+};
+
+}  // namespace
+
+std::uint64_t calibration_id(const Calibration& calibration) {
+  const CameraIntrinsics& c = calibration.camera;
+  Fnv1a64 h;
+  h.integer(c.width);
+  h.integer(c.height);
+  for (double v : {c.fx, c.fy, c.cx, c.cy})
+    h.number(v);
+  for (double k : c.distortion)
+    h.number(k);
+  for (double p : calibration.laser.plane_coefficients())
+    h.number(p);
+  h.number(calibration.laser.sheet_width_m);
+  return h.value();
+}
+
+std::string calibration_id_text(std::uint64_t id) {
+  char text[17];
+  std::snprintf(text, sizeof text, "%016llx", static_cast<unsigned long long>(id));
+  return text;
 }
 
 namespace {

@@ -45,6 +45,15 @@ struct Calibration {
   LaserMount laser;
 };
 
+// What tells two calibrations apart: 64-bit FNV-1a over the image size, fx, fy, cx, cy, the five
+// distortion coefficients, the laser sheet's plane_coefficients() and its width, in that order
+// (sizes as 32-bit and numbers as IEEE 754 bits, little-endian; -0 taken as 0). Two calibrations
+// that triangulate alike have the same id however they were written (a plane or baseline and
+// angle); any change of a value gives another.
+std::uint64_t calibration_id(const Calibration& calibration);
+// The id as people see it: 16 lower-case hex digits.
+std::string calibration_id_text(std::uint64_t id);
+
 // Reads `camera:` and `laser:` sections from a mapping (a calibration file, or the calibration
 // section of the daemon's configuration). Throws ConfigError naming the key. The camera may also
 // be given in OpenCV's calibration layout (image_width, image_height, camera_matrix,

@@ -2,6 +2,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 
 namespace laserline::hal {
 
@@ -32,6 +33,9 @@ struct FrameInfo {
   // Host CLOCK_MONOTONIC of the last laser switch before this frame was grabbed (0 = none yet).
   // When it is later than exposure_mono_ns the switch came too late for this frame.
   std::int64_t laser_switch_mono_ns = 0;
+  // The exposure time and analogue gain the camera reports for this frame; NaN where it does not.
+  double exposure_us = std::numeric_limits<double>::quiet_NaN();
+  double gain_db = std::numeric_limits<double>::quiet_NaN();
 
   // Exposure time on the wall clock, from the two host clocks read together at arrival.
   std::int64_t exposure_wall_ns() const {

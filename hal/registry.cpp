@@ -35,8 +35,11 @@ std::unique_ptr<Camera> create_sim_camera(const CameraRequest& request) {
   SimCameraStall stall;
   stall.after_s = sim.number("stall_after_s", 0.0, 0.0, 1e6);
   stall.for_s = sim.number("stall_for_s", 0.0, 0.0, 1e6);
+  SimCameraExposure exposure;
+  exposure.exposure_us = sim.number("exposure_us", exposure.exposure_us, 1.0, 1e7);
+  exposure.gain_db = sim.number("gain_db", exposure.gain_db, -20.0, 60.0);
   sim.finish();
-  return std::make_unique<SimCamera>(options, request.laser, stall, request.channel);
+  return std::make_unique<SimCamera>(options, request.laser, stall, request.channel, exposure);
 }
 
 std::unique_ptr<Camera> create_aravis_camera(const CameraRequest& request) {

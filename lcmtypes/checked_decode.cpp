@@ -124,7 +124,16 @@ bool walk_profile(Walker& w, const Limits& limits) {
          w.string("detector", limits.max_string_bytes) &&
          w.skip(kI64 + kBool + kI8 + 6 * kF64, "search axes") &&
          w.count("num_points", limits.max_points, kPointBytes, &n) && w.skip(kI64, "instance_id") &&
+         w.skip(2 * kF64, "exposure_us, gain_db") && w.skip(kI64, "calibration_id") &&
          w.end("laserline.profile_t");
+}
+
+bool walk_calibration(Walker& w) {
+  return w.hash(laserline::calibration_t::getHash(), "laserline.calibration_t") &&
+         w.skip(2 * kI64, "utime, calibration_id") && w.skip(2 * kI32, "width, height") &&
+         w.skip(4 * kF64, "fx, fy, cx, cy") && w.skip(5 * kF64, "distortion") &&
+         w.skip(4 * kF64, "laser_plane") && w.skip(kF64, "sheet_width_m") &&
+         w.skip(kI64, "instance_id") && w.end("laserline.calibration_t");
 }
 
 bool walk_status(Walker& w, const Limits& limits) {
@@ -144,7 +153,8 @@ bool walk_image(Walker& w, const Limits& limits) {
   std::int32_t n = 0;
   return w.hash(image_t::getHash(), "laserline.image_t") &&
          w.skip(3 * kI64 + kBool + 4 * kI32 + kI8 + 2 * kI32 + kI8, "header") &&
-         w.count("size", limits.max_image_bytes, 1, &n) && w.end("laserline.image_t");
+         w.count("size", limits.max_image_bytes, 1, &n) &&
+         w.skip(2 * kF64, "exposure_us, gain_db") && w.end("laserline.image_t");
 }
 
 bool png_size(const std::uint8_t* d, std::size_t n, int* width, int* height) {
@@ -213,6 +223,12 @@ bool decode(const void* data, std::size_t size, laserline::status_t* out, const 
             std::string* problem) {
   Walker w(data, size, problem);
   return walk_status(w, limits) && generated_decode(data, size, out, problem);
+}
+
+bool decode(const void* data, std::size_t size, laserline::calibration_t* out, const Limits&,
+            std::string* problem) {
+  Walker w(data, size, problem);
+  return walk_calibration(w) && generated_decode(data, size, out, problem);
 }
 
 bool decode(const void* data, std::size_t size, laserline::image_t* out, const Limits& limits,

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <laserline/calibration_t.hpp>
 #include <laserline/image_t.hpp>
 #include <laserline/point_t.hpp>
 #include <laserline/profile_t.hpp>
@@ -37,6 +38,8 @@ bool decode(const void* data, std::size_t size, laserline::profile_t* out, const
 bool decode(const void* data, std::size_t size, laserline::status_t* out, const Limits& limits,
             std::string* problem);
 bool decode(const void* data, std::size_t size, laserline::image_t* out, const Limits& limits,
+            std::string* problem);
+bool decode(const void* data, std::size_t size, laserline::calibration_t* out, const Limits& limits,
             std::string* problem);
 
 // The type fingerprint in front of an encoded message (0 when shorter than one).

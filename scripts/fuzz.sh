@@ -8,7 +8,7 @@ cd "$(dirname "$0")/.."
 seconds=${1:-20}
 shift || true
 harnesses=("$@")
-[ ${#harnesses[@]} -gt 0 ] || harnesses=(profile status point image_message image_payload lcm_log
+[ ${#harnesses[@]} -gt 0 ] || harnesses=(profile status point calibration_message image_message image_payload lcm_log
                                           config calibration poses)
 build=build/fuzz
 CC=clang-16 CXX=clang++-16 cmake -S tests/fuzz -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null

@@ -268,6 +268,24 @@ TEST_F(AravisTest, MissingCameraOrImpossibleFormatIsAClearError) {
   EXPECT_EQ(error.rfind("device '127.0.0.1': pixel_format 'Mono12': ", 0), 0u) << error;
 }
 
+// Each frame carries the exposure and gain the camera was set to (read back from it once after
+// configuring: what the camera took, not what was asked for).
+TEST_F(AravisTest, FramesCarryTheCamerasExposureAndGain) {
+  FakeCamera fake;
+  ASSERT_TRUE(fake.wait_ready());
+  AravisCameraOptions o = options(320, 240, 50);
+  o.exposure_us = 2500;
+  o.gain_db = 3;
+  AravisCamera camera(o);
+  std::string error;
+  ASSERT_TRUE(camera.open(&error)) << error;
+  std::vector<std::uint8_t> pixels(camera.format().bytes());
+  FrameInfo info;
+  ASSERT_EQ(camera.grab(pixels, info, std::chrono::milliseconds(1000)), GrabStatus::kOk);
+  EXPECT_DOUBLE_EQ(info.exposure_us, 2500);
+  EXPECT_DOUBLE_EQ(info.gain_db, 3);
+}
+
 TEST_F(AravisTest, Mono16IsDeliveredAsItsTopByte) {
   FakeCamera fake;
   ASSERT_TRUE(fake.wait_ready());

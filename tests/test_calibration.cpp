@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <opencv2/core.hpp>
 #include <string>
@@ -269,6 +270,65 @@ TEST_F(CalibrationFile, NativeErrorsUnchanged) {
   EXPECT_EQ(error_of("laser:\n  angel_deg: 80\n"),
             "calib.yaml:2: laser.angel_deg: unknown key (expected one of: angle_deg, baseline_m, "
             "plane, sheet_width_m, side)");
+}
+
+// calibration_id: what a log's profiles and calibration_t name; it must stay the same across
+// versions (logs outlive the software) and tell any two calibrations apart.
+TEST(CalibrationId, StableAndTheSameHoweverTheSheetIsWritten) {
+  const Calibration defaults;
+  EXPECT_EQ(calibration_id(defaults), calibration_id(Calibration{}));
+  // Pinned (computed independently in Python, docs/messages.md): a change of the serialisation
+  // would make every recorded log name another id.
+  EXPECT_EQ(calibration_id_text(calibration_id(defaults)), "252c9bdbd4951ce8");
+  // The sheet given as its plane triangulates as baseline and angle do: the same id.
+  Calibration as_plane = defaults;
+  as_plane.laser.plane = defaults.laser.plane_coefficients();
+  as_plane.laser.baseline_m = 1.0;  // not used once the plane is given
+  EXPECT_EQ(calibration_id(as_plane), calibration_id(defaults));
+  Calibration negative_zero = defaults;
+  negative_zero.camera.distortion[2] = -0.0;
+  EXPECT_EQ(calibration_id(negative_zero), calibration_id(defaults));
+  EXPECT_EQ(calibration_id_text(0x00ab), "00000000000000ab");
+  EXPECT_EQ(calibration_id_text(0xfedcba9876543210), "fedcba9876543210");
+}
+
+TEST(CalibrationId, ChangesWithEveryValue) {
+  const Calibration base;
+  const std::uint64_t id = calibration_id(base);
+  std::map<std::uint64_t, std::string> seen{{id, "base"}};
+  auto differs = [&](const std::string& what, const std::function<void(Calibration&)>& change) {
+    Calibration c = base;
+    change(c);
+    const std::uint64_t other = calibration_id(c);
+    EXPECT_NE(other, id) << what;
+    const auto [at, inserted] = seen.emplace(other, what);
+    EXPECT_TRUE(inserted) << what << " gives the id of " << at->second;
+  };
+  differs("width", [](Calibration& c) { c.camera.width += 1; });
+  differs("height", [](Calibration& c) { c.camera.height += 1; });
+  differs("width and height swapped", [](Calibration& c) {
+    c.camera.width = 1024;
+    c.camera.height = 1280;
+  });
+  differs("fx", [](Calibration& c) { c.camera.fx = std::nextafter(c.camera.fx, 2e3); });
+  differs("fy", [](Calibration& c) { c.camera.fy += 0.001; });
+  differs("cx", [](Calibration& c) { c.camera.cx += 0.001; });
+  differs("cy", [](Calibration& c) { c.camera.cy += 0.001; });
+  for (std::size_t k = 0; k < 5; ++k) {
+    differs("distortion " + std::to_string(k),
+            [k](Calibration& c) { c.camera.distortion[k] = 1e-6; });
+  }
+  differs("baseline", [](Calibration& c) { c.laser.baseline_m += 0.001; });
+  differs("angle", [](Calibration& c) { c.laser.angle_deg += 0.01; });
+  differs("side", [](Calibration& c) { c.laser.side = LaserSide::kBelow; });
+  for (std::size_t k = 0; k < 4; ++k) {
+    differs("plane " + std::to_string(k), [k](Calibration& c) {
+      std::array<double, 4> plane = c.laser.plane_coefficients();
+      plane[k] += 1e-4;
+      c.laser.plane = plane;
+    });
+  }
+  differs("sheet width", [](Calibration& c) { c.laser.sheet_width_m *= 2; });
 }
 
 }  // namespace

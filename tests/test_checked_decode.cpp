@@ -43,7 +43,27 @@ laserline::profile_t profile(int points) {
   }
   p.num_points = points;
   p.instance_id = -5;
+  p.exposure_us = 2500;
+  p.gain_db = NAN;  // not reported
+  p.calibration_id = static_cast<std::int64_t>(0x8000'0000'0000'0001);
   return p;
+}
+
+laserline::calibration_t calibration() {
+  laserline::calibration_t c{};
+  c.utime = 1'700'000'000'000'000;
+  c.calibration_id = 0x252c9bdbd4951ce8;
+  c.width = 1280;
+  c.height = 1024;
+  c.fx = c.fy = 1400;
+  c.cx = 639.5;
+  c.cy = 511.5;
+  c.laser_plane[1] = 1;
+  c.laser_plane[2] = -0.176;
+  c.laser_plane[3] = 0.25;
+  c.sheet_width_m = 0.003;
+  c.instance_id = 0x0123456789abcdef;
+  return c;
 }
 
 laserline::status_t status() {
@@ -94,6 +114,9 @@ TEST(CheckedDecode, RealMessagesRoundTripAndEveryPrefixIsRefused) {
     EXPECT_EQ(encode(back), bytes);
     EXPECT_EQ(back.num_points, points);
     EXPECT_EQ(back.instance_id, -5);
+    EXPECT_EQ(back.exposure_us, 2500);
+    EXPECT_TRUE(std::isnan(back.gain_db));
+    EXPECT_EQ(static_cast<std::uint64_t>(back.calibration_id), 0x8000'0000'0000'0001u);
   }
   every_prefix_refused<laserline::profile_t>(encode(profile(3)));
   const Bytes s = encode(status());
@@ -116,7 +139,14 @@ TEST(CheckedDecode, RealMessagesRoundTripAndEveryPrefixIsRefused) {
   Bytes longer = i;
   longer.push_back(0);
   EXPECT_FALSE(decode(longer.data(), longer.size(), &ib, Limits{}, &problem));
-  EXPECT_EQ(problem, "1 bytes after the end of the laserline.image_t (191 of 192 bytes used)");
+  EXPECT_EQ(problem, "1 bytes after the end of the laserline.image_t (207 of 208 bytes used)");
+  const Bytes c = encode(calibration());
+  laserline::calibration_t cb;
+  ASSERT_TRUE(decode(c.data(), c.size(), &cb, Limits{}, &problem)) << problem;
+  EXPECT_EQ(encode(cb), c);
+  EXPECT_EQ(cb.calibration_id, 0x252c9bdbd4951ce8);
+  EXPECT_EQ(cb.laser_plane[3], 0.25);
+  every_prefix_refused<laserline::calibration_t>(c);
   EXPECT_FALSE(decode(s.data(), s.size(), &ib, Limits{}, &problem));
   EXPECT_EQ(problem, "not a laserline.image_t (another type's fingerprint)");
 }
@@ -137,7 +167,8 @@ TEST(CheckedDecode, CraftedLengthsAreRefusedInOneLine) {
     EXPECT_EQ(problem, "detector at byte 41: length " + std::to_string(length) + " outside 1..257");
   }
   const std::size_t num_points_at = kDetectorAt + 4 + 9 + 8 + 1 + 1 + 48;
-  for (std::int32_t n : {-1, 0x7fffffff, 3}) {
+  // 4 points of 23 bytes do not fit in the 2 points and the 32 bytes after them.
+  for (std::int32_t n : {-1, 0x7fffffff, 4}) {
     Bytes bytes = encode(profile(2));
     put_i32(bytes, num_points_at, n);
     EXPECT_FALSE(decode(bytes.data(), bytes.size(), &p, Limits{}, &problem)) << n;
@@ -158,6 +189,20 @@ TEST(CheckedDecode, CraftedLengthsAreRefusedInOneLine) {
     EXPECT_FALSE(decode(image_bytes.data(), image_bytes.size(), &m, Limits{}, &problem));
     EXPECT_EQ(problem, "size at byte 59: " + std::to_string(size) + " outside 0..67108864");
   }
+  // A calibration_t cut short in its laser plane, one with a byte too many, another type.
+  laserline::calibration_t c;
+  const Bytes calibration_bytes = encode(calibration());
+  EXPECT_EQ(calibration_bytes.size(), 8u + 16 + 8 + 32 + 40 + 32 + 8 + 8);
+  EXPECT_FALSE(decode(calibration_bytes.data(), 8 + 16 + 8 + 32 + 40 + 10, &c, Limits{}, &problem));
+  EXPECT_EQ(problem, "laser_plane at byte 104 runs past the end (114 bytes)");
+  Bytes longer = calibration_bytes;
+  longer.push_back(0);
+  EXPECT_FALSE(decode(longer.data(), longer.size(), &c, Limits{}, &problem));
+  EXPECT_EQ(problem,
+            "1 bytes after the end of the laserline.calibration_t (152 of 153 bytes used)");
+  const Bytes status_bytes = encode(status());
+  EXPECT_FALSE(decode(status_bytes.data(), status_bytes.size(), &c, Limits{}, &problem));
+  EXPECT_EQ(problem, "not a laserline.calibration_t (another type's fingerprint)");
 }
 
 TEST(CheckedDecode, ImagePixelsAreBoundedByTheirBytes) {

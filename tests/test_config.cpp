@@ -12,6 +12,7 @@
 #include <string>
 
 #include "daemon/backends.hpp"
+#include "daemon/lcm_publisher.hpp"
 
 namespace laserline::daemon {
 namespace {
@@ -38,6 +39,8 @@ TEST(Config, BuiltInDefaultIsValidAndRunsTheSimulator) {
   EXPECT_EQ(config.profile_channel, "LASERLINE_PROFILE");
   EXPECT_EQ(config.image_channel, "LASERLINE_IMAGE");
   EXPECT_EQ(config.status_channel, "LASERLINE_STATUS");
+  EXPECT_EQ(config.calibration_channel, "LASERLINE_CALIBRATION");
+  EXPECT_EQ(config.calibration_period_s, 5.0);
   Backends backends = create_backends(config);
   EXPECT_EQ(backends.camera->format().width, 1280);
   EXPECT_EQ(backends.camera->format().height, 1024);
@@ -288,6 +291,10 @@ TEST(Config, LcmChannelsAndUrl) {
       hal::load_yaml_text("lcm: {profile_channel: SCAN_A, url: 'memq://'}\n", "t"), "t");
   EXPECT_EQ(config.profile_channel, "SCAN_A");
   EXPECT_EQ(config.status_channel, "LASERLINE_STATUS");
+  EXPECT_EQ(error_of("lcm:\n  calibration_channel: ''\n"),
+            "test.yaml:2: lcm.calibration_channel: must be 1 to 63 characters");
+  EXPECT_EQ(error_of("lcm:\n  calibration_period_s: 0\n"),
+            "test.yaml:2: lcm.calibration_period_s: must be between 0.05 and 3600, got 0");
 }
 
 TEST(Config, Realtime) {
@@ -682,6 +689,56 @@ TEST(Config, LaserSheetOutOfViewNamesTheCalibrationFile) {
         << e.what();
   }
   std::filesystem::remove_all(dir);
+}
+
+// The calibration in a calibration_t message: what the daemon publishes is what a tool reads back
+// (the same id); a message whose values are out of range or whose id is not its content's is
+// refused in one line.
+TEST(CalibrationMessage, RoundTripsWithItsIdAndRefusesWhatDoesNotHold) {
+  hal::Calibration calibration;
+  calibration.camera.width = 640;
+  calibration.camera.height = 480;
+  calibration.camera.fx = 701.5;
+  calibration.camera.distortion = {-0.1, 0.02, 0.001, -0.002, 0.003};
+  calibration.laser.side = hal::LaserSide::kLeft;
+  const laserline::calibration_t message = calibration_message(calibration, 42);
+  EXPECT_EQ(static_cast<std::uint64_t>(message.calibration_id), hal::calibration_id(calibration));
+  EXPECT_EQ(message.instance_id, 42);
+  EXPECT_EQ(message.width, 640);
+  EXPECT_EQ(message.distortion[4], 0.003);
+  EXPECT_EQ(message.laser_plane[0], 1.0) << "the sheet of a projector on the left";
+  hal::Calibration back;
+  std::string problem;
+  ASSERT_TRUE(calibration_from_message(message, &back, &problem)) << problem;
+  EXPECT_EQ(hal::calibration_id(back), hal::calibration_id(calibration));
+  EXPECT_EQ(back.camera.fx, 701.5);
+  EXPECT_TRUE(back.laser.plane.has_value());
+
+  laserline::calibration_t changed = message;
+  changed.cy += 1;  // the content changed, the id did not
+  EXPECT_FALSE(calibration_from_message(changed, &back, &problem));
+  EXPECT_EQ(problem,
+            "calibration_id " +
+                hal::calibration_id_text(static_cast<std::uint64_t>(message.calibration_id)) +
+                " is not the id of its content (" +
+                hal::calibration_id_text(hal::calibration_id([&] {
+                  hal::Calibration c = calibration;
+                  c.camera.cy += 1;
+                  return c;
+                }())) +
+                ")");
+  changed = message;
+  changed.fx = NAN;
+  EXPECT_FALSE(calibration_from_message(changed, &back, &problem));
+  EXPECT_EQ(problem, "fx nan outside 1..1e+06");
+  changed = message;
+  changed.width = 0;
+  EXPECT_FALSE(calibration_from_message(changed, &back, &problem));
+  EXPECT_EQ(problem, "width 0 outside 16..16384");
+  changed = message;
+  changed.laser_plane[0] = changed.laser_plane[1] = changed.laser_plane[2] = 0;
+  EXPECT_FALSE(calibration_from_message(changed, &back, &problem));
+  EXPECT_EQ(problem, "laser_plane: the normal (a, b, c) is zero");
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 
 #include <sys/wait.h>
 #include <unistd.h>
+#include <laserline/calibration_t.hpp>
 #include <laserline/image_t.hpp>
 #include <laserline/profile_t.hpp>
 #include <lcm/lcm-cpp.hpp>
@@ -24,11 +25,13 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
+#include <optional>
 #include <span>
 #include <sstream>
 #include <string>
 #include <vector>
 
+#include "hal/calibration.hpp"
 #include "hal/sim/sim_scene.hpp"
 
 namespace laserline {
@@ -434,6 +437,135 @@ std::vector<std::uint8_t> encode(const Message& m) {
   return data;
 }
 
+// What laserlined publishes on LASERLINE_CALIBRATION, written here field by field.
+laserline::calibration_t calibration_message(const hal::Calibration& c) {
+  laserline::calibration_t m{};
+  m.utime = 1'700'000'000'000'000;
+  m.calibration_id = static_cast<std::int64_t>(hal::calibration_id(c));
+  m.width = c.camera.width;
+  m.height = c.camera.height;
+  m.fx = c.camera.fx;
+  m.fy = c.camera.fy;
+  m.cx = c.camera.cx;
+  m.cy = c.camera.cy;
+  std::copy(c.camera.distortion.begin(), c.camera.distortion.end(), m.distortion);
+  const std::array<double, 4> plane = c.laser.plane_coefficients();
+  std::copy(plane.begin(), plane.end(), m.laser_plane);
+  m.sheet_width_m = c.laser.sheet_width_m;
+  return m;
+}
+
+// A log of frames 0 and 1 as a daemon of `calibration` records it: its calibration_t first
+// (unless left out), then each frame's image_t and a profile naming the calibration.
+void write_dive(const std::string& log_path, hal::SimScene& scene,
+                const std::optional<hal::Calibration>& published, std::uint64_t profile_id) {
+  lcm::LogFile log(log_path, "w");
+  ASSERT_TRUE(log.good());
+  std::int64_t utime = 1'700'000'000'000'000;
+  if (published) {
+    write_event(log, "LASERLINE_CALIBRATION", encode(calibration_message(*published)), utime);
+  }
+  for (int k : {0, 1}) {
+    const cv::Mat image = render(scene, k);
+    laserline::image_t m = image_message(image, k);
+    m.pixelformat = laserline::image_t::PIXEL_FORMAT_GRAY;
+    m.row_stride = kWidth;
+    m.data.assign(image.data, image.data + image.total());
+    m.size = static_cast<std::int32_t>(m.data.size());
+    write_event(log, "LASERLINE_IMAGE", encode(m), utime += 33'333);
+    laserline::profile_t p{};
+    p.sequence = k;
+    p.laser_on = true;
+    p.detector = "maxvalue";
+    p.calibration_id = static_cast<std::int64_t>(profile_id);
+    write_event(log, "LASERLINE_PROFILE", encode(p), utime += 10);
+  }
+}
+
+// issue 16: a log says which calibration made it. Without --calib the log's calibration_t is
+// used (and said so); a --calib that is another calibration is refused before anything is
+// written, unless --override-log-calibration; profiles naming another calibration are a mismatch
+// too.
+TEST_F(LaserlineExtract, LcmLogCarriesItsCalibration) {
+  hal::SimScene scene(options_);
+  const hal::Calibration recorded = hal::load_calibration_file(calib_);
+  const std::uint64_t id = hal::calibration_id(recorded);
+  const std::string dive = path("dive.lcmlog");
+  write_dive(dive, scene, recorded, id);
+  const std::string csv = path("points.csv");
+  const std::string common =
+      std::string(LASERLINE_EXTRACT_PATH) + " --detector maxvalue --output " + csv + " ";
+
+  RunResult r = run_command(common + dive);
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("laserline-extract: calibration " + hal::calibration_id_text(id) +
+                       " from the log " + dive + "\n"),
+            std::string::npos)
+      << r.out;
+  expect_frames_match(read_csv(csv), {{0, 0}, {1, 1}}, scene);
+
+  // The same calibration given: taken without a word.
+  r = run_command(common + "--calib " + calib_ + " " + dive);
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_EQ(r.out.find("from the log"), std::string::npos) << r.out;
+
+  // Another calibration (the sheet 1 mm further away): refused, one line naming both ids.
+  const std::string other = write_calibration(
+      "other.yaml",
+      "{baseline_m: " + std::to_string(options_.calibration.laser.baseline_m + 0.001) +
+          ", angle_deg: " + std::to_string(options_.calibration.laser.angle_deg) + "}");
+  const std::uint64_t other_id = hal::calibration_id(hal::load_calibration_file(other));
+  fs::remove(csv);
+  r = run_command(common + "--calib " + other + " " + dive);
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  EXPECT_EQ(r.out, "laserline-extract: --calib " + other + " is calibration " +
+                       hal::calibration_id_text(other_id) + ", but " + dive +
+                       " was recorded with calibration " + hal::calibration_id_text(id) + " (" +
+                       dive +
+                       " event 0 (LASERLINE_CALIBRATION)); leave out --calib to use the log's, or "
+                       "add --override-log-calibration\n");
+  EXPECT_FALSE(fs::exists(csv)) << "refused before any output";
+  r = run_command(common + "--calib " + other + " --override-log-calibration " + dive);
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_TRUE(fs::exists(csv));
+
+  // No calibration_t, profiles naming another calibration than --calib: refused the same way.
+  const std::string profiles_only = path("profiles_only.lcmlog");
+  write_dive(profiles_only, scene, std::nullopt, other_id);
+  r = run_command(common + "--calib " + calib_ + " " + profiles_only);
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  EXPECT_NE(r.out.find(" was recorded with calibration " + hal::calibration_id_text(other_id) +
+                       " (" + profiles_only + " event 1 (LASERLINE_PROFILE))"),
+            std::string::npos)
+      << r.out;
+  // ... and without --calib there is nothing to extract them with.
+  r = run_command(common + profiles_only);
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  EXPECT_EQ(r.out, "laserline-extract: --calib is required: the profiles of " + profiles_only +
+                       " event 1 (LASERLINE_PROFILE) name calibration " +
+                       hal::calibration_id_text(other_id) +
+                       ", but no laserline.calibration_t in the log carries it (see --help)\n");
+  // An image without a log: --calib is required.
+  r = run_command(common + path("none.png"));
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  EXPECT_EQ(r.out,
+            "laserline-extract: --calib is required: no input is an LCM log that carries a "
+            "laserline.calibration_t (see --help)\n");
+
+  // A log whose calibration_t is one calibration and whose profiles name another (two
+  // recordings joined): without --calib, its frames are not extracted with either.
+  const std::string mixed = path("mixed.lcmlog");
+  write_dive(mixed, scene, recorded, other_id);
+  r = run_command(common + mixed);
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find(
+                "laserline-extract: " + mixed + ": event 2 (LASERLINE_PROFILE) names calibration " +
+                hal::calibration_id_text(other_id) + ", not " + hal::calibration_id_text(id) +
+                " of " + mixed + "'s calibration_t in use; skipped"),
+            std::string::npos)
+      << r.out;
+}
+
 // A log as laserlined and lcm-logger record it: image_t frames (8-bit with row padding,
 // 16-bit little and big endian, PNG-compressed), profile_t messages between them, and one
 // image_t whose payload is cut short.
@@ -462,6 +594,8 @@ TEST_F(LaserlineExtract, LcmLogOfImageMessages) {
     for (int k : {0, 2}) {
       laserline::profile_t p;
       p.sequence = k;
+      p.calibration_id = static_cast<std::int64_t>(
+          hal::calibration_id(hal::load_calibration_file(calib_)));  // the one given
       p.laser_on = k != 2;
       p.detector = "maxvalue";
       p.num_points = 0;

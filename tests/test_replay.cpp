@@ -12,11 +12,13 @@
 #include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
+#include <laserline/calibration_t.hpp>
 #include <laserline/image_t.hpp>
 #include <laserline/profile_t.hpp>
 #include <laserline/status_t.hpp>
 #include <lcm/lcm-cpp.hpp>
 
+#include <array>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -24,9 +26,12 @@
 #include <string>
 #include <vector>
 
+#include "daemon/config.hpp"
 #include "daemon/lcm_camera.hpp"
+#include "hal/calibration.hpp"
 #include "hal/clock.hpp"
 #include "lcmtypes/checked_decode.hpp"
+#include "lcmtypes/lcm_log.hpp"
 #include "private_network.hpp"
 
 namespace {
@@ -457,6 +462,106 @@ calibration:
 detector: {name: maxvalue, maxvalue: {threshold: 60}}
 lcm: )" + lcm +
          "\n";
+}
+
+// issue 16: a log says which calibration made its points and with which exposure and gain each
+// frame was taken. The daemon on the simulator writes calibration_t at start (before any profile)
+// and every lcm.calibration_period_s; every profile names it and carries the simulated camera's
+// exposure and gain (so does every raw frame). laserline-extract takes the log's calibration
+// without --calib, laserline-listen shows it.
+TEST(RecordedLog, CarriesItsCalibrationAndEachFramesExposure) {
+  TempDir dir;
+  const std::string dive = dir / "dive.lcmlog";
+  const std::string rec = dir / "record.yaml";
+  std::ofstream(rec) << scanner_config(
+      "  backend: sim\n  frame_rate_hz: 20\n  sim: {seed: 3, distance_m: 1.0, tilt_y_deg: 10, "
+      "noise_sigma: 1.5, exposure_us: 2500, gain_db: 6}",
+      "{url: \"file://" + dive +
+          "?mode=w\", image_every_n: 1, image_downscale: 1, image_compression: zlib, "
+          "calibration_period_s: 0.5}");
+  Child daemon({LASERLINED_PATH, "--config", rec, "--duration", "2.2"}, dir / "record.out");
+  ASSERT_EQ(daemon.wait(30), 0) << daemon.output();
+  const laserline::daemon::DaemonConfig config = laserline::daemon::load_config_file(rec);
+  const std::uint64_t id = laserline::hal::calibration_id(config.calibration);
+
+  laserline::messages::LcmLogReader log;
+  std::string problem;
+  ASSERT_TRUE(log.open(dive, &problem)) << problem;
+  laserline::messages::LcmLogReader::Event event;
+  laserline::messages::LcmLogReader::Damage damage;
+  std::vector<std::int64_t> calibration_utimes;
+  std::int64_t profiles = 0, images = 0, profiles_before_calibration = 0;
+  while (log.next(&event, &damage)) {
+    const laserline::messages::Limits limits;
+    if (event.channel == "LASERLINE_CALIBRATION") {
+      laserline::calibration_t c;
+      ASSERT_TRUE(
+          laserline::messages::decode(event.data.data(), event.data.size(), &c, limits, &problem))
+          << problem;
+      EXPECT_EQ(static_cast<std::uint64_t>(c.calibration_id), id);
+      EXPECT_EQ(c.width, 320);
+      EXPECT_EQ(c.height, 256);
+      EXPECT_EQ(c.fx, 350);
+      EXPECT_EQ(c.cy, 127.5);
+      EXPECT_EQ(c.sheet_width_m, 0.003);
+      const std::array<double, 4> plane = config.calibration.laser.plane_coefficients();
+      for (std::size_t k = 0; k < 4; ++k)
+        EXPECT_EQ(c.laser_plane[k], plane[k]) << k;
+      EXPECT_NE(c.instance_id, 0);
+      calibration_utimes.push_back(c.utime);
+    } else if (event.channel == "LASERLINE_PROFILE") {
+      laserline::profile_t p;
+      ASSERT_TRUE(
+          laserline::messages::decode(event.data.data(), event.data.size(), &p, limits, &problem))
+          << problem;
+      EXPECT_EQ(static_cast<std::uint64_t>(p.calibration_id), id) << p.sequence;
+      EXPECT_EQ(p.exposure_us, 2500) << p.sequence;
+      EXPECT_EQ(p.gain_db, 6) << p.sequence;
+      profiles_before_calibration += calibration_utimes.empty() ? 1 : 0;
+      ++profiles;
+    } else if (event.channel == "LASERLINE_IMAGE") {
+      laserline::image_t m;
+      ASSERT_TRUE(
+          laserline::messages::decode(event.data.data(), event.data.size(), &m, limits, &problem))
+          << problem;
+      EXPECT_EQ(m.exposure_us, 2500);
+      EXPECT_EQ(m.gain_db, 6);
+      ++images;
+    }
+  }
+  EXPECT_GE(profiles, 20);
+  EXPECT_GE(images, 20);
+  EXPECT_EQ(profiles_before_calibration, 0) << "calibration_t comes first";
+  // At start and every 0.5 s of the 2.2 s run: 5 (4 on a slow start).
+  EXPECT_GE(calibration_utimes.size(), 4u);
+  EXPECT_LE(calibration_utimes.size(), 6u);
+  for (std::size_t i = 1; i < calibration_utimes.size(); ++i) {
+    EXPECT_NEAR(static_cast<double>(calibration_utimes[i] - calibration_utimes[i - 1]) * 1e-6, 0.5,
+                0.15)
+        << i;
+  }
+  RecordProperty("calibration_messages", std::to_string(calibration_utimes.size()));
+
+  const std::string id_text = laserline::hal::calibration_id_text(id);
+  Child extract({LASERLINE_EXTRACT_PATH, "--detector", "maxvalue", "--threshold", "60", "--output",
+                 dir / "points.csv", dive},
+                dir / "extract.out");
+  EXPECT_EQ(extract.wait(60), 0) << extract.output();
+  EXPECT_NE(extract.output().find("laserline-extract: calibration " + id_text + " from the log " +
+                                  dive + "\n"),
+            std::string::npos)
+      << extract.output();
+  Child listen({LASERLINE_LISTEN_PATH, "--url", "file://" + dive}, dir / "listen.out");
+  EXPECT_EQ(listen.wait(30), 0) << listen.output();
+  EXPECT_NE(listen.output().find("  calibration: " + id_text + " (" +
+                                 std::to_string(calibration_utimes.size()) +
+                                 " calibration_t messages on LASERLINE_CALIBRATION)\n"),
+            std::string::npos)
+      << listen.output();
+  EXPECT_NE(listen.output().find("  exposure, gain (last profile): 2500 us, 6 dB\n"),
+            std::string::npos)
+      << listen.output();
+  EXPECT_EQ(listen.output().find("calibration mismatch"), std::string::npos) << listen.output();
 }
 
 class Replay : public ::testing::Test {

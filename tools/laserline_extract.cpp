@@ -7,6 +7,7 @@
 // Single-threaded. Every frame's points are written and flushed before the next frame is read,
 // so an interruption or a bad input never loses what was already extracted.
 #include <unistd.h>
+#include <laserline/calibration_t.hpp>
 #include <laserline/image_t.hpp>
 #include <laserline/profile_t.hpp>
 
@@ -31,6 +32,7 @@
 #include <vector>
 
 #include "daemon/config.hpp"
+#include "daemon/lcm_publisher.hpp"
 #include "hal/calibration.hpp"
 #include "hal/laser_channel.hpp"
 #include "lcmtypes/checked_decode.hpp"
@@ -47,12 +49,18 @@ namespace fs = std::filesystem;
 using laserline::hal::ConfigError;
 
 constexpr const char* kUsage =
-    "usage: laserline-extract --calib FILE [--config FILE] --detector NAME [--threshold VALUE]\n"
+    "usage: laserline-extract [--calib FILE [--override-log-calibration]] [--config FILE]\n"
+    "                         --detector NAME [--threshold VALUE]\n"
     "                         [--channel NAME|EXPR] [--roi x,y,w,h] [--mask FILE]\n"
     "                         [--laser-pattern BITS] [--overlay-dir DIR] [--all-candidates]\n"
     "                         [--output points.csv] [--ply cloud.ply [--poses poses.csv]]\n"
     "                         INPUT...\n"
-    "  --calib FILE       calibration (camera and laser); images must have its size\n"
+    "  --calib FILE       calibration (camera and laser); images must have its size. Without\n"
+    "                     it, the calibration an LCM log carries (laserline.calibration_t, which\n"
+    "                     laserlined publishes); with it, a log recorded with another calibration\n"
+    "                     (its calibration_t or its profiles' calibration_id) is refused\n"
+    "  --override-log-calibration  extract such a log with --calib all the same (a newer\n"
+    "                     calibration of the same scanner)\n"
     "  --config FILE      laserlined configuration whose detector options are used\n"
     "                     (default: the built-in configuration)\n"
     "  --detector NAME    detector to run (see the list below)\n"
@@ -170,6 +178,7 @@ class Progress {
 };
 
 struct Options {
+  bool override_log_calibration = false;
   std::string calib, config, detector, overlay_dir, output, ply, poses;
   // As given; checked once the calibration and the detector are known.
   std::string threshold, roi, mask;
@@ -511,12 +520,74 @@ void extract_video(Extractor& x, const std::string& path, std::size_t input, std
   }
 }
 
+// The calibration the frames are extracted with, and what a log must name to be extracted.
+struct CalibrationInUse {
+  std::uint64_t id = 0;
+  std::string name;            // for messages: the file, or the log it came from
+  bool accept_others = false;  // --override-log-calibration
+};
+
+std::string id_text(std::int64_t id) {
+  return laserline::hal::calibration_id_text(static_cast<std::uint64_t>(id));
+}
+
+// What a log says of its calibration before its frames: its first laserline.calibration_t (the
+// daemon publishes one at start, before any profile, and every few seconds), and the
+// calibration_id of the first profile when that comes first (a logger started after the daemon).
+// Reading stops at the first calibration_t: only a log without one is read to its end.
+struct LogCalibration {
+  std::optional<laserline::hal::Calibration> calibration;
+  std::uint64_t id = 0;
+  std::string where;  // the event that named the id; empty: the log names none
+};
+
+LogCalibration first_log_calibration(const std::string& path) {
+  using laserline::messages::LcmLogReader;
+  LogCalibration found;
+  LcmLogReader log;
+  std::string problem;
+  if (!log.open(path, &problem)) return found;  // reported when the log is extracted
+  const laserline::messages::Limits limits;
+  LcmLogReader::Event event;
+  LcmLogReader::Damage damage;
+  laserline::calibration_t message;
+  laserline::profile_t profile;
+  laserline::hal::Calibration calibration;
+  while (log.next(&event, &damage)) {
+    const std::int64_t hash =
+        laserline::messages::message_hash(event.data.data(), event.data.size());
+    const std::string where =
+        path + " event " + std::to_string(event.number) + " (" + event.channel + ")";
+    if (hash == laserline::calibration_t::getHash() &&
+        laserline::messages::decode(event.data.data(), event.data.size(), &message, limits,
+                                    &problem) &&
+        laserline::daemon::calibration_from_message(message, &calibration, &problem)) {
+      const auto id = static_cast<std::uint64_t>(message.calibration_id);
+      if (found.where.empty()) {
+        found.id = id;
+        found.where = where;
+      }
+      if (found.id == id) found.calibration = calibration;
+      return found;
+    }
+    if (found.where.empty() && hash == laserline::profile_t::getHash() &&
+        laserline::messages::decode(event.data.data(), event.data.size(), &profile, limits,
+                                    &problem)) {
+      found.id = static_cast<std::uint64_t>(profile.calibration_id);
+      found.where = where;
+    }
+  }
+  return found;
+}
+
 // An LCM log: every laserline.image_t message (on any channel) is a frame, in log order. The
 // laser state of a frame comes from the profile_t of the same sequence number in the same log
 // (image_t does not carry it); without one, from --laser-pattern (else on). Damaged records are
 // skipped (reported with their byte offsets) and reading goes on at the next whole event; every
-// message is decoded only after its lengths are checked (messages::decode).
-void extract_log(Extractor& x, const std::string& path, std::size_t input, std::size_t inputs) {
+// message is decoded only after its lengths are checked (messages::decode). A log whose
+// calibration_t or profiles name another calibration than the one in use is skipped whole.
+void extract_log(Extractor& x, const std::string& path, std::size_t input, std::size_t inputs,
+                 const CalibrationInUse& in_use) {
   using laserline::messages::LcmLogReader;
   const laserline::messages::Limits limits;
   std::map<std::int64_t, bool> laser_on_by_sequence;
@@ -531,16 +602,38 @@ void extract_log(Extractor& x, const std::string& path, std::size_t input, std::
       return;
     }
     laserline::profile_t profile;
+    laserline::calibration_t calibration;
+    std::string other_calibration;  // the first event naming another calibration
     while (log.next(&event, &damage)) {
       const std::int64_t hash =
           laserline::messages::message_hash(event.data.data(), event.data.size());
+      std::optional<std::int64_t> named;
       if (hash == laserline::image_t::getHash()) {
         ++images;
       } else if (hash == laserline::profile_t::getHash() &&
                  laserline::messages::decode(event.data.data(), event.data.size(), &profile, limits,
                                              &problem)) {
         laser_on_by_sequence[profile.sequence] = profile.laser_on;
+        named = profile.calibration_id;
+      } else if (hash == laserline::calibration_t::getHash()) {
+        if (laserline::messages::decode(event.data.data(), event.data.size(), &calibration, limits,
+                                        &problem)) {
+          named = calibration.calibration_id;
+        } else {
+          x.fail(path + " event " + std::to_string(event.number) + " (" + event.channel +
+                 "): not a valid laserline.calibration_t: " + problem + "; skipped");
+        }
       }
+      if (named && static_cast<std::uint64_t>(*named) != in_use.id && other_calibration.empty()) {
+        other_calibration = "event " + std::to_string(event.number) + " (" + event.channel +
+                            ") names calibration " + id_text(*named);
+      }
+    }
+    if (!other_calibration.empty() && !in_use.accept_others) {
+      x.fail(path + ": " + other_calibration + ", not " +
+             laserline::hal::calibration_id_text(in_use.id) + " of " + in_use.name +
+             " in use; skipped (--override-log-calibration extracts it all the same)");
+      return;
     }
   }
   if (images == 0) {
@@ -629,7 +722,8 @@ Options parse_arguments(int argc, char** argv) {
                                   {"output", true},
                                   {"ply", true},
                                   {"poses", true},
-                                  {"all-candidates", false}});
+                                  {"all-candidates", false},
+                                  {"override-log-calibration", false}});
   while (args.next()) {
     const std::string& arg = args.name();
     if (arg.empty()) {
@@ -679,9 +773,13 @@ Options parse_arguments(int argc, char** argv) {
       o.poses = value();
     } else if (arg == "--all-candidates") {
       o.all_candidates = true;
+    } else if (arg == "--override-log-calibration") {
+      o.override_log_calibration = true;
     }
   }
-  if (o.calib.empty()) usage_error("--calib is required");
+  if (o.override_log_calibration && o.calib.empty()) {
+    usage_error("--override-log-calibration goes with --calib");
+  }
   if (o.detector.empty()) usage_error("--detector is required (one of: " + detector_list() + ")");
   if (o.output.empty() && o.ply.empty()) usage_error("--output or --ply is required");
   if (!o.poses.empty() && o.ply.empty()) usage_error("--poses needs --ply");
@@ -817,17 +915,73 @@ std::vector<std::string> images_in_folder(const std::string& folder, std::error_
 int main(int argc, char** argv) {
   // OpenCV's own warnings (e.g. a failing decoder) would duplicate our one line per problem.
   cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);
-  const Options options = parse_arguments(argc, argv);
+  Options options = parse_arguments(argc, argv);
 
   const auto names = laserline::pipeline::detector_names();
   if (std::find(names.begin(), names.end(), options.detector) == names.end()) {
     fatal("--detector: unknown detector '" + options.detector + "' (one of: " + detector_list() +
           ")");
   }
+  std::vector<InputKind> kinds;
+  for (const auto& input : options.inputs)
+    kinds.push_back(kind_of(input));
   laserline::hal::Calibration calibration;
+  CalibrationInUse in_use;
+  in_use.accept_others = options.override_log_calibration;
+  if (!options.calib.empty()) {
+    try {
+      calibration = laserline::hal::load_calibration_file(options.calib);
+    } catch (const ConfigError& e) {
+      fatal(e.what());
+    }
+    in_use.id = laserline::hal::calibration_id(calibration);
+    in_use.name = options.calib;
+  }
+  // What the logs among the inputs were recorded with: before any output is written.
+  std::optional<LogCalibration> from_log;
+  for (std::size_t i = 0; i < options.inputs.size(); ++i) {
+    if (kinds[i] != InputKind::kLog) continue;
+    LogCalibration log = first_log_calibration(options.inputs[i]);
+    if (log.where.empty()) continue;
+    if (!options.calib.empty()) {
+      if (log.id != in_use.id && !options.override_log_calibration) {
+        fatal("--calib " + options.calib + " is calibration " +
+              laserline::hal::calibration_id_text(in_use.id) + ", but " + options.inputs[i] +
+              " was recorded with calibration " + laserline::hal::calibration_id_text(log.id) +
+              " (" + log.where +
+              "); leave out --calib to use the log's, or add --override-log-calibration");
+      }
+    } else if (!from_log) {
+      from_log = std::move(log);
+    } else if (log.id != from_log->id) {
+      fatal(options.inputs[i] + " was recorded with calibration " +
+            laserline::hal::calibration_id_text(log.id) + " (" + log.where + "), " +
+            from_log->where + " with calibration " +
+            laserline::hal::calibration_id_text(from_log->id) +
+            ": extract them apart, or give --calib");
+    }
+  }
+  if (options.calib.empty()) {
+    if (!from_log) {
+      usage_error(
+          "--calib is required: no input is an LCM log that carries a "
+          "laserline.calibration_t");
+    }
+    if (!from_log->calibration) {
+      usage_error("--calib is required: the profiles of " + from_log->where + " name calibration " +
+                  laserline::hal::calibration_id_text(from_log->id) +
+                  ", but no laserline.calibration_t in the log carries it");
+    }
+    calibration = *from_log->calibration;
+    in_use.id = from_log->id;
+    const std::string log_path = from_log->where.substr(0, from_log->where.find(" event "));
+    in_use.name = log_path + "'s calibration_t";
+    options.calib = in_use.name;  // names the calibration in messages
+    std::fprintf(stderr, "laserline-extract: calibration %s from the log %s\n",
+                 laserline::hal::calibration_id_text(in_use.id).c_str(), log_path.c_str());
+  }
   laserline::pipeline::DetectorOptions detector_options;
   try {
-    calibration = laserline::hal::load_calibration_file(options.calib);
     // The configuration's detector section (thresholds, front-end, motion); its calibration is
     // replaced by --calib.
     const laserline::daemon::DaemonConfig config =
@@ -885,9 +1039,6 @@ int main(int argc, char** argv) {
 
   Extractor x(options, calibration, std::move(detector), region, csv, ply ? &*ply : nullptr,
               poses ? &*poses : nullptr);
-  std::vector<InputKind> kinds;
-  for (const auto& input : options.inputs)
-    kinds.push_back(kind_of(input));
   for (std::size_t i = 0; i < options.inputs.size(); ++i) {
     const std::string& input = options.inputs[i];
     const std::size_t number = i + 1, inputs = options.inputs.size();
@@ -920,7 +1071,7 @@ int main(int argc, char** argv) {
       }
       case InputKind::kLog:
         x.start_sequence();
-        extract_log(x, input, number, inputs);
+        extract_log(x, input, number, inputs, in_use);
         break;
       case InputKind::kVideo:
         x.start_sequence();

@@ -3,6 +3,7 @@
 // the points of the same frame drawn on it.
 #include <signal.h>
 #include <time.h>
+#include <laserline/calibration_t.hpp>
 #include <laserline/image_t.hpp>
 #include <laserline/profile_t.hpp>
 #include <laserline/status_t.hpp>
@@ -30,6 +31,7 @@ namespace {
 constexpr const char* kUsage =
     "usage: laserline-listen [--url URL] [--duration S] [--quiet S] [--overlay FILE.png]\n"
     "                        [--profile-channel C] [--image-channel C] [--status-channel C]\n"
+    "                        [--calibration-channel C]\n"
     "  --url URL        LCM URL (default: LCM_DEFAULT_URL or udpm://239.255.76.67:7667?ttl=0)\n"
     "  --duration S     stop after S seconds (default: run until --quiet or SIGINT)\n"
     "  --quiet S        stop when nothing arrived for S seconds after the first message (default "
@@ -80,6 +82,10 @@ struct Listener {
   laserline::messages::Limits limits;
   laserline::messages::ProblemLog problems{"laserline-listen: "};
   std::map<std::string, std::set<std::int64_t>> instances;  // ids seen per channel
+  std::int64_t calibrations = 0;                            // calibration_t messages
+  std::set<std::int64_t> published_calibration_ids;         // in calibration_t
+  std::set<std::int64_t> profile_calibration_ids;           // named by profiles
+  double last_exposure_us = NAN, last_gain_db = NAN;
 
   // Messages from the network or a log: (bytes, receive time, channel, where for reports).
   struct Message {
@@ -126,6 +132,9 @@ struct Listener {
     last_sequence = p.sequence;
     last_utime = p.utime;
     ++profiles;
+    if (profile_calibration_ids.size() < 16) profile_calibration_ids.insert(p.calibration_id);
+    last_exposure_us = p.exposure_us;
+    last_gain_db = p.gain_db;
     points_per_profile.push_back(p.num_points);
     recent.push_back(std::move(p));
     if (recent.size() > 256) recent.pop_front();
@@ -147,6 +156,15 @@ struct Listener {
     statuses.push_back(std::move(s));
   }
 
+  void handle_calibration(const Message& m) {
+    laserline::calibration_t c;
+    if (!decode(m, &c)) return;
+    note_instance(m.channel, c.instance_id);
+    last_message_s = now_s(CLOCK_MONOTONIC);
+    ++calibrations;
+    if (published_calibration_ids.size() < 16) published_calibration_ids.insert(c.calibration_id);
+  }
+
   // LCM's subscription handlers (plain functions: GCC's UBSan misreports LCM's
   // member-function-pointer dispatch).
   static Message live(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
@@ -160,6 +178,9 @@ struct Listener {
   }
   static void on_status(const lcm::ReceiveBuffer* rbuf, const std::string& c, Listener* self) {
     self->handle_status(live(rbuf, c));
+  }
+  static void on_calibration(const lcm::ReceiveBuffer* rbuf, const std::string& c, Listener* self) {
+    self->handle_calibration(live(rbuf, c));
   }
 };
 
@@ -218,7 +239,46 @@ bool write_overlay(const Listener& l, const std::string& path) {
   return true;
 }
 
-void report(const Listener& l, const std::string& url) {
+std::string id_list(const std::set<std::int64_t>& ids) {
+  std::string text;
+  for (std::int64_t id : ids) {
+    char hex[20];
+    std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(id));
+    text += (text.empty() ? "" : ", ") + std::string(hex);
+  }
+  return text;
+}
+
+// Which calibration made the points: the ids published on the calibration channel and those the
+// profiles name, which must be the same one.
+void report_calibration(const Listener& l, const std::string& channel) {
+  const std::string published = id_list(l.published_calibration_ids);
+  if (l.calibrations == 0) {
+    std::printf(
+        "  calibration: none received on %s%s\n", channel.c_str(),
+        l.profiles > 0 ? ("; profiles name " + id_list(l.profile_calibration_ids)).c_str() : "");
+  } else {
+    std::printf("  calibration: %s (%lld calibration_t messages on %s)\n", published.c_str(),
+                static_cast<long long>(l.calibrations), channel.c_str());
+  }
+  if (l.calibrations > 0 && l.profiles > 0 &&
+      l.profile_calibration_ids != l.published_calibration_ids) {
+    std::printf("  calibration mismatch: profiles name %s, %s carries %s\n",
+                id_list(l.profile_calibration_ids).c_str(), channel.c_str(), published.c_str());
+  }
+  if (l.profiles > 0) {
+    auto value = [](double v, const char* unit) {
+      if (std::isnan(v)) return std::string("not reported");
+      char text[32];
+      std::snprintf(text, sizeof text, "%g %s", v, unit);
+      return std::string(text);
+    };
+    std::printf("  exposure, gain (last profile): %s, %s\n",
+                value(l.last_exposure_us, "us").c_str(), value(l.last_gain_db, "dB").c_str());
+  }
+}
+
+void report(const Listener& l, const std::string& url, const std::string& calibration_channel) {
   std::printf("laserline-listen: received on %s\n", url.c_str());
   const double span_s = static_cast<double>(l.last_utime - l.first_utime) * 1e-6;
   std::printf("  profiles: %lld (sequence %lld..%lld, %lld missing, %lld out of order), %.1f Hz\n",
@@ -296,6 +356,7 @@ void report(const Listener& l, const std::string& url) {
                 static_cast<long long>(l.images), static_cast<long long>(s.images_published),
                 static_cast<long long>(s.images_dropped));
   }
+  report_calibration(l, calibration_channel);
   if (l.decode_errors > 0) {
     std::printf("  undecodable messages: %lld\n", static_cast<long long>(l.decode_errors));
   }
@@ -309,7 +370,8 @@ void report(const Listener& l, const std::string& url) {
 // Reads a log to its end (LCM's own file:// reader stops at the first damaged record without a
 // word); false when it cannot be opened. *damaged: the log was damaged or cut short.
 bool read_log(const std::string& path, Listener& listener, const std::string& profile_channel,
-              const std::string& image_channel, const std::string& status_channel, bool* damaged) {
+              const std::string& image_channel, const std::string& status_channel,
+              const std::string& calibration_channel, bool* damaged) {
   laserline::messages::LcmLogReader log;
   std::string error;
   if (!log.open(path, &error)) {
@@ -348,6 +410,8 @@ bool read_log(const std::string& path, Listener& listener, const std::string& pr
       listener.handle_image(m);
     } else if (event.channel == status_channel) {
       listener.handle_status(m);
+    } else if (event.channel == calibration_channel) {
+      listener.handle_calibration(m);
     }
   }
   *damaged = log.totals().damaged_regions > 0;
@@ -364,7 +428,8 @@ int main(int argc, char** argv) {
   std::string url = env_url != nullptr ? env_url : "udpm://239.255.76.67:7667?ttl=0";
   double duration_s = 0, quiet_s = 2.0;
   std::string overlay, profile_channel = "LASERLINE_PROFILE", image_channel = "LASERLINE_IMAGE",
-                       status_channel = "LASERLINE_STATUS";
+                       status_channel = "LASERLINE_STATUS",
+                       calibration_channel = "LASERLINE_CALIBRATION";
   laserline::cli::Arguments args(argc, argv, "laserline-listen", kUsage,
                                  {{"url", true},
                                   {"duration", true},
@@ -372,7 +437,8 @@ int main(int argc, char** argv) {
                                   {"overlay", true},
                                   {"profile-channel", true},
                                   {"image-channel", true},
-                                  {"status-channel", true}});
+                                  {"status-channel", true},
+                                  {"calibration-channel", true}});
   while (args.next()) {
     const std::string& arg = args.name();
     auto value = [&]() -> std::string { return args.value(); };
@@ -401,6 +467,8 @@ int main(int argc, char** argv) {
       image_channel = value();
     } else if (arg == "--status-channel") {
       status_channel = value();
+    } else if (arg == "--calibration-channel") {
+      calibration_channel = value();
     } else {
       args.fail("unexpected argument '" + args.value() + "'");
     }
@@ -412,10 +480,11 @@ int main(int argc, char** argv) {
   if (url.rfind("file://", 0) == 0) {
     const std::string path = url.substr(7, url.find('?') - 7);
     bool damaged = false;
-    if (!read_log(path, listener, profile_channel, image_channel, status_channel, &damaged)) {
+    if (!read_log(path, listener, profile_channel, image_channel, status_channel,
+                  calibration_channel, &damaged)) {
       return 1;
     }
-    report(listener, url);
+    report(listener, url, calibration_channel);
     if (!overlay.empty()) write_overlay(listener, overlay);
     return listener.profiles > 0 && !damaged && listener.decode_errors == 0 ? 0 : 1;
   }
@@ -428,6 +497,7 @@ int main(int argc, char** argv) {
   lcm.subscribeFunction(profile_channel, &Listener::on_profile, &listener);
   lcm.subscribeFunction(image_channel, &Listener::on_image, &listener);
   lcm.subscribeFunction(status_channel, &Listener::on_status, &listener);
+  lcm.subscribeFunction(calibration_channel, &Listener::on_calibration, &listener);
 
   const double start = now_s(CLOCK_MONOTONIC);
   bool warned_silence = false;
@@ -448,7 +518,7 @@ int main(int argc, char** argv) {
     if (duration_s > 0 && now - start >= duration_s) break;
     if (listener.last_message_s > 0 && now - listener.last_message_s >= quiet_s) break;
   }
-  report(listener, url);
+  report(listener, url, calibration_channel);
   if (!overlay.empty()) write_overlay(listener, overlay);
   return listener.profiles > 0 ? 0 : 1;
 }

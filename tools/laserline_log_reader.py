@@ -87,6 +87,7 @@ def main():
     parser.add_argument("--profile-channel", default="LASERLINE_PROFILE")
     parser.add_argument("--status-channel", default="LASERLINE_STATUS")
     parser.add_argument("--image-channel", default="LASERLINE_IMAGE")
+    parser.add_argument("--calibration-channel", default="LASERLINE_CALIBRATION")
     args = parser.parse_args()
     if args.types:
         sys.path.insert(0, args.types)
@@ -108,8 +109,12 @@ def main():
                   file=sys.stderr)
 
     decoders = {args.profile_channel: laserline.profile_t, args.status_channel: laserline.status_t,
-                args.image_channel: laserline.image_t}
+                args.image_channel: laserline.image_t,
+                args.calibration_channel: laserline.calibration_t}
     profiles, statuses, images, other = [], [], [], {}
+    calibrations = {}  # calibration_id -> its last calibration_t
+    calibration_count = 0
+    profile_calibrations = set()  # the calibration ids the profiles name
     first_utime = last_utime = None
     try:
         points_out = open(args.points, "w", newline="") if args.points else None
@@ -156,6 +161,7 @@ def main():
                                                               for i in sorted(ids))))
             if decoder is laserline.profile_t:
                 profiles.append((msg.sequence, msg.num_points))
+                profile_calibrations.add(msg.calibration_id & (2**64 - 1))
                 if writer:
                     o, l, a = msg.search_origin, msg.search_line_step, msg.search_along
                     for p in msg.points:
@@ -166,6 +172,9 @@ def main():
                                         ["" if math.isnan(c) else "%.5f" % c for c in p.xyz])
             elif decoder is laserline.status_t:
                 statuses.append(msg)
+            elif decoder is laserline.calibration_t:
+                calibration_count += 1
+                calibrations[msg.calibration_id & (2**64 - 1)] = msg
             else:
                 images.append((msg.width, msg.height, msg.compression))
     except OSError as e:
@@ -204,6 +213,20 @@ def main():
               % (args.status_channel, len(statuses), s.camera_state, s.frames_processed,
                  s.frames_dropped, "on" if s.laser_on else "off", s.cpu_percent, s.bad_messages,
                  s.bad_frames, s.images_published, s.images_dropped, s.instance_id & (2**64 - 1)))
+    if calibrations:
+        print("%s: %d messages, calibration %s" % (
+            args.calibration_channel, calibration_count,
+            ", ".join("%016x (%dx%d, fx %g, fy %g, cx %g, cy %g, plane %s)"
+                      % (i, c.width, c.height, c.fx, c.fy, c.cx, c.cy,
+                         " ".join("%g" % v for v in c.laser_plane))
+                      for i, c in sorted(calibrations.items()))))
+    else:
+        print("%s: no calibration" % args.calibration_channel)
+    if calibrations and profile_calibrations and profile_calibrations != set(calibrations):
+        report("%s: the profiles name calibration %s, %s carries %s" % (
+            args.log, ", ".join("%016x" % i for i in sorted(profile_calibrations)),
+            args.calibration_channel,
+            ", ".join("%016x" % i for i in sorted(calibrations))))
     if images:
         names = {0: "none", 1: "png", 2: "jpeg", 3: "zlib"}
         w, h, c = images[-1]

@@ -28,10 +28,11 @@ bool sleep_until(std::int64_t deadline_ns, const std::atomic<bool>& stopped) {
 }  // namespace
 
 SimCamera::SimCamera(const SimSceneOptions& options, const Laser* laser, SimCameraStall stall,
-                     const LaserChannel& channel)
+                     const LaserChannel& channel, SimCameraExposure exposure)
     : scene_(options),
       laser_(laser),
       stall_(stall),
+      exposure_(exposure),
       period_ns_(static_cast<std::int64_t>(std::llround(1e9 / options.frame_rate_hz))) {
   if (options.colour != SimColour::kMono) {
     const FrameFormat f = scene_.format();
@@ -93,6 +94,8 @@ GrabStatus SimCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
   info.arrival_mono_ns = monotonic_ns();
   info.arrival_wall_ns = wall_ns();
   info.laser_on = laser_on;
+  info.exposure_us = exposure_.exposure_us;
+  info.gain_db = exposure_.gain_db;
   ++next_sequence_;
   return GrabStatus::kOk;
 }

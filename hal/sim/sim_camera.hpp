@@ -20,12 +20,20 @@ struct SimCameraStall {
   double for_s = 0;
 };
 
+// What the simulated camera reports as each frame's exposure and gain (camera.sim.exposure_us,
+// gain_db), as a real camera reports its settings; the rendered scene's brightness is the scene's
+// own (laser_peak, ambient) and does not follow them.
+struct SimCameraExposure {
+  double exposure_us = 1000;
+  double gain_db = 0;
+};
+
 class SimCamera final : public Camera {
  public:
   // Colour scenes are delivered as `channel` of them (the conversion a colour camera backend
   // makes, hal/pixel_conversion.hpp).
   SimCamera(const SimSceneOptions& options, const Laser* laser, SimCameraStall stall = {},
-            const LaserChannel& channel = {});
+            const LaserChannel& channel = {}, SimCameraExposure exposure = {});
 
   bool open(std::string* error) override;
   FrameFormat format() const override { return scene_.format(); }
@@ -39,6 +47,7 @@ class SimCamera final : public Camera {
   std::vector<std::uint8_t> raw_;  // colour scenes: the frame as rendered
   const Laser* laser_;
   SimCameraStall stall_;
+  SimCameraExposure exposure_;
   std::int64_t period_ns_;
   std::int64_t start_mono_ns_ = 0;
   std::uint64_t next_sequence_ = 0;

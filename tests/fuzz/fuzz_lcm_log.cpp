@@ -20,6 +20,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   laserline::status_t status;
   laserline::image_t image;
   laserline::point_t point;
+  laserline::calibration_t calibration;
   std::string problem;
   while (true) {
     const bool more = log.next(&event, &damage);
@@ -36,6 +37,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       laserline::messages::decode(event.data.data(), event.data.size(), &image, limits, &problem);
     } else if (hash == laserline::point_t::getHash()) {
       laserline::messages::decode(event.data.data(), event.data.size(), &point, limits, &problem);
+    } else if (hash == laserline::calibration_t::getHash()) {
+      laserline::messages::decode(event.data.data(), event.data.size(), &calibration, limits,
+                                  &problem);
     }
   }
   if (accounted != static_cast<std::int64_t>(size)) std::abort();

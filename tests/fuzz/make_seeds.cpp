@@ -80,7 +80,28 @@ laserline::profile_t profile(int points) {
   }
   p.num_points = points;
   p.instance_id = 0x1234'5678'9abc'def0;
+  p.exposure_us = 2000;
+  p.gain_db = NAN;
+  p.calibration_id = 0x0fed'cba9'8765'4321;
   return p;
+}
+
+laserline::calibration_t calibration() {
+  laserline::calibration_t c{};
+  c.utime = 1'700'000'000'000'000;
+  c.calibration_id = 0x0fed'cba9'8765'4321;
+  c.width = 64;
+  c.height = 48;
+  c.fx = c.fy = 70;
+  c.cx = 31.5;
+  c.cy = 23.5;
+  c.distortion[0] = -0.1;
+  c.laser_plane[1] = 1;
+  c.laser_plane[2] = -0.17;
+  c.laser_plane[3] = 0.25;
+  c.sheet_width_m = 0.003;
+  c.instance_id = 0x1234'5678'9abc'def0;
+  return c;
 }
 
 laserline::status_t status() {
@@ -172,11 +193,14 @@ int main(int argc, char** argv) {
   write(dir / "profile/empty", profile_empty);
   write(dir / "status/status", status_bytes);
   write(dir / "point/point", encode(profile(1).points[0]));
+  const Bytes calibration_bytes = encode(calibration());
+  write(dir / "calibration_message/calibration", calibration_bytes);
 
   const cv::Mat grey = frame(64, 48);
   Bytes log;
   std::int64_t number = 0;
   log_event(log, number++, "LASERLINE_STATUS", status_bytes);
+  log_event(log, number++, "LASERLINE_CALIBRATION", calibration_bytes);
   const char* names[] = {"none", "png", "jpeg", "zlib"};
   for (std::int8_t c = 0; c < 4; ++c) {
     const laserline::image_t m = image(grey, c);
