@@ -6,6 +6,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "hal/calibration.hpp"
 #include "hal/clock.hpp"
 #include "hal/registry.hpp"
 
@@ -78,6 +79,7 @@ bool LcmCamera::open(std::string* error) {
     return false;
   }
   lcm_->subscribeFunction(options_.channel, &LcmCamera::on_live_event, this);
+  lcm_->subscribeFunction(options_.calibration_channel, &LcmCamera::on_live_calibration, this);
   return true;
 }
 
@@ -133,6 +135,13 @@ hal::GrabStatus LcmCamera::grab_offline(std::span<std::uint8_t> dst, hal::FrameI
     if (!more) break;
     const std::string where = path_ + ": event " + std::to_string(event_.number) + " at byte " +
                               std::to_string(event_.offset);
+    if (event_.channel == options_.calibration_channel) {
+      if (check_calibration(event_.data.data(), static_cast<int>(event_.data.size()), where)) {
+        continue;
+      }
+      ended_ = true;
+      return hal::GrabStatus::kStopped;
+    }
     if (event_.channel != options_.channel) {
       note_channel(event_.channel, where);
       continue;
@@ -159,6 +168,7 @@ hal::GrabStatus LcmCamera::grab_live(std::span<std::uint8_t> dst, hal::FrameInfo
     // Short slices, so that stop() is seen within 100 ms.
     const int slice_ms = static_cast<int>(std::clamp<std::int64_t>(remaining / kMs, 1, 100));
     if (lcm_->handleTimeout(slice_ms) < 0) return hal::GrabStatus::kError;
+    if (refused_.load()) return hal::GrabStatus::kStopped;
     if (live_got_frame_) return hal::GrabStatus::kOk;
   }
   return hal::GrabStatus::kStopped;
@@ -171,6 +181,34 @@ void LcmCamera::on_live_event(const lcm::ReceiveBuffer* rbuf, const std::string&
                        *self->live_info_)) {
     self->live_got_frame_ = true;
   }
+}
+
+void LcmCamera::on_live_calibration(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
+                                    LcmCamera* self) {
+  if (self->refused_.load()) return;
+  self->check_calibration(rbuf->data, static_cast<int>(rbuf->data_size),
+                          self->options_.url + " " + channel);
+}
+
+bool LcmCamera::check_calibration(const void* data, int size, const std::string& where) {
+  laserline::calibration_t recorded;
+  std::string problem;
+  if (!messages::decode(data, static_cast<std::size_t>(size), &recorded, limits_, &problem)) {
+    bad_messages_.fetch_add(1);
+    problems_.report(options_.calibration_channel + " bad message",
+                     where + ": not a valid laserline.calibration_t: " + problem + "; ignored");
+    return true;
+  }
+  const auto id = static_cast<std::uint64_t>(recorded.calibration_id);
+  if (id == options_.calibration_id) return true;
+  std::fprintf(stderr,
+               "laserlined: replay %s: recorded with calibration %s, but the configuration's is "
+               "%s: the replay's 3-D points would be wrong; configure the calibration it was "
+               "recorded with (laserline-extract uses a log's own); replay refused\n",
+               where.c_str(), hal::calibration_id_text(id).c_str(),
+               hal::calibration_id_text(options_.calibration_id).c_str());
+  refused_.store(true);
+  return false;
 }
 
 bool LcmCamera::skip_frame(bool bad_message, const std::string& kind, const std::string& where,
@@ -300,6 +338,9 @@ void register_lcm_camera() {
     }
     o.channel = lcm.string("channel", o.channel);
     if (o.channel.empty()) lcm.fail("channel", "must not be empty");
+    o.calibration_channel = lcm.string("calibration_channel", o.calibration_channel);
+    if (o.calibration_channel.empty()) lcm.fail("calibration_channel", "must not be empty");
+    o.calibration_id = hal::calibration_id(*request.calibration);
     lcm.finish();
     o.width = request.calibration->camera.width;
     o.height = request.calibration->camera.height;

@@ -45,6 +45,10 @@ class LcmCamera : public hal::Camera {
     std::string channel = "LASERLINE_IMAGE";
     int width = 0;  // the frames expected (the calibration's size); others are skipped
     int height = 0;
+    // The recording's laserline.calibration_t: a replay under another calibration is refused
+    // (its 3-D points would be wrong without a word).
+    std::string calibration_channel = "LASERLINE_CALIBRATION";
+    std::uint64_t calibration_id = 0;  // the calibration in force
   };
 
   // What a replay met so far; complete once grab() returned kStopped.
@@ -81,10 +85,15 @@ class LcmCamera : public hal::Camera {
   bool skip_frame(bool bad_message, const std::string& kind, const std::string& where,
                   const std::string& problem);
   void note_channel(const std::string& channel, const std::string& where);
+  // A calibration_t of the recording: false (reported, the replay ends) when it names another
+  // calibration than the one in force.
+  bool check_calibration(const void* data, int size, const std::string& where);
   void report_end();
 
   static void on_live_event(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
                             LcmCamera* self);
+  static void on_live_calibration(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
+                                  LcmCamera* self);
 
   Options options_;
   hal::FrameFormat format_;
@@ -105,6 +114,7 @@ class LcmCamera : public hal::Camera {
   std::int64_t missing_frames_ = 0;  // sequence numbers skipped between replayed frames
   std::atomic<bool> stopping_{false};
   bool ended_ = false;
+  std::atomic<bool> refused_{false};  // the recording names another calibration
 
   // Live: where the subscription handler puts the frame grab() waits for.
   std::span<std::uint8_t> live_dst_;

@@ -164,8 +164,10 @@ TEST(Config, ReplayCameraNeedsAUrl) {
             "LCM URL (live)");
   EXPECT_EQ(error_of("camera:\n  backend: lcm\n  lcm: {url: 'file://'}\n"),
             "test.yaml:3: camera.lcm.url: file:// needs the path of a log file");
-  EXPECT_EQ(error_of("camera:\n  backend: lcm\n  lcm: {url: 'file:///x.lcmlog', chanel: A}\n"),
-            "test.yaml:3: camera.lcm.chanel: unknown key (expected one of: channel, url)");
+  EXPECT_EQ(
+      error_of("camera:\n  backend: lcm\n  lcm: {url: 'file:///x.lcmlog', chanel: A}\n"),
+      "test.yaml:3: camera.lcm.chanel: unknown key (expected one of: calibration_channel, channel, "
+      "url)");
   EXPECT_EQ(error_of("camera:\n  backend: lcm\n  lcm: {url: 'file:///x.lcmlog'}\n"), "")
       << "the log is opened with the camera, not when the configuration is checked";
 }

@@ -18,6 +18,7 @@
 #include <laserline/status_t.hpp>
 #include <lcm/lcm-cpp.hpp>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <filesystem>
@@ -28,6 +29,7 @@
 
 #include "daemon/config.hpp"
 #include "daemon/lcm_camera.hpp"
+#include "daemon/lcm_publisher.hpp"
 #include "hal/calibration.hpp"
 #include "hal/clock.hpp"
 #include "lcmtypes/checked_decode.hpp"
@@ -370,6 +372,58 @@ TEST(LcmCameraLog, FramesThatDoNotFitTheCalibrationAreExplainedInOneLine) {
       "2, compression jpeg); frames that replay are recorded with lcm.image_every_n: 1, "
       "lcm.image_downscale: 1, no lcm.image_roi and lcm.image_compression none, zlib or png";
   EXPECT_NE(r.errors.find(why), std::string::npos) << r.errors;
+}
+
+// A recording names its calibration (laserline.calibration_t before its frames): replayed under
+// that calibration it runs; under another one it is refused in one line before any frame.
+TEST(LcmCameraLog, ARecordingOfAnotherCalibrationIsRefused) {
+  TempDir dir;
+  const std::string path = dir / "calibrated.lcmlog";
+  laserline::hal::Calibration recorded;
+  recorded.camera.width = kW;
+  recorded.camera.height = kH;
+  recorded.camera.cx = (kW - 1) / 2.0;
+  recorded.camera.cy = (kH - 1) / 2.0;
+  {
+    lcm::LogFile log(path, "w");
+    laserline::calibration_t m = laserline::daemon::calibration_message(recorded, 1);
+    std::vector<std::uint8_t> bytes(static_cast<std::size_t>(m.getEncodedSize()));
+    m.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+    write_event(log, "LASERLINE_CALIBRATION", bytes);
+    for (int s = 0; s < 3; ++s)
+      write_event(log, "LASERLINE_IMAGE", encode_image(s, kW, kH));
+  }
+  auto run = [&](std::uint64_t calibration_id) {
+    LcmCamera camera(
+        {"file://" + path, "LASERLINE_IMAGE", kW, kH, "LASERLINE_CALIBRATION", calibration_id});
+    std::string error;
+    EXPECT_TRUE(camera.open(&error)) << error;
+    std::vector<std::uint8_t> pixels(static_cast<std::size_t>(kW * kH));
+    laserline::hal::FrameInfo info;
+    ::testing::internal::CaptureStderr();
+    int frames = 0;
+    while (camera.grab(pixels, info, std::chrono::milliseconds(100)) ==
+           laserline::hal::GrabStatus::kOk) {
+      ++frames;
+    }
+    return std::make_pair(frames, ::testing::internal::GetCapturedStderr());
+  };
+  const std::uint64_t id = laserline::hal::calibration_id(recorded);
+  const auto [same_frames, same_errors] = run(id);
+  EXPECT_EQ(same_frames, 3) << same_errors;
+  EXPECT_EQ(same_errors.find("refused"), std::string::npos) << same_errors;
+
+  laserline::hal::Calibration other = recorded;
+  other.camera.fx += 1.0;
+  const auto [other_frames, other_errors] = run(laserline::hal::calibration_id(other));
+  EXPECT_EQ(other_frames, 0);
+  const std::string why =
+      "laserlined: replay " + path + ": event 0 at byte 0: recorded with calibration " +
+      laserline::hal::calibration_id_text(id) + ", but the configuration's is " +
+      laserline::hal::calibration_id_text(laserline::hal::calibration_id(other)) +
+      ": the replay's 3-D points would be wrong";
+  EXPECT_NE(other_errors.find(why), std::string::npos) << other_errors;
+  EXPECT_EQ(std::count(other_errors.begin(), other_errors.end(), '\n'), 1) << other_errors;
 }
 
 // Every 3rd frame recorded (image_every_n: 3): replayed, and the gaps are said with the remedy.
