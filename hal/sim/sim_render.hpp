@@ -23,8 +23,8 @@ inline constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 }  // namespace sim
 
 struct SimScene::Pose {
-  sim::Mat3 r{};  // camera to world: X_world = r X_cam + t
-  sim::Vec3 t{};
+  sim::Mat3 r = sim::Mat3::Identity();  // camera to world: X_world = r X_cam + t
+  sim::Vec3 t = sim::Vec3::Zero();
 };
 
 }  // namespace laserline::hal

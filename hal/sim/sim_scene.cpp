@@ -177,14 +177,13 @@ SimScene::Pose SimScene::pose_at(std::uint64_t sequence) const {
   // Sinusoids shifted to start at zero, so that the world frame is the camera frame at t = 0.
   auto wave = [](double x, double shift) { return std::sin(x + shift) - std::sin(shift); };
   Pose pose;
-  pose.t = {options_.sway_m * wave(phase, 0.0), options_.sway_m * 0.6 * wave(1.3 * phase, 1.0),
-            options_.sway_m * 0.4 * wave(0.7 * phase, 2.0)};
+  pose.t = Vec3(options_.sway_m * wave(phase, 0.0), options_.sway_m * 0.6 * wave(1.3 * phase, 1.0),
+                options_.sway_m * 0.4 * wave(0.7 * phase, 2.0));
   if (options_.vehicle_speed_m_s != 0) {
     // Along the surface's x axis (see make_geometry), so the distance to the surface stays.
-    const Mat3 basis = mul(rot_x(options_.tilt_x_deg * kDeg), rot_y(options_.tilt_y_deg * kDeg));
+    const Mat3 basis = rot_x(options_.tilt_x_deg * kDeg) * rot_y(options_.tilt_y_deg * kDeg);
     const double travel = options_.vehicle_speed_m_s * time;
-    for (int i = 0; i < 3; ++i)
-      pose.t[i] += travel * basis[i * 3];
+    pose.t += travel * basis.col(0);
   }
   const double amp = options_.sway_deg * kDeg;
   double scan = 0.0;
@@ -197,19 +196,16 @@ SimScene::Pose SimScene::pose_at(std::uint64_t sequence) const {
   const double ax = amp * wave(0.9 * phase, 0.5) + (options_.scan_pan ? 0.0 : scan);
   const double ay = amp * 0.7 * wave(1.1 * phase, 2.3) + (options_.scan_pan ? scan : 0.0);
   const double az = amp * 0.5 * wave(0.8 * phase, 4.1);
-  pose.r = mul(rot_z(az), mul(rot_y(ay), rot_x(ax)));
+  pose.r = rot_z(az) * (rot_y(ay) * rot_x(ax));
   return pose;
 }
 
 SimCameraPose SimScene::camera_pose(std::uint64_t sequence) const {
   const Pose pose = pose_at(sequence);  // camera -> world
   SimCameraPose out;
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j)
-      out.rotation[i * 3 + j] = pose.r[j * 3 + i];
-  }
-  const Vec3 t = mul_transposed(pose.r, pose.t);
-  out.translation = {-t[0], -t[1], -t[2]};
+  // Row-major R^T is column-major R.
+  Eigen::Map<Mat3>(out.rotation.data()) = pose.r;
+  Eigen::Map<Vec3>(out.translation.data()) = -(pose.r.transpose() * pose.t);
   return out;
 }
 
@@ -218,13 +214,11 @@ double SimScene::relief_height(double x_m, double y_m) const {
 }
 
 std::array<double, 3> SimScene::surface_point(double x_m, double y_m) const {
-  const Mat3 basis = mul(rot_x(options_.tilt_x_deg * kDeg), rot_y(options_.tilt_y_deg * kDeg));
+  const Mat3 basis = rot_x(options_.tilt_x_deg * kDeg) * rot_y(options_.tilt_y_deg * kDeg);
   const double h = relief_height(x_m, y_m);
   // Axes e1, e2 are the basis' first two columns, the normal toward the camera minus the third.
   std::array<double, 3> out{};
-  for (int i = 0; i < 3; ++i) {
-    out[i] = x_m * basis[i * 3] + y_m * basis[i * 3 + 1] - h * basis[i * 3 + 2];
-  }
+  Eigen::Map<Vec3>(out.data()) = x_m * basis.col(0) + y_m * basis.col(1) - h * basis.col(2);
   out[2] += options_.distance_m;
   return out;
 }
