@@ -170,6 +170,29 @@ class Frontend {
   };
   template <class Lane>
   void roll_with(const StageImages* images, BandRings<Lane>& rings);
+  // Its stages (see frontend.cpp): the pass's settings, the normalised rows (III-B), where a
+  // block's rows are, a strip's band-pass rows (III-C), a row's candidates (III-D/E).
+  template <class Lane>
+  struct RollPass;
+  template <class Lane>
+  struct StripRows;
+  template <class Lane>
+  RollPass<Lane> roll_pass() const;
+  std::uint16_t* normalised_slot(int r);
+  const std::uint16_t* normalised_at(int r, int rows);
+  void normalise_until(int last, int rows, float normalised_one, int& next,
+                       const StageImages* images);
+  void place_block_rows(int rows, int band_base, int band_top, int normalised_base,
+                        int normalised_top);
+  template <class Lane>
+  void band_pass_rows(const RollPass<Lane>& pass, const StripRows<Lane>& strip, int first, int end,
+                      const StageImages* images);
+  template <class Lane>
+  int lowest_beside(const RollPass<Lane>& pass, const StripRows<Lane>& strip, int r, int i,
+                    int side, int enough) const;
+  template <class Lane>
+  void row_candidates(const RollPass<Lane>& pass, const StripRows<Lane>& strip, int r,
+                      const StageImages* images);
   // Normalised row r into out[0, width).
   void normalise_row(int r, std::uint16_t* out);
   bool avx2_ = false;  // the AVX2 kernels run: the CPU has AVX2, and use_intrinsics()

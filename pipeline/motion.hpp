@@ -1,3 +1,6 @@
+// The motion stage's interface (paper III-A): frame-to-frame homography from tracked features and,
+// with the camera's intrinsics, the camera's own motion. Implemented along its steps in
+// motion.cpp, features.cpp, tracking.cpp, homography.cpp, camera_motion.cpp and five_point.cpp.
 #pragma once
 
 #include <array>
@@ -6,7 +9,9 @@
 #include <span>
 #include <vector>
 
+#include "pipeline/five_point.hpp"
 #include "pipeline/geometry.hpp"
+#include "pipeline/homography.hpp"
 #include "pipeline/image_view.hpp"
 
 namespace laserline::pipeline {
@@ -50,20 +55,6 @@ struct CameraMotion {
   double relative_scale = std::numeric_limits<double>::quiet_NaN();
 };
 
-// A planar projective transformation of pixel coordinates: p_current ~ H p_previous.
-struct Homography {
-  std::array<double, 9> h{1, 0, 0, 0, 1, 0, 0, 0, 1};  // row-major
-
-  std::array<double, 2> map(double u, double v) const {
-    const double w = h[6] * u + h[7] * v + h[8];
-    return {(h[0] * u + h[1] * v + h[2]) / w, (h[3] * u + h[4] * v + h[5]) / w};
-  }
-  // p_previous ~ inverse() p_current, scaled so that h[8] = 1 where possible; all zero if singular.
-  Homography inverse() const;
-  // The map p -> this(first(p)), scaled likewise.
-  Homography after(const Homography& first) const;
-};
-
 // A feature of the previous frame and where it was found in the current one.
 struct FeatureTrack {
   float previous_u = 0, previous_v = 0;
@@ -81,13 +72,6 @@ struct MotionEstimate {
   float rms_px = 0;     // RMS transfer error of the inliers, full-size pixels
   CameraMotion camera;  // invalid unless reset() was given the intrinsics
 };
-
-// Solutions of the five-point relative orientation problem (Nister; Stewenius' Groebner basis
-// form): essential matrices E (row-major) with current^T E previous = 0 for the five normalised
-// image points (x, y, 1) given. Returns how many (0 .. 10); no allocation.
-int five_point_essentials(const std::array<std::array<double, 2>, 5>& previous,
-                          const std::array<std::array<double, 2>, 5>& current,
-                          std::array<std::array<double, 9>, 10>& essentials);
 
 // Camera motion between consecutive frames from point correspondences in pixels (as seen, with
 // the lens distortion of the geometry): undistorted and normalised, five-point RANSAC with

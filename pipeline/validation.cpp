@@ -1,5 +1,6 @@
 #include "pipeline/validation.hpp"
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -22,18 +23,15 @@ double box_distance(const LineSegment& a, const LineSegment& b) {
   return std::hypot(du, dv);
 }
 
-using Vec3 = std::array<double, 3>;
+using Vector3 = Eigen::Vector3d;
+using RowMajor3 = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
 
-Vec3 rotate(const std::array<double, 9>& r, const Vec3& x) {
-  return {r[0] * x[0] + r[1] * x[1] + r[2] * x[2], r[3] * x[0] + r[4] * x[1] + r[5] * x[2],
-          r[6] * x[0] + r[7] * x[1] + r[8] * x[2]};
+// A pair's rotation and translation as Eigen views of its row-major arrays (no copy).
+Eigen::Map<const RowMajor3> rotation_of(const PairMotion& motion) {
+  return Eigen::Map<const RowMajor3>(motion.rotation.data());
 }
-Vec3 rotate_back(const std::array<double, 9>& r, const Vec3& x) {
-  return {r[0] * x[0] + r[3] * x[1] + r[6] * x[2], r[1] * x[0] + r[4] * x[1] + r[7] * x[2],
-          r[2] * x[0] + r[5] * x[1] + r[8] * x[2]};
-}
-double dot(const Vec3& a, const Vec3& b) {
-  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+Eigen::Map<const Vector3> translation_of(const PairMotion& motion) {
+  return Eigen::Map<const Vector3>(motion.translation.data());
 }
 
 }  // namespace
@@ -230,45 +228,40 @@ bool back_project(const ScannerGeometry& camera, const PairMotion& first, const 
                   const std::array<double, 2>& x0, const std::array<double, 2>& x1,
                   double max_depth_baselines, std::array<double, 2>& x2, double& ray_gap_px) {
   // Rays of the raw pixels (lens distortion removed).
-  Vec3 a{0, 0, 1}, b{0, 0, 1};
-  if (!camera.normalised(x0[0], x0[1], a[0], a[1]) ||
-      !camera.normalised(x1[0], x1[1], b[0], b[1])) {
+  Vector3 a(0, 0, 1), b(0, 0, 1);
+  if (!camera.normalised(x0[0], x0[1], a(0), a(1)) ||
+      !camera.normalised(x1[0], x1[1], b(0), b(1))) {
     return false;
   }
   // In frame n-1: ray 0 from camera n-2's centre t1 along R1 a, ray 1 from the origin along b.
-  const Vec3 d0 = rotate(first.rotation, a);
-  const Vec3& t1 = first.translation;
+  const Vector3 d0 = rotation_of(first) * a;
+  const Vector3 t1 = translation_of(first);
   // Closest points t1 + mu d0 and lambda b: least squares of mu d0 - lambda b = -t1.
-  const double d0d0 = dot(d0, d0), bb = dot(b, b), d0b = dot(d0, b);
-  const double d0t = dot(d0, t1), bt = dot(b, t1);
+  const double d0d0 = d0.dot(d0), bb = b.dot(b), d0b = d0.dot(b);
+  const double d0t = d0.dot(t1), bt = b.dot(t1);
   const double det = d0d0 * bb - d0b * d0b;
   if (!(det > 1e-18)) return false;  // parallel rays: no parallax at all
   const double mu = (d0b * bt - bb * d0t) / det;
   const double lambda = (d0d0 * bt - d0b * d0t) / det;
   if (!(mu > 0) || !(lambda > 0)) return false;  // behind a camera
-  const Vec3 on0{t1[0] + mu * d0[0], t1[1] + mu * d0[1], t1[2] + mu * d0[2]};
-  const Vec3 x{0.5 * (on0[0] + lambda * b[0]), 0.5 * (on0[1] + lambda * b[1]),
-               0.5 * (on0[2] + lambda * b[2])};
-  const double baseline = std::sqrt(dot(t1, t1));
-  if (!(x[2] > 0) || !(x[2] <= max_depth_baselines * baseline)) return false;
+  const Vector3 on0 = t1 + mu * d0;
+  const Vector3 x = 0.5 * (on0 + lambda * b);
+  const double baseline = std::sqrt(t1.dot(t1));
+  if (!(x(2) > 0) || !(x(2) <= max_depth_baselines * baseline)) return false;
 
   // How far the point lands from the two observations it came from.
-  const Vec3 rel{x[0] - t1[0], x[1] - t1[1], x[2] - t1[2]};
-  const Vec3 in0 = rotate_back(first.rotation, rel);
-  if (!(in0[2] > 0)) return false;
-  const auto p0 = camera.pixel(in0[0] / in0[2], in0[1] / in0[2]);
-  const auto p1 = camera.pixel(x[0] / x[2], x[1] / x[2]);
+  const Vector3 in0 = rotation_of(first).transpose() * (x - t1);
+  if (!(in0(2) > 0)) return false;
+  const auto p0 = camera.pixel(in0(0) / in0(2), in0(1) / in0(2));
+  const auto p1 = camera.pixel(x(0) / x(2), x(1) / x(2));
   const double e0 = std::hypot(p0[0] - x0[0], p0[1] - x0[1]);
   const double e1 = std::hypot(p1[0] - x1[0], p1[1] - x1[1]);
   ray_gap_px = std::max(e0, e1);
 
   // Into frame n, with the translation in the first pair's units.
-  const double scale = second.relative_scale;
-  const Vec3 r = rotate(second.rotation, x);
-  const Vec3 in2{r[0] + scale * second.translation[0], r[1] + scale * second.translation[1],
-                 r[2] + scale * second.translation[2]};
-  if (!(in2[2] > 0)) return false;
-  x2 = camera.pixel(in2[0] / in2[2], in2[1] / in2[2]);
+  const Vector3 in2 = rotation_of(second) * x + second.relative_scale * translation_of(second);
+  if (!(in2(2) > 0)) return false;
+  x2 = camera.pixel(in2(0) / in2(2), in2(1) / in2(2));
   return true;
 }
 

@@ -1,5 +1,6 @@
 #include "tools/point_cloud.hpp"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <bit>
 #include <cerrno>
@@ -51,29 +52,8 @@ std::string number_text(double value) {
   return buffer;
 }
 
-std::array<double, 4> slerp(std::array<double, 4> a, std::array<double, 4> b, double s) {
-  double dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3];
-  if (dot < 0.0) {  // q and -q are the same rotation: take the short way
-    for (double& c : b)
-      c = -c;
-    dot = -dot;
-  }
-  double wa = 1.0 - s, wb = s;
-  if (dot < 0.9999) {  // otherwise nearly parallel: linear, normalised below
-    const double theta = std::acos(dot);
-    wa = std::sin((1.0 - s) * theta) / std::sin(theta);
-    wb = std::sin(s * theta) / std::sin(theta);
-  }
-  std::array<double, 4> q{};
-  double norm = 0;
-  for (int i = 0; i < 4; ++i) {
-    q[i] = wa * a[i] + wb * b[i];
-    norm += q[i] * q[i];
-  }
-  norm = std::sqrt(norm);
-  for (double& c : q)
-    c /= norm;
-  return q;
+Eigen::Quaterniond quaternion(const std::array<double, 4>& wxyz) {
+  return {wxyz[0], wxyz[1], wxyz[2], wxyz[3]};
 }
 
 void append_le(std::vector<unsigned char>& out, float value) {
@@ -85,14 +65,9 @@ void append_le(std::vector<unsigned char>& out, float value) {
 }  // namespace
 
 std::array<double, 3> Pose::apply(const std::array<double, 3>& p) const {
-  const auto& [w, x, y, z] = rotation;
-  // v' = v + 2w (q x v) + 2 q x (q x v), q = (x, y, z)
-  const double tx = 2.0 * (y * p[2] - z * p[1]);
-  const double ty = 2.0 * (z * p[0] - x * p[2]);
-  const double tz = 2.0 * (x * p[1] - y * p[0]);
-  return {p[0] + w * tx + (y * tz - z * ty) + position[0],
-          p[1] + w * ty + (z * tx - x * tz) + position[1],
-          p[2] + w * tz + (x * ty - y * tx) + position[2]};
+  const Eigen::Vector3d world = quaternion(rotation) * Eigen::Vector3d(p[0], p[1], p[2]) +
+                                Eigen::Vector3d(position[0], position[1], position[2]);
+  return {world(0), world(1), world(2)};
 }
 
 PoseLog PoseLog::load(const std::string& path) {
@@ -168,7 +143,9 @@ bool PoseLog::at_time(double t, Pose& pose) const {
   const double s = (t - a.time) / (b.time - a.time);
   for (int i = 0; i < 3; ++i)
     pose.position[i] = a.pose.position[i] + s * (b.pose.position[i] - a.pose.position[i]);
-  pose.rotation = slerp(a.pose.rotation, b.pose.rotation, s);
+  // The shorter way round (q and -q are the same rotation).
+  const Eigen::Quaterniond q = quaternion(a.pose.rotation).slerp(s, quaternion(b.pose.rotation));
+  pose.rotation = {q.w(), q.x(), q.y(), q.z()};
   return true;
 }
 

@@ -53,36 +53,23 @@ SimLineFamily epipolar_lines(const Calibration& calibration) {
 
 namespace sim {
 
-Vec3 mul_transposed(const Mat3& m, const Vec3& v) {
-  return {m[0] * v[0] + m[3] * v[1] + m[6] * v[2], m[1] * v[0] + m[4] * v[1] + m[7] * v[2],
-          m[2] * v[0] + m[5] * v[1] + m[8] * v[2]};
-}
-
-Mat3 mul(const Mat3& a, const Mat3& b) {
-  Mat3 r{};
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) {
-      r[i * 3 + j] = a[i * 3] * b[j] + a[i * 3 + 1] * b[3 + j] + a[i * 3 + 2] * b[6 + j];
-    }
-  }
-  return r;
-}
-
-double dot(const Vec3& a, const Vec3& b) {
-  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-
 Mat3 rot_x(double a) {
   const double c = std::cos(a), s = std::sin(a);
-  return {1, 0, 0, 0, c, -s, 0, s, c};
+  Mat3 m;
+  m << 1, 0, 0, 0, c, -s, 0, s, c;
+  return m;
 }
 Mat3 rot_y(double a) {
   const double c = std::cos(a), s = std::sin(a);
-  return {c, 0, s, 0, 1, 0, -s, 0, c};
+  Mat3 m;
+  m << c, 0, s, 0, 1, 0, -s, 0, c;
+  return m;
 }
 Mat3 rot_z(double a) {
   const double c = std::cos(a), s = std::sin(a);
-  return {c, -s, 0, s, c, 0, 0, 0, 1};
+  Mat3 m;
+  m << c, -s, 0, s, c, 0, 0, 0, 1;
+  return m;
 }
 
 FrameGeometry make_geometry(const SimSceneOptions& o, const Mat3& r, const Vec3& t,
@@ -97,37 +84,31 @@ FrameGeometry make_geometry(const SimSceneOptions& o, const Mat3& r, const Vec3&
   g.lp = o.calibration.laser.plane_coefficients();
 
   // The surface in the world: through p0, normal n_w toward the camera, texture axes e1, e2.
-  const Mat3 basis = mul(rot_x(o.tilt_x_deg * kDeg), rot_y(o.tilt_y_deg * kDeg));
-  const Vec3 e1{basis[0], basis[3], basis[6]};
-  const Vec3 e2{basis[1], basis[4], basis[7]};
-  const Vec3 n_w{-basis[2], -basis[5], -basis[8]};
-  const Vec3 p0{0.0, 0.0, o.distance_m};
+  const Mat3 basis = rot_x(o.tilt_x_deg * kDeg) * rot_y(o.tilt_y_deg * kDeg);
+  const Vec3 e1 = basis.col(0);
+  const Vec3 e2 = basis.col(1);
+  const Vec3 n_w = -basis.col(2);
+  const Vec3 p0(0.0, 0.0, o.distance_m);
 
   // In the camera frame: n_c . X = D with n_c = -R^T n_w, D = n_w . T - n_w . p0 (> 0 in front).
-  const Vec3 rn = mul_transposed(r, n_w);
-  g.n = {-rn[0], -rn[1], -rn[2]};
-  g.d_surface = dot(n_w, t) - dot(n_w, p0);
+  g.n = -(r.transpose() * n_w);
+  g.d_surface = n_w.dot(t) - n_w.dot(p0);
   g.surface = g.d_surface > 0;
   if (!g.surface) return g;
 
   // Texture coordinate s = e1 . (X_w - p0) = Z (R^T e1) . r + e1 . (T - p0) with Z = D / (n_c . r),
   // so s (n_c . r) is linear in the ray r: a homography, here in texels and pixel coordinates.
   const double texel = o.texture_scale_m / kFinestSpacing;
-  const Vec3 tp{t[0] - p0[0], t[1] - p0[1], t[2] - p0[2]};
-  const Vec3 re1 = mul_transposed(r, e1), re2 = mul_transposed(r, e2);
-  const double c1 = dot(e1, tp), c2 = dot(e2, tp);
+  const Vec3 tp = t - p0;
+  const Vec3 re1 = r.transpose() * e1, re2 = r.transpose() * e2;
+  const double c1 = e1.dot(tp), c2 = e2.dot(tp);
   g.e1 = re1;
   g.e2 = re2;
   g.c1 = c1;
   g.c2 = c2;
   g.texel_m = texel;
-  const std::array<Vec3, 3> rows{Vec3{(g.d_surface * re1[0] + c1 * g.n[0]) / texel,
-                                      (g.d_surface * re1[1] + c1 * g.n[1]) / texel,
-                                      (g.d_surface * re1[2] + c1 * g.n[2]) / texel},
-                                 Vec3{(g.d_surface * re2[0] + c2 * g.n[0]) / texel,
-                                      (g.d_surface * re2[1] + c2 * g.n[1]) / texel,
-                                      (g.d_surface * re2[2] + c2 * g.n[2]) / texel},
-                                 g.n};
+  const std::array<Vec3, 3> rows{(g.d_surface * re1 + c1 * g.n) / texel,
+                                 (g.d_surface * re2 + c2 * g.n) / texel, g.n};
   for (int i = 0; i < 3; ++i) {
     const Vec3& m = rows[i];
     g.h[i * 3 + 0] = m[0] / g.fx;
@@ -200,23 +181,21 @@ LineHit solve_relief(const FrameGeometry& g, const SimLineFamily& lines, double 
   // ray; for a column u exactly (1, 0, -xn).
   const double scale = std::max(std::abs(r.dx), std::abs(r.dy));
   const double d0 = r.dx / scale, d1 = r.dy / scale;
-  const Vec3 n1{d1, -d0, d0 * r.y0 - d1 * r.x0}, n2{a, b, c};
-  const Vec3 dir{n1[1] * n2[2] - n1[2] * n2[1], n1[2] * n2[0] - n1[0] * n2[2],
-                 n1[0] * n2[1] - n1[1] * n2[0]};
+  const Vec3 n1(d1, -d0, d0 * r.y0 - d1 * r.x0), n2(a, b, c);
+  const Vec3 dir = n1.cross(n2);
   // P = alpha n1 + beta n2 with n1 . P = 0 (in the line's plane) and n2 . P = -e (on the sheet).
-  const double g11 = dot(n1, n1), g12 = dot(n1, n2), g22 = dot(n2, n2);
+  const double g11 = n1.dot(n1), g12 = n1.dot(n2), g22 = n2.dot(n2);
   const double det = g11 * g22 - g12 * g12;
   if (!(det > 1e-18 * g11 * g22)) return out;
   const double alpha = e * g12 / det, beta = -e * g11 / det;
-  const Vec3 p{alpha * n1[0] + beta * n2[0], alpha * n1[1] + beta * n2[1],
-               alpha * n1[2] + beta * n2[2]};
+  const Vec3 p = alpha * n1 + beta * n2;
   // Height above the base plane along the line: q0 - l qd.
-  const double q0 = g.d_surface - dot(g.n, p), qd = dot(g.n, dir);
+  const double q0 = g.d_surface - g.n.dot(p), qd = g.n.dot(dir);
   if (!(std::abs(qd) > 1e-12)) return out;
   const double margin = 1e-3;
   const double l_top = (q0 - (relief_max + margin)) / qd, l_bottom = (q0 + margin) / qd;
-  const double x0 = dot(g.e1, p) + g.c1, xd = dot(g.e1, dir);
-  const double y0 = dot(g.e2, p) + g.c2, yd = dot(g.e2, dir);
+  const double x0 = g.e1.dot(p) + g.c1, xd = g.e1.dot(dir);
+  const double y0 = g.e2.dot(p) + g.c2, yd = g.e2.dot(dir);
   // The relief (the objects on the surface) has moved by object_shift_m along x.
   const double shift = g.object_shift_m;
   auto height = [&](double l) { return relief_at(relief, x0 + l * xd - shift, y0 + l * yd); };
@@ -238,7 +217,7 @@ LineHit solve_relief(const FrameGeometry& g, const SimLineFamily& lines, double 
     (above(mid) > 0 ? lo : hi) = mid;
   }
   const double l = 0.5 * (lo + hi);
-  const Vec3 x{p[0] + l * dir[0], p[1] + l * dir[1], p[2] + l * dir[2]};
+  const Vec3 x = p + l * dir;
   if (!(x[2] > 0)) return out;
   out.z = x[2];
   const double u = g.cx + g.fx * x[0] / x[2], v = g.cy + g.fy * x[1] / x[2];

@@ -4,6 +4,8 @@
 // and where the sheet meets the surface along an image line (flat or relieved). Internal to the
 // simulator (hal/sim/).
 
+#include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <array>
 #include <vector>
 
@@ -11,27 +13,25 @@
 
 namespace laserline::hal::sim {
 
-using Vec3 = std::array<double, 3>;
-using Mat3 = std::array<double, 9>;  // row-major
+using Vec3 = Eigen::Vector3d;
+using Mat3 = Eigen::Matrix3d;
 
-Vec3 mul_transposed(const Mat3& m, const Vec3& v);
-Mat3 mul(const Mat3& a, const Mat3& b);
-double dot(const Vec3& a, const Vec3& b);
+// Rotations by angle a (radians) about the x, y and z axes.
 Mat3 rot_x(double a);
 Mat3 rot_y(double a);
 Mat3 rot_z(double a);
 
 // Everything render() and ground_truth() need about one frame, in the camera frame.
 struct FrameGeometry {
-  bool surface = false;  // the surface plane is in front of the camera
-  Vec3 n{};              // surface: n . X = d_surface, n pointing away from the camera
+  bool surface = false;   // the surface plane is in front of the camera
+  Vec3 n = Vec3::Zero();  // surface: n . X = d_surface, n pointing away from the camera
   double d_surface = 0;
   std::array<double, 9> h{};   // pixel (u, v, 1) -> (S, T, W); texel coordinates are S/W, T/W
   std::array<double, 4> lp{};  // laser sheet a X + b Y + c Z + e = 0
   double fx = 1, fy = 1, cx = 0, cy = 0;
   // For the relief: surface coordinates (metres) of a camera-frame point X are
   // x = e1 . X + c1, y = e2 . X + c2, height toward the camera d_surface - n . X.
-  Vec3 e1{}, e2{};
+  Vec3 e1 = Vec3::Zero(), e2 = Vec3::Zero();
   double c1 = 0, c2 = 0;
   double texel_m = 1;
   double object_shift_m = 0;  // how far the relief (objects) moved along x (object_speed_m_s)

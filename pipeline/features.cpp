@@ -1,0 +1,236 @@
+// Features of a frame for the motion stage: its image pyramid (2x2 box averages), Shi-Tomasi
+// corners one per grid cell at the detect level, and the laser filter (paper IV-A) that keeps
+// features on the laser line out.
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include "pipeline/motion.hpp"
+#include "pipeline/motion_internal.hpp"
+
+namespace laserline::pipeline {
+
+using namespace motion_detail;
+
+namespace {
+
+// Calls body(i) for i in [first, last). The blocks of a fixed length are what GCC's default -O2
+// ("very cheap") cost model is willing to vectorise; the rest runs one by one. Flattened, so
+// that the body is inlined too. Its callers take __restrict pointers and stay out of line
+// (noinline): inlined, GCC loses the promise and declines to vectorise.
+template <typename Body>
+[[gnu::always_inline, gnu::flatten]] inline void for_each_index(int first, int last, Body body) {
+  constexpr int kBlock = 16;
+  int i = first;
+  for (; i + kBlock <= last; i += kBlock) {
+    for (int k = 0; k < kBlock; ++k)
+      body(i + k);
+  }
+  for (; i < last; ++i)
+    body(i);
+}
+
+// 2x2 box average (rounded) of rows a and b into `count` pixels of out.
+[[gnu::noinline]] void downsample_row(const std::uint8_t* __restrict a,
+                                      const std::uint8_t* __restrict b,
+                                      std::uint8_t* __restrict out, int count) {
+  for_each_index(0, count, [&](int u) {
+    const unsigned sum = 2u + a[2 * u] + a[2 * u + 1] + b[2 * u] + b[2 * u + 1];
+    out[u] = static_cast<std::uint8_t>(sum >> 2);
+  });
+}
+
+// Level 1 of the frame (full size is not kept: the tracker keeps patches of it, see State).
+void downsample_frame(const ImageView& frame, Level& level1) {
+  for (int v = 0; v < level1.height; ++v) {
+    downsample_row(frame.row(2 * v), frame.row(2 * v + 1),
+                   level1.pixels.data() + static_cast<std::ptrdiff_t>(v) * level1.width,
+                   level1.width);
+  }
+}
+
+void downsample(const Level& fine, Level& coarse) {
+  for (int v = 0; v < coarse.height; ++v) {
+    downsample_row(fine.row(2 * v), fine.row(2 * v + 1),
+                   coarse.pixels.data() + static_cast<std::ptrdiff_t>(v) * coarse.width,
+                   coarse.width);
+  }
+}
+
+// Adds the gradient products of the row `mid` (doubled central differences) to the column sums
+// and replaces the products of the row three above (in xx, xy, yy) with them, for u in
+// [first, last).
+[[gnu::noinline]] void slide_structure_row(
+    const std::uint8_t* __restrict up, const std::uint8_t* __restrict mid,
+    const std::uint8_t* __restrict down, std::int32_t* __restrict xx, std::int32_t* __restrict xy,
+    std::int32_t* __restrict yy, std::int32_t* __restrict sum_xx, std::int32_t* __restrict sum_xy,
+    std::int32_t* __restrict sum_yy, int first, int last) {
+  for_each_index(first, last, [&](int u) {
+    const std::int32_t gx = mid[u + 1] - mid[u - 1];
+    const std::int32_t gy = down[u] - up[u];
+    const std::int32_t pxx = gx * gx, pxy = gx * gy, pyy = gy * gy;
+    sum_xx[u] += pxx - xx[u];
+    sum_xy[u] += pxy - xy[u];
+    sum_yy[u] += pyy - yy[u];
+    xx[u] = pxx;
+    xy[u] = pxy;
+    yy[u] = pyy;
+  });
+}
+
+// min(a, c) of the 3x3 structure tensor [a b; b c]: a bound of its smaller eigenvalue.
+[[gnu::noinline]] void eigenvalue_bound_row(const std::int32_t* __restrict sum_xx,
+                                            const std::int32_t* __restrict sum_yy,
+                                            std::int32_t* __restrict bound, int first, int last) {
+  for_each_index(first, last, [&](int u) {
+    const std::int32_t a = sum_xx[u - 1] + sum_xx[u] + sum_xx[u + 1];
+    const std::int32_t c = sum_yy[u - 1] + sum_yy[u] + sum_yy[u + 1];
+    bound[u] = std::min(a, c);
+  });
+}
+
+// Paper IV-A: summed |Haar d/dv| over summed |Haar d/du| in the neighbourhood of (u, v), detect
+// level coordinates. A bright line along the rows answers across it (d/dv) far more than along it.
+// Wavelets of kHaarSize on a grid of step kHaarSize / 2, built from sums of half x half blocks.
+bool looks_like_laser(const ImageView& level, int u, int v, int radius, double ratio) {
+  constexpr int half = kHaarSize / 2;
+  // Wavelet centres (x, y): du compares columns x-half .. x-1 with x .. x+half-1, dv rows alike.
+  const int u_lo = std::max(u - radius, half), u_hi = std::min(u + radius, level.width - half);
+  const int v_lo = std::max(v - radius, half), v_hi = std::min(v + radius, level.height - half);
+  if (u_hi < u_lo || v_hi < v_lo) return false;
+  const int columns = (u_hi - u_lo) / half + 1, rows = (v_hi - v_lo) / half + 1;
+  // block[j][i]: sum of the half x half block whose top left corner is
+  // (u_lo - half + i * half, v_lo - half + j * half).
+  std::array<std::array<int, kMaxHaarBlocks>, kMaxHaarBlocks> block;
+  for (int j = 0; j <= rows; ++j) {
+    for (int i = 0; i <= columns; ++i) {
+      int sum = 0;
+      for (int y = 0; y < half; ++y) {
+        const std::uint8_t* p = level.row(v_lo - half + j * half + y) + (u_lo - half + i * half);
+        for (int x = 0; x < half; ++x)
+          sum += p[x];
+      }
+      block[j][i] = sum;
+    }
+  }
+  long long sum_du = 0, sum_dv = 0;
+  for (int j = 0; j < rows; ++j) {
+    for (int i = 0; i < columns; ++i) {
+      const int top_left = block[j][i], top_right = block[j][i + 1];
+      const int bottom_left = block[j + 1][i], bottom_right = block[j + 1][i + 1];
+      sum_du += std::abs(top_right + bottom_right - top_left - bottom_left);
+      sum_dv += std::abs(bottom_left + bottom_right - top_left - top_right);
+    }
+  }
+  return static_cast<double>(sum_dv) > ratio * static_cast<double>(sum_du);
+}
+
+}  // namespace
+
+namespace motion_detail {
+
+void build_pyramid(const ImageView& frame, int levels, Pyramid& pyramid) {
+  if (levels > 1) downsample_frame(frame, pyramid.levels[1]);
+  for (int l = 2; l < levels; ++l)
+    downsample(pyramid.levels[l - 1], pyramid.levels[l]);
+}
+
+}  // namespace motion_detail
+
+void MotionEstimator::detect_features(int index, const ImageView& frame) {
+  State& s = *state_;
+  const MotionOptions& o = options_;
+  const ImageView level =
+      o.detect_level == 0 ? frame : s.pyramids[index].levels[o.detect_level].view();
+  const int width = level.width;
+  const int cells = o.grid_columns * o.grid_rows;
+  std::fill(s.cell_u.begin(), s.cell_u.end(), -1);
+
+  // Gradient products (doubled central differences, integers) of the last three rows, and their
+  // sums over those rows (kept sliding); summed over columns u-1 .. u+1 they are the structure
+  // tensor of (u, v), four times over.
+  const int first = s.margin - 1, last = level.height - s.margin;
+  const int u_first = s.margin - 1, u_last = width - s.margin;  // inclusive
+  std::int32_t* __restrict sum_xx = s.column_xx.data();
+  std::int32_t* __restrict sum_xy = s.column_xy.data();
+  std::int32_t* __restrict sum_yy = s.column_yy.data();
+  for (int u = u_first; u <= u_last; ++u)
+    sum_xx[u] = sum_xy[u] = sum_yy[u] = 0;
+  for (auto* rows : {&s.gxx, &s.gxy, &s.gyy})
+    for (auto& row : *rows)
+      std::fill(row.begin(), row.end(), 0);
+  // Adds row v's products to the sums, replacing those of row v-3.
+  const auto slide = [&](int v) {
+    const int slot = v % 3;
+    slide_structure_row(level.row(v - 1), level.row(v), level.row(v + 1), s.gxx[slot].data(),
+                        s.gxy[slot].data(), s.gyy[slot].data(), sum_xx, sum_xy, sum_yy, u_first,
+                        u_last + 1);
+  };
+  const float floor4 = 4.0f * kMinEigenvalue;
+  std::fill(s.cell_score.begin(), s.cell_score.end(), floor4);
+  slide(first);
+  slide(first + 1);
+  std::int32_t* __restrict bound = s.eigen_bound.data();
+  for (int v = s.margin; v < last; ++v) {
+    slide(v + 1);
+    // The smaller eigenvalue is at most min(a, c): most pixels stop at that bound.
+    eigenvalue_bound_row(sum_xx, sum_yy, bound, s.margin, width - s.margin);
+    float* cell_score = s.cell_score.data() + s.cell_of_row[v] * o.grid_columns;
+    int* cell_u = s.cell_u.data() + s.cell_of_row[v] * o.grid_columns;
+    int* cell_v = s.cell_v.data() + s.cell_of_row[v] * o.grid_columns;
+    for (int column = 0; column < o.grid_columns; ++column) {
+      float best = cell_score[column];
+      int best_u = -1;
+      const int u_end = s.cell_start[column + 1];
+      for (int u = s.cell_start[column]; u < u_end; ++u) {
+        if (static_cast<float>(bound[u]) <= best) continue;
+        const std::int32_t a = sum_xx[u - 1] + sum_xx[u] + sum_xx[u + 1];
+        const std::int32_t c = sum_yy[u - 1] + sum_yy[u] + sum_yy[u + 1];
+        const std::int32_t b = sum_xy[u - 1] + sum_xy[u] + sum_xy[u + 1];
+        const float half_difference = 0.5f * static_cast<float>(a - c);
+        const float bf = static_cast<float>(b);
+        const float score = 0.5f * static_cast<float>(a + c) -
+                            std::sqrt(half_difference * half_difference + bf * bf);
+        if (score > best) {
+          best = score;
+          best_u = u;
+        }
+      }
+      if (best_u >= 0) {
+        cell_score[column] = best;
+        cell_u[column] = best_u;
+        cell_v[column] = v;
+      }
+    }
+  }
+
+  // Full-size position of a detect-level pixel: the whole pixel nearest its block's centre, so
+  // the full-size template needs no interpolation.
+  const int factor = 1 << o.detect_level;
+  const int offset = factor / 2;
+  int kept = 0, rejected = 0;
+  for (int cell = 0; cell < cells; ++cell) {
+    if (s.cell_u[cell] < 0) continue;
+    const Point p{static_cast<float>(s.cell_u[cell] * factor + offset),
+                  static_cast<float>(s.cell_v[cell] * factor + offset)};
+    if (looks_like_laser(level, s.cell_u[cell], s.cell_v[cell], 2 * o.window_radius,
+                         o.laser_filter_ratio)) {
+      s.rejected[index][rejected++] = p;
+    } else {
+      // The full-size template for the tracker, (2r+3)^2 around the feature.
+      const int n = o.window_radius + 1;
+      std::uint8_t* patch =
+          s.patches[index].data() + static_cast<std::ptrdiff_t>(kept) * s.patch_bytes;
+      for (int j = -n; j <= n; ++j) {
+        std::memcpy(patch, frame.row(static_cast<int>(p[1]) + j) + (static_cast<int>(p[0]) - n),
+                    static_cast<std::size_t>(2 * n + 1));
+        patch += 2 * n + 1;
+      }
+      s.features[index][kept++] = p;
+    }
+  }
+  s.feature_count[index] = kept;
+  s.rejected_count[index] = rejected;
+}
+
+}  // namespace laserline::pipeline

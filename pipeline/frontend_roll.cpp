@@ -1,0 +1,621 @@
+// The front end's pass down the rows (paper III-C to III-E), after the row normalisation
+// (frontend.cpp): the band-pass of the normalised rows, the noise level, the SNR, and the
+// candidates per column, in blocks of rows and strips of columns; its row kernels, portable and in
+// AVX2, compiled into each target's version of the pass.
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <span>
+#include <string>
+#include <type_traits>
+
+#include "pipeline/frontend.hpp"
+#include "pipeline/frontend_common.hpp"
+
+namespace laserline::pipeline {
+
+using namespace frontend_detail;
+
+namespace {
+
+// The band-pass row from the box sums of the normalised rows, each box sliding one row on:
+// sum += entering - leaving (rows of zeros beyond the ends). The band-pass, inner mean minus outer
+// mean, is held as the integer a * inner sum - b * outer sum (the constructor picks a and b and
+// the unit): exact, and in 16-bit lanes (sixteen to an AVX2 register) wherever it and the sums
+// fit (a * inner sum alone may not: that arithmetic is modulo 2^16, and the result fits).
+// `most` is the row's largest band-pass (candidates need the threshold).
+template <class Lane, class Sum = std::make_unsigned_t<Lane>>
+LASERLINE_ROW_KERNEL void band_pass_row(Sum* __restrict inner,
+                                        const std::uint16_t* __restrict inner_entering,
+                                        const std::uint16_t* __restrict inner_leaving,
+                                        Sum* __restrict outer,
+                                        const std::uint16_t* __restrict outer_entering,
+                                        const std::uint16_t* __restrict outer_leaving, Sum a, Sum b,
+                                        int count, Lane* __restrict out, int& most) {
+  Lane largest = std::numeric_limits<Lane>::min();
+  for (int u = 0; u < count; ++u) {
+    const auto i = static_cast<Sum>(inner[u] + inner_entering[u] - inner_leaving[u]);
+    const auto o = static_cast<Sum>(outer[u] + outer_entering[u] - outer_leaving[u]);
+    inner[u] = i;
+    outer[u] = o;
+    const auto band = static_cast<Lane>(static_cast<Sum>(a * i - b * o));
+    out[u] = band;
+    largest = std::max(largest, band);
+  }
+  most = largest;
+}
+
+// The same where a box is cut short by an end of the rows (a few rows at either end): the means
+// over what each box covers (inner weight wi, outer wo per unit of sum), in the band-pass's unit.
+template <class Lane, class Sum = std::make_unsigned_t<Lane>>
+LASERLINE_ROW_KERNEL void band_pass_row_cut_short(
+    Sum* __restrict inner, const std::uint16_t* __restrict inner_entering,
+    const std::uint16_t* __restrict inner_leaving, Sum* __restrict outer,
+    const std::uint16_t* __restrict outer_entering, const std::uint16_t* __restrict outer_leaving,
+    float wi, float wo, int count, Lane* __restrict out, int& most) {
+  Lane largest = std::numeric_limits<Lane>::min();
+  for (int u = 0; u < count; ++u) {
+    const auto i = static_cast<Sum>(inner[u] + inner_entering[u] - inner_leaving[u]);
+    const auto o = static_cast<Sum>(outer[u] + outer_entering[u] - outer_leaving[u]);
+    inner[u] = i;
+    outer[u] = o;
+    const float exact = static_cast<float>(i) * wi - static_cast<float>(o) * wo;
+    // Rounded half away from zero, branch-free (the sign is random: a branch would mispredict).
+    const auto band =
+        static_cast<Lane>(static_cast<std::int32_t>(exact + std::copysign(0.5f, exact)));
+    out[u] = band;
+    largest = std::max(largest, band);
+  }
+  most = largest;
+}
+
+// The candidates of a band-pass row, as bits (bit i of word i / 64 for column i of the strip):
+// the pixels at or above `threshold` (the noise is at least 1, so nothing below can pass the SNR
+// threshold) that are a maximum of the band-pass within `reach` rows up and down (strictly above
+// the rows above, at least the rows below). Row r + k is at ring + slot[k]. Few pass (a fraction
+// of a percent), so the rest of the test runs on them alone.
+// Portable version: byte flags, then eight at a time into bits.
+template <class Lane>
+LASERLINE_ROW_KERNEL void peak_bits(const Lane* ring, const std::size_t* slot, int reach,
+                                    Lane threshold, int count, std::uint8_t* __restrict flags,
+                                    std::uint64_t* __restrict bits) {
+  const Lane* __restrict row = ring + slot[0];
+  for (int u = 0; u < count; ++u)
+    flags[u] = static_cast<std::uint8_t>(row[u] >= threshold);
+  for (int k = 1; k <= reach; ++k) {
+    const Lane* __restrict above = ring + slot[-k];
+    const Lane* __restrict below = ring + slot[k];
+    for (int u = 0; u < count; ++u)
+      flags[u] = static_cast<std::uint8_t>(flags[u] & (row[u] > above[u]) & (row[u] >= below[u]));
+  }
+  for (int w = 0; w * 64 < count; ++w)
+    bits[w] = 0;
+  for (int c = 0; c < count; c += 8) {
+    std::uint64_t eight = 0;
+    std::memcpy(&eight, flags + c, sizeof eight);
+    // Flags of 0 or 1 in the bytes: the product gathers flag k into bit k of its top byte.
+    static_assert(std::endian::native == std::endian::little);
+    const std::uint64_t gathered = (eight * 0x0102040810204080u) >> 56;
+    bits[c / 64] |= gathered << (c % 64);
+  }
+}
+
+#if LASERLINE_AVX2_KERNELS
+// peak_bits() of sixteen 16-bit lanes from column u: a compare mask.
+template <int kReach = 0>  // the reach if known at compile time
+__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i peaks_of_sixteen(
+    const std::int16_t* ring, const std::size_t* slot, int reach, __m256i below_threshold, int u) {
+  if constexpr (kReach > 0) reach = kReach;
+  const std::int16_t* column = ring + u;
+  const __m256i centre = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(column + slot[0]));
+  __m256i peak = _mm256_cmpgt_epi16(centre, below_threshold);
+  for (int k = 1; k <= reach; ++k) {
+    const __m256i above = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(column + slot[-k]));
+    const __m256i below = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(column + slot[k]));
+    const __m256i higher = _mm256_cmpgt_epi16(centre, above);
+    const __m256i lower = _mm256_cmpgt_epi16(below, centre);
+    peak = _mm256_and_si256(peak, _mm256_andnot_si256(lower, higher));
+  }
+  return peak;
+}
+
+// peak_bits() for 16-bit lanes in AVX2: compare masks packed to bytes and their top bits taken
+// (count a multiple of 16).
+template <int kReach>
+__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL void peak_bits_avx2_with(
+    const std::int16_t* ring, const std::size_t* slot, int reach, std::int16_t threshold, int count,
+    std::uint64_t* bits) {
+  const __m256i below_threshold = _mm256_set1_epi16(static_cast<short>(threshold - 1));
+  for (int w = 0; w * 64 < count; ++w)
+    bits[w] = 0;
+  for (int u = 0; u < count; u += 32) {
+    const __m256i first = peaks_of_sixteen<kReach>(ring, slot, reach, below_threshold, u);
+    const __m256i second =
+        u + 16 < count ? peaks_of_sixteen<kReach>(ring, slot, reach, below_threshold, u + 16)
+                       : _mm256_setzero_si256();
+    // packs interleaves the 128-bit halves: the permutation puts the bytes back in order.
+    const __m256i bytes = _mm256_permute4x64_epi64(_mm256_packs_epi16(first, second), 0xd8);
+    const auto mask = static_cast<std::uint32_t>(_mm256_movemask_epi8(bytes));
+    bits[u / 64] |= static_cast<std::uint64_t>(mask) << (u % 64);
+  }
+}
+
+__attribute__((target("avx2"))) inline void peak_bits_avx2(const std::int16_t* ring,
+                                                           const std::size_t* slot, int reach,
+                                                           std::int16_t threshold, int count,
+                                                           std::uint64_t* bits) {
+  // (The usual reach, 2 rows for a 3-row laser width, unrolled.)
+  if (reach == 2) {
+    peak_bits_avx2_with<2>(ring, slot, reach, threshold, count, bits);
+  } else {
+    peak_bits_avx2_with<0>(ring, slot, reach, threshold, count, bits);
+  }
+}
+#endif
+
+}  // namespace
+
+struct Frontend::StageImages {
+  std::span<float> normalised, band_pass, signal_to_noise;
+};
+
+namespace {
+
+// The sum of |band-pass| over a noise window less its guard band (see Frontend::noise_level()):
+// over the `rows` rows from each of `above` and `below` (offsets into the strip's band-pass ring),
+// columns [first, first + count) of the ring. Exact: 64-bit.
+template <class Lane>
+std::uint64_t window_sum(const Lane* ring, const Frontend::NoiseWindow& window, int first,
+                         int count) {
+  std::uint64_t sum = 0;
+  for (const std::size_t* rows : {window.above, window.below}) {
+    for (int j = 0; j < window.rows; ++j) {
+      const Lane* row = ring + rows[j] + first;
+      for (int i = 0; i < count; ++i)
+        sum += static_cast<std::uint64_t>(row[i] < 0 ? -static_cast<std::int64_t>(row[i]) : row[i]);
+    }
+  }
+  return sum;
+}
+
+#if LASERLINE_AVX2_KERNELS
+// |band-pass| of sixteen 16-bit lanes, summed in pairs to 32-bit lanes with the weights `ones`
+// (1 for the window's columns, else 0).
+__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i magnitude_pairs(const std::int16_t* x,
+                                                                             __m256i ones) {
+  return _mm256_madd_epi16(
+      _mm256_abs_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(x))), ones);
+}
+
+// window_sum() of 16-bit lanes in AVX2, sixteen columns to a register, the columns beyond `count`
+// weighted 0. Reads up to 15 lanes past the last column (the ring is padded for it). Each 32-bit
+// lane sums two columns over the rows: at most 2 x 32767 x 1000 rows (the largest noise window)
+// fits, and for a window at most sixteen columns wide (the usual case: one register, summed in
+// 32 bits) so does the whole sum.
+__attribute__((target("avx2"))) inline std::uint64_t window_sum_avx2(
+    const std::int16_t* ring, const Frontend::NoiseWindow& window, int first, int count) {
+  const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  const std::int16_t* columns = ring + first;
+  std::uint64_t sum = 0;
+  for (int c = 0; c < count; c += 16) {
+    const __m256i ones =
+        _mm256_and_si256(_mm256_cmpgt_epi16(_mm256_set1_epi16(static_cast<short>(count - c)), lane),
+                         _mm256_set1_epi16(1));
+    // (The rows above and below the guard band in two sums: two chains of additions.)
+    __m256i above = _mm256_setzero_si256(), below = _mm256_setzero_si256();
+    for (int j = 0; j < window.rows; ++j) {
+      above = _mm256_add_epi32(above, magnitude_pairs(columns + window.above[j] + c, ones));
+      below = _mm256_add_epi32(below, magnitude_pairs(columns + window.below[j] + c, ones));
+    }
+    const __m256i both = _mm256_add_epi32(above, below);
+    if (count <= 16) {
+      __m128i total =
+          _mm_add_epi32(_mm256_castsi256_si128(both), _mm256_extracti128_si256(both, 1));
+      total = _mm_add_epi32(total, _mm_shuffle_epi32(total, 0x4e));
+      total = _mm_add_epi32(total, _mm_shuffle_epi32(total, 0xb1));
+      return static_cast<std::uint32_t>(_mm_cvtsi128_si32(total));
+    }
+    __m256i wide = _mm256_add_epi64(_mm256_cvtepu32_epi64(_mm256_castsi256_si128(both)),
+                                    _mm256_cvtepu32_epi64(_mm256_extracti128_si256(both, 1)));
+    const __m128i pairs =
+        _mm_add_epi64(_mm256_castsi256_si128(wide), _mm256_extracti128_si256(wide, 1));
+    sum += static_cast<std::uint64_t>(_mm_cvtsi128_si64(pairs)) +
+           static_cast<std::uint64_t>(_mm_extract_epi64(pairs, 1));
+  }
+  return sum;
+}
+#endif
+
+}  // namespace
+
+template <class Lane>
+float Frontend::noise_level(const Lane* ring, const NoiseWindow& window, int u, int begin) const {
+  std::uint64_t sum = 0;
+  const int count = 2 * noise_pad_ + 1;
+  if (u >= noise_pad_ && u + noise_pad_ < width_) {
+    const int first = u - noise_pad_ - begin;
+    bool summed = false;
+#if LASERLINE_AVX2_KERNELS
+    if constexpr (std::is_same_v<Lane, std::int16_t>) {
+      if (avx2_) {
+        sum = window_sum_avx2(ring, window, first, count);
+        summed = true;
+      }
+    }
+#endif
+    if (!summed) sum = window_sum(ring, window, first, count);
+  } else {  // at the image's sides the window repeats the edge column
+    for (int k = -noise_pad_; k <= noise_pad_; ++k)
+      sum += window_sum(ring, window, std::clamp(u + k, 0, width_ - 1) - begin, 1);
+  }
+  // III-D: the minimal noise level is 1.
+  return std::max(static_cast<float>(sum) * band_unit_ * noise_norm_, 1.0f);
+}
+
+// The settings of one pass down the rows, the same for each of its stages.
+template <class Lane>
+struct Frontend::RollPass {
+  using Sum = std::make_unsigned_t<Lane>;
+  int rows = 0;
+  int hi = 0, ho = 0;      // half the inner and the outer band-pass box
+  int nh = 0, gh = 0;      // half the noise window, its guard band
+  int look = 0;            // band-pass rows needed below the row under test
+  int edge = 0;            // rows nearer the ends are outside the depth range: no candidates there
+  bool near_down = false;  // glow below the line (see water_glows())
+  int saturation = 0;
+  std::size_t image_stride = 0;
+  float threshold = 0;      // SNR, as an amplitude ratio
+  Lane lane_threshold = 0;  // in band-pass units: at or above it where the band-pass is
+  float unit = 1;           // grey levels of a band-pass unit
+  Sum a = 0, b = 0;         // the band-pass coefficients
+  int per_column = 0;
+  float normalised_one = 1;  // 1.0 in normalised units
+};
+
+// One strip of one block of rows: its own columns [c0, c1), and what its rings and sums hold:
+// `count` columns from `begin` on, the noise window's reach on either side (beyond the image:
+// zeros); where the rows the block touches are in its ring and in the normalised ring.
+template <class Lane>
+struct Frontend::StripRows {
+  using Sum = std::make_unsigned_t<Lane>;
+  int c0 = 0, c1 = 0, begin = 0, count = 0;
+  int* most = nullptr;  // per band-pass slot: the row's largest value
+  Sum* inner = nullptr;
+  Sum* outer = nullptr;
+  Lane* band_ring = nullptr;
+  const std::size_t* band_rows = nullptr;  // of row band_base on
+  const int* band_slots = nullptr;
+  int band_base = 0;
+  const std::uint16_t* const* normalised_rows = nullptr;  // of row normalised_base on
+  int normalised_base = 0;
+
+  LASERLINE_ROW_KERNEL Lane* band(int r) const { return band_ring + band_rows[r - band_base]; }
+  LASERLINE_ROW_KERNEL int& row_most(int r) const { return most[band_slots[r - band_base]]; }
+  // The strip's columns of normalised row r.
+  LASERLINE_ROW_KERNEL const std::uint16_t* normalised(int r) const {
+    return normalised_rows[r - normalised_base] + begin;
+  }
+};
+
+template <class Lane>
+LASERLINE_ROW_KERNEL Frontend::RollPass<Lane> Frontend::roll_pass() const {
+  RollPass<Lane> pass;
+  pass.rows = rows_.rows();
+  pass.hi = inner_ / 2;
+  pass.ho = outer_ / 2;
+  pass.nh = noise_half_;
+  pass.gh = guard_;
+  pass.look = std::max({noise_half_, reach_, ridge_});
+  pass.edge = std::max({margin_, reach_, ridge_});
+  pass.near_down = rows_.near_side() > 0;
+  pass.saturation = options_.saturation_level;
+  pass.image_stride = static_cast<std::size_t>(stride_);
+  pass.threshold = std::pow(10.0f, static_cast<float>(options_.snr_threshold_db) / 20.0f);
+  // (Beyond the lanes' range, as a high threshold in 16-bit lanes can be: never reached.)
+  const float lanes = std::ceil(pass.threshold / band_unit_);
+  constexpr Lane kMostLane = std::numeric_limits<Lane>::max();
+  pass.lane_threshold =
+      lanes < static_cast<float>(kMostLane) ? static_cast<Lane>(lanes) : kMostLane;
+  pass.unit = band_unit_;
+  pass.a = static_cast<typename RollPass<Lane>::Sum>(band_a_);
+  pass.b = static_cast<typename RollPass<Lane>::Sum>(band_b_);
+  pass.per_column = options_.max_candidates_per_column;
+  pass.normalised_one = static_cast<float>(1 << (kFixedBits - normalised_shift_));
+  return pass;
+}
+
+// Column 0 of normalised row r in the ring.
+LASERLINE_ROW_KERNEL std::uint16_t* Frontend::normalised_slot(int r) {
+  return normalised_ring_.data() + normalised_pad_ +
+         static_cast<std::size_t>(r % normalised_ring_rows_) * normalised_stride_;
+}
+
+// Normalised row r; rows beyond the ends are rows of zeros (a box cut short sums what it covers).
+LASERLINE_ROW_KERNEL const std::uint16_t* Frontend::normalised_at(int r, int rows) {
+  if (r < 0 || r >= rows) return zero_normalised_.data() + normalised_pad_;
+  return normalised_slot(r);
+}
+
+// III-B: the normalised rows from `next` to `last` (at most the last row) into the ring, and into
+// images->normalised where asked; `next` moves on past them.
+LASERLINE_ROW_KERNEL void Frontend::normalise_until(int last, int rows, float normalised_one,
+                                                    int& next, const StageImages* images) {
+  for (; next <= std::min(last, rows - 1); ++next) {
+    std::uint16_t* out = normalised_slot(next);
+    normalise_row(next, out);
+    if (images != nullptr && !images->normalised.empty()) {
+      float* dst = images->normalised.data() + next * static_cast<std::size_t>(stride_);
+      for (int u = 0; u < width_; ++u)
+        dst[u] = static_cast<float>(out[u]) / normalised_one;
+    }
+  }
+}
+
+// Where the rows a block touches are, the same in every strip: as offsets into a strip's rings
+// (rows beyond the ends: the zero row after the ring's last) from row band_base to band_top, and
+// the normalised rows from normalised_base to normalised_top.
+LASERLINE_ROW_KERNEL void Frontend::place_block_rows(int rows, int band_base, int band_top,
+                                                     int normalised_base, int normalised_top) {
+  const auto ring = static_cast<std::size_t>(ring_stride_);
+  // (Slots counted on from the first, wrapping: a division per row and strip was 2% of the time.)
+  for (int r = band_base, slot = band_base < 0 ? 0 : band_base % band_ring_rows_; r < band_top;
+       ++r) {
+    const int at = r < 0 || r >= rows ? band_ring_rows_ : slot;
+    band_slots_[r - band_base] = at;
+    band_rows_[r - band_base] = static_cast<std::size_t>(at) * ring;
+    if (r >= 0) slot = slot + 1 == band_ring_rows_ ? 0 : slot + 1;
+  }
+  for (int r = normalised_base; r <= normalised_top; ++r)
+    normalised_rows_[r - normalised_base] = normalised_at(r, rows);
+}
+
+// III-C: the band-pass rows [first, end) of a strip: box means down the columns; at the ends the
+// boxes are cut short and averaged over what they cover. The sums of row b are those of row b - 1
+// plus the row that enters the box and minus the one that leaves it; they start holding rows
+// 0 .. half - 1.
+template <class Lane>
+LASERLINE_ROW_KERNEL void Frontend::band_pass_rows(const RollPass<Lane>& pass,
+                                                   const StripRows<Lane>& strip, int first, int end,
+                                                   const StageImages* images) {
+  using Sum = std::make_unsigned_t<Lane>;
+  const int hi = pass.hi, ho = pass.ho, rows = pass.rows, count = strip.count;
+  Sum* inner = strip.inner;
+  Sum* outer = strip.outer;
+  if (first == 0) {
+    for (int j = 0; j < std::min(ho, rows); ++j) {
+      const std::uint16_t* row = strip.normalised(j);
+      for (int u = 0; u < count; ++u) {
+        if (j < hi) inner[u] = static_cast<Sum>(inner[u] + row[u]);
+        outer[u] = static_cast<Sum>(outer[u] + row[u]);
+      }
+    }
+  }
+  for (int b = first; b < end; ++b) {
+    Lane* out = strip.band(b);
+    int& row_most = strip.row_most(b);
+    const std::uint16_t* inner_in = strip.normalised(b + hi);
+    const std::uint16_t* inner_out = strip.normalised(b - hi - 1);
+    const std::uint16_t* outer_in = strip.normalised(b + ho);
+    const std::uint16_t* outer_out = strip.normalised(b - ho - 1);
+    if (b >= ho && b + ho < rows) {
+      if (count == kRingColumns) {
+        band_pass_row(inner, inner_in, inner_out, outer, outer_in, outer_out, pass.a, pass.b,
+                      kRingColumns, out, row_most);
+      } else {
+        band_pass_row(inner, inner_in, inner_out, outer, outer_in, outer_out, pass.a, pass.b, count,
+                      out, row_most);
+      }
+    } else {
+      const int i0 = std::max(b - hi, 0), i1 = std::min(b + hi + 1, rows);
+      const int o0 = std::max(b - ho, 0), o1 = std::min(b + ho + 1, rows);
+      const float wi = 1.0f / (static_cast<float>(i1 - i0) * pass.normalised_one * pass.unit);
+      const float wo = 1.0f / (static_cast<float>(o1 - o0) * pass.normalised_one * pass.unit);
+      band_pass_row_cut_short(inner, inner_in, inner_out, outer, outer_in, outer_out, wi, wo, count,
+                              out, row_most);
+    }
+    if (images != nullptr && !images->band_pass.empty()) {
+      float* dst = images->band_pass.data() + b * pass.image_stride;
+      for (int u = strip.c0; u < strip.c1; ++u)
+        dst[u] = static_cast<float>(out[u - strip.begin]) * pass.unit;
+    }
+  }
+}
+
+// The lowest band-pass at ring column i on one side of row r (side -1: up, +1: down): out to
+// where the band-pass crosses zero (farther for a line wider than the model), then the lowest
+// value within half an outer box beyond; it stops once below `enough`.
+template <class Lane>
+LASERLINE_ROW_KERNEL int Frontend::lowest_beside(const RollPass<Lane>& pass,
+                                                 const StripRows<Lane>& strip, int r, int i,
+                                                 int side, int enough) const {
+  int d = reach_ + 1;
+  while (d < pass.look && strip.band(r + side * d)[i] > 0)
+    ++d;
+  int low = 0;
+  for (const int last_row = std::min(d + ridge_, pass.look); d <= last_row; ++d) {
+    low = std::min<int>(low, strip.band(r + side * d)[i]);
+    if (low < enough) break;  // low enough: no need to look farther
+  }
+  return low;
+}
+
+// III-D/E for row r of a strip: its SNR into images->signal_to_noise where asked, and its
+// candidates (maxima of the band-pass within `reach` rows, ridges, at or above the threshold)
+// into column_best_ / column_count_.
+template <class Lane>
+LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
+                                                   const StripRows<Lane>& strip, int r,
+                                                   const StageImages* images) {
+  const int begin = strip.begin, count = strip.count, c0 = strip.c0, c1 = strip.c1;
+  const Lane* row = strip.band(r);
+  // The noise window of row r, rows [r - nh, r + nh], less its guard band.
+  const NoiseWindow noise{strip.band_rows + (r - pass.nh - strip.band_base),
+                          strip.band_rows + (r + pass.gh + 1 - strip.band_base), pass.nh - pass.gh};
+  auto noise_at = [&](int u) LASERLINE_ROW_LAMBDA {
+    return noise_level(strip.band_ring, noise, u, begin);
+  };
+  if (images != nullptr && !images->signal_to_noise.empty()) {
+    float* dst = images->signal_to_noise.data() + r * pass.image_stride;
+    for (int u = c0; u < c1; ++u)
+      dst[u] = static_cast<float>(row[u - begin]) * pass.unit / noise_at(u);
+  }
+  const bool searched = r >= pass.edge && r < pass.rows - pass.edge;
+  if (!searched || strip.row_most(r) < pass.lane_threshold) return;
+  // Candidates: maxima of the band-pass within `reach` rows at or above the threshold.
+  const std::size_t* rows_at = strip.band_rows + (r - strip.band_base);
+  std::uint64_t* bits = peak_bits_.data();
+#if LASERLINE_AVX2_KERNELS
+  if constexpr (std::is_same_v<Lane, std::int16_t>) {
+    if (avx2_) {
+      peak_bits_avx2(strip.band_ring, rows_at, reach_, pass.lane_threshold, count, bits);
+    } else {
+      peak_bits(strip.band_ring, rows_at, reach_, pass.lane_threshold, count, peak_flags_.data(),
+                bits);
+    }
+  } else
+#endif
+  {
+    peak_bits(strip.band_ring, rows_at, reach_, pass.lane_threshold, count, peak_flags_.data(),
+              bits);
+  }
+  const Lane* up = strip.band(r - 1);
+  const Lane* down = strip.band(r + 1);
+
+  // From set bit to set bit over the strip's own columns [first, end) (a branch per pixel would
+  // mispredict).
+  const int first = c0 - begin, end = c1 - begin;
+  for (int w = first / 64; w * 64 < end; ++w) {
+    std::uint64_t word = bits[w];
+    if (first > w * 64) word &= ~std::uint64_t{0} << (first - w * 64);
+    if (end < w * 64 + 64) word &= (std::uint64_t{1} << (end - w * 64)) - 1;
+    for (; word != 0; word &= word - 1) {
+      const int i = w * 64 + std::countr_zero(word);
+      const Lane lane = row[i];
+      const int u = begin + i;
+      const float value = static_cast<float>(lane) * pass.unit;
+      // Keep the strongest few per column (bounded work and output). Strongest by band-pass
+      // amplitude: the laser adds light, while a faint texture edge in a quiet neighbourhood can
+      // have the higher SNR. (Checked first: it is the cheapest test.)
+      Peak* best = column_best_.data() + static_cast<std::size_t>(u) * pass.per_column;
+      const int n = column_count_[u];
+      int slot = n;
+      if (n == pass.per_column) {
+        slot = 0;
+        for (int j = 1; j < n; ++j)
+          if (best[j].band < best[slot].band) slot = j;
+        if (best[slot].band >= value) continue;
+      }
+      // A ridge, not an edge: the band-pass an eighth of the peak below zero on both sides (a
+      // line gives a half to three quarters, a line lying on a texture edge less on the edge's
+      // bright side; an edge nothing on its bright side).
+      const int enough = -static_cast<int>(lane) / 8;  // (rounded toward zero)
+      const int lowest_up =
+          glowing_ && !pass.near_down ? 0 : lowest_beside(pass, strip, r, i, -1, enough);
+      const int lowest_down =
+          glowing_ && pass.near_down ? 0 : lowest_beside(pass, strip, r, i, +1, enough);
+      const int needed =
+          glowing_ ? (pass.near_down ? lowest_up : lowest_down) : std::max(lowest_up, lowest_down);
+      // (A clipped core much wider than the model is flat: the band-pass sees its two flanks as
+      // edges. Its run is found and centred by the refinement.)
+      if (8 * needed > -static_cast<int>(lane) &&
+          current_.at(u, static_cast<int>(rows_.source_row(r) + 0.5f)) < pass.saturation) {
+        continue;
+      }
+      const float snr = value / noise_at(u);
+      if (!(snr >= pass.threshold)) continue;
+      if (n < pass.per_column) column_count_[u] = static_cast<std::uint8_t>(n + 1);
+      // Sub-row position of the band-pass peak, mapped back to an original row: the guess the
+      // refinement starts from.
+      const auto above = static_cast<float>(up[i]), below = static_cast<float>(down[i]);
+      const auto centre = static_cast<float>(lane);
+      const float curvature = above - 2.0f * centre + below;
+      const float offset =
+          curvature < 0.0f ? std::clamp(0.5f * (above - below) / curvature, -0.5f, 0.5f) : 0.0f;
+      best[slot] = Peak{static_cast<float>(r) + offset, snr, value};
+    }
+  }
+}
+
+// Rows go in blocks: the block's normalised rows across the whole image (long runs through the
+// frame), then strip by strip the band-pass, noise and candidates of the block's rows (the
+// strip's rings stay in the first-level cache for the whole block).
+template <class Lane>
+LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRings<Lane>& rings) {
+  using Sum = std::make_unsigned_t<Lane>;
+  const RollPass<Lane> pass = roll_pass<Lane>();
+  const int rows = pass.rows;
+  const auto ring = static_cast<std::size_t>(ring_stride_);
+  const int strips = (width_ + kStripColumns - 1) / kStripColumns;
+  std::fill(column_count_.begin(), column_count_.end(), 0);
+  std::fill(rings.inner.begin(), rings.inner.end(), Sum{0});
+  std::fill(rings.outer.begin(), rings.outer.end(), Sum{0});
+
+  int next_normalised = 0;
+  int next_band = 0;
+  for (int r_begin = 0; r_begin < rows; r_begin += kRowBlock) {
+    const int r_end = std::min(r_begin + kRowBlock, rows);
+    const int band_end = std::min(r_end + pass.look, rows);  // band-pass rows [next_band, band_end)
+    normalise_until(band_end - 1 + pass.ho, rows, pass.normalised_one, next_normalised, images);
+    const int band_base = r_begin - pass.look;
+    const int normalised_base = next_band - pass.ho - 1;
+    place_block_rows(rows, band_base, r_end + pass.look, normalised_base, band_end + pass.ho);
+    for (int s = 0; s < strips; ++s) {
+      StripRows<Lane> strip;
+      strip.c0 = s * kStripColumns;
+      strip.c1 = std::min(strip.c0 + kStripColumns, width_);
+      strip.begin = strip.c0 - noise_pad_;
+      strip.count = ring_stride_;
+      const std::size_t state = static_cast<std::size_t>(s) * ring;
+      strip.most = band_most_.data() + static_cast<std::size_t>(s) * (band_ring_rows_ + 1);
+      strip.inner = rings.inner.data() + state;
+      strip.outer = rings.outer.data() + state;
+      strip.band_ring = rings.band.data() + state * static_cast<std::size_t>(band_ring_rows_ + 1);
+      strip.band_rows = band_rows_.data();
+      strip.band_slots = band_slots_.data();
+      strip.band_base = band_base;
+      strip.normalised_rows = normalised_rows_.data();
+      strip.normalised_base = normalised_base;
+      band_pass_rows(pass, strip, next_band, band_end, images);
+      for (int r = r_begin; r < r_end; ++r)
+        row_candidates(pass, strip, r, images);
+    }
+    next_band = band_end;
+  }
+}
+
+void Frontend::roll(const StageImages* images) {
+  if (narrow_band_) {
+    roll_narrow(images);
+  } else {
+    roll_wide(images);
+  }
+}
+
+LASERLINE_DENSE_KERNEL
+void Frontend::roll_narrow(const StageImages* images) {
+  roll_with(images, narrow_);
+}
+
+LASERLINE_DENSE_KERNEL
+void Frontend::roll_wide(const StageImages* images) {
+  roll_with(images, wide_);
+}
+
+void Frontend::stage_images(std::span<float> normalised, std::span<float> band_pass,
+                            std::span<float> signal_to_noise) {
+  const std::size_t size = static_cast<std::size_t>(rows_.rows()) * stride_;
+  for (std::span<float> image : {normalised, band_pass, signal_to_noise}) {
+    if (!image.empty() && image.size() < size) {
+      throw std::invalid_argument("Frontend::stage_images: an output is smaller than " +
+                                  std::to_string(rows_.rows()) + " x " + std::to_string(stride_));
+    }
+  }
+  const StageImages images{normalised, band_pass, signal_to_noise};
+  roll(&images);
+}
+
+}  // namespace laserline::pipeline
