@@ -8,6 +8,7 @@
 
 #include "hal/camera.hpp"
 #include "hal/laser_channel.hpp"
+#include "hal/camera_link.hpp"
 #include "hal/pixel_conversion.hpp"
 
 struct _ArvCamera;
@@ -120,23 +121,15 @@ class AravisCamera final : public Camera {
 
   // Camera-thread state.
   std::int64_t silent_ns_ = 0;  // time spent waiting for a frame since the last one
-  std::int64_t next_reconnect_mono_ns_ = 0;
-  int reconnect_delay_ms_ = 0;
-  std::int64_t offset_ns_ = 0;  // host monotonic - camera time, tracked
-  bool offset_valid_ = false;
+  ReconnectBackoff backoff_;
+  CameraClockOffset clock_;
   std::uint64_t last_frame_id_ = 0;
   std::int64_t sequence_base_ = 0;  // our sequence - the camera's frame id (wraps, reconnects)
   std::uint64_t next_sequence_ = 0;
   bool have_frame_id_ = false;
   std::uint64_t underruns_base_ = 0;  // underruns of streams already closed
 
-  std::atomic<std::int64_t> missing_packets_{0};
-  std::atomic<std::int64_t> timeouts_{0};
-  std::atomic<std::int64_t> size_mismatches_{0};
-  std::atomic<std::int64_t> underruns_{0};
-  std::atomic<std::int64_t> other_errors_{0};
-  std::atomic<std::int64_t> reconnects_{0};
-  std::atomic<std::int64_t> skipped_frames_{0};
+  CameraHealthCounters counters_;
 };
 
 }  // namespace laserline::hal
