@@ -6,8 +6,10 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "hal/calibration.hpp"
 #include "hal/clock.hpp"
 #include "hal/registry.hpp"
+#include "hal/yaml_reader.hpp"
 
 namespace laserline::daemon {
 

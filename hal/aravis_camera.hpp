@@ -2,14 +2,16 @@
 
 #include <atomic>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "hal/camera.hpp"
-#include "hal/laser_channel.hpp"
 #include "hal/camera_link.hpp"
+#include "hal/laser_channel.hpp"
 #include "hal/pixel_conversion.hpp"
+#include "hal/registry.hpp"
 
 struct _ArvCamera;
 struct _ArvStream;
@@ -50,6 +52,8 @@ struct AravisCameraOptions {
 
 // The pixel formats the aravis backend takes, by their GenICam (SFNC) names.
 const std::vector<std::string>& aravis_pixel_formats();
+// The aravis backend's factory (hal/registry.hpp): its options from the `camera:` section.
+std::unique_ptr<Camera> create_aravis_camera(const CameraRequest& request);
 // Empty when the backend takes `options.pixel_format` at the options' size; otherwise why not, one
 // line (a mosaic needs 2x2 pixels, YUYV an even width). open() checks it too.
 std::string aravis_pixel_format_problem(const AravisCameraOptions& options);

@@ -2,13 +2,15 @@
 
 #include <atomic>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "hal/camera.hpp"
-#include "hal/laser_channel.hpp"
 #include "hal/camera_link.hpp"
+#include "hal/laser_channel.hpp"
 #include "hal/pixel_conversion.hpp"
+#include "hal/registry.hpp"
 
 namespace laserline::hal {
 
@@ -29,6 +31,8 @@ struct V4l2CameraOptions {
 
 // The pixel formats the v4l2 backend takes (names of the V4L2_PIX_FMT_ macros).
 const std::vector<std::string>& v4l2_pixel_formats();
+// The v4l2 backend's factory (hal/registry.hpp): its options from the `camera:` section.
+std::unique_ptr<Camera> create_v4l2_camera(const CameraRequest& request);
 // Empty when the backend takes `options.pixel_format` at the options' size; otherwise why not, one
 // line (a mosaic needs 2x2 pixels, YUYV an even width). open() checks it too.
 std::string v4l2_pixel_format_problem(const V4l2CameraOptions& options);

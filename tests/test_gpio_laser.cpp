@@ -25,6 +25,7 @@
 #include "hal/clock.hpp"
 #include "hal/gpio_laser.hpp"
 #include "hal/registry.hpp"
+#include "hal/yaml_reader.hpp"
 #include "run_command.hpp"
 #include "thread_allocations.hpp"
 
