@@ -9,7 +9,6 @@
 #include <filesystem>
 #include <stdexcept>
 
-#include "daemon/raw_frame_encoder.hpp"
 #include "pipeline/options.hpp"
 #include "pipeline/profile.hpp"
 
@@ -327,6 +326,43 @@ void check_frame_path(const DaemonConfig& config, const hal::FrameFormat& format
                            std::to_string(config.frame_memory_limit_mb) +
                            " MB: fewer slots, a smaller camera or a higher limit");
   }
+}
+
+RawFrameOptions with_raw_frame_region(RawFrameOptions options, const hal::FrameFormat& format) {
+  if (options.roi_width == 0 || options.roi_height == 0) {
+    options.roi_x = 0;
+    options.roi_y = 0;
+    options.roi_width = format.width;
+    options.roi_height = format.height;
+  }
+  return options;
+}
+
+std::string raw_frame_region_problem(const RawFrameOptions& given, const hal::FrameFormat& format) {
+  const RawFrameOptions o = with_raw_frame_region(given, format);
+  const std::int64_t right = std::int64_t{o.roi_x} + o.roi_width;
+  const std::int64_t bottom = std::int64_t{o.roi_y} + o.roi_height;
+  if (o.roi_x < 0 || o.roi_y < 0 || o.roi_width <= 0 || o.roi_height <= 0 || right > format.width ||
+      bottom > format.height) {
+    return "lcm.image_roi: [" + std::to_string(o.roi_x) + ", " + std::to_string(o.roi_y) + ", " +
+           std::to_string(o.roi_width) + ", " + std::to_string(o.roi_height) +
+           "] is not inside the camera's " + std::to_string(format.width) + "x" +
+           std::to_string(format.height) + " frame";
+  }
+  if (o.downscale < 1 || o.roi_width < o.downscale || o.roi_height < o.downscale) {
+    return "lcm.image_downscale: " + std::to_string(o.downscale) + " leaves no pixel of a " +
+           std::to_string(o.roi_width) + "x" + std::to_string(o.roi_height) + " region";
+  }
+  return "";
+}
+
+std::uint64_t raw_frame_encoder_bytes(const RawFrameOptions& given,
+                                      const hal::FrameFormat& format) {
+  const RawFrameOptions o = with_raw_frame_region(given, format);
+  const int k = std::max(1, o.downscale);
+  const auto out = static_cast<std::uint64_t>(std::max(0, o.roi_width / k)) *
+                   static_cast<std::uint64_t>(std::max(0, o.roi_height / k));
+  return out + out + out / 8 + 4096;  // the scaled region and the compressed output
 }
 
 bool searches_depth_range(const std::string& detector) {
