@@ -1,7 +1,7 @@
 // The gpiod laser backend against the real libgpiod 1.6 library, through the stand-in chip of
-// tests/gpiochip_shim.cpp: linked into this test for the in-process tests, LD_PRELOADed into
-// laserlined for the daemon's safety paths and the alternate-mode timing. The shim's log is the
-// "oscilloscope": every level change on the pin with its host time.
+// tests/standins/gpiochip_shim.cpp: linked into this test for the in-process tests, LD_PRELOADed
+// into laserlined for the daemon's safety paths and the alternate-mode timing. The shim's log is
+// the "oscilloscope": every level change on the pin with its host time.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/resource.h>
