@@ -3,12 +3,13 @@
 #include <malloc.h>
 
 #include <algorithm>
+#include <climits>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <stdexcept>
 
-#include "daemon/raw_frame_encoder.hpp"
+#include "pipeline/options.hpp"
 #include "pipeline/profile.hpp"
 
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
@@ -26,6 +27,23 @@ int power_of_two(hal::YamlMap& map, const std::string& key, int fallback) {
   if ((value & (value - 1)) != 0)
     map.fail(key, "must be a power of two, got " + std::to_string(value));
   return value;
+}
+
+// The detector's options are read here as numbers and checked by the pipeline (their one check):
+// its error names the field, which is the key in `map`.
+void read(hal::YamlMap& map, const char* key, double& value) {
+  value = map.number(key, value, -HUGE_VAL, HUGE_VAL);
+}
+void read(hal::YamlMap& map, const char* key, int& value) {
+  value = static_cast<int>(map.integer(key, value, INT_MIN, INT_MAX));
+}
+template <typename Check>
+void checked(const hal::YamlMap& map, Check check) {
+  try {
+    check();
+  } catch (const pipeline::OptionError& e) {
+    map.fail(e.field(), e.problem());
+  }
 }
 
 hal::Calibration read_calibration_section(hal::YamlMap& root, const std::string& source,
@@ -105,68 +123,60 @@ std::string describe_sheet(const hal::LaserMount& laser) {
 
 void read_detector_options(hal::YamlMap& detector, pipeline::DetectorOptions& options) {
   hal::YamlMap maxvalue = detector.map("maxvalue");
-  options.maxvalue_threshold =
-      static_cast<int>(maxvalue.integer("threshold", options.maxvalue_threshold, 1, 255));
+  read(maxvalue, "threshold", options.maxvalue_threshold);
+  checked(maxvalue, [&] { pipeline::validate_maxvalue_threshold(options.maxvalue_threshold); });
   maxvalue.finish();
 
   pipeline::FrontendOptions& f = options.frontend;
   hal::YamlMap frontend = detector.map("frontend");
-  f.min_depth_m = frontend.number("min_depth_m", f.min_depth_m, 0.01, 1000.0);
-  f.max_depth_m = frontend.number("max_depth_m", f.max_depth_m, 0.01, 1000.0);
-  if (f.max_depth_m <= f.min_depth_m) frontend.fail("max_depth_m", "must be above min_depth_m");
-  f.normalised_width_px = frontend.number("normalised_width_px", f.normalised_width_px, 1.0, 32.0);
-  f.passband_ratio = frontend.number("passband_ratio", f.passband_ratio, 1.5, 16.0);
-  f.noise_rows = static_cast<int>(frontend.integer("noise_rows", f.noise_rows, 3, 1001));
-  f.noise_columns = static_cast<int>(frontend.integer("noise_columns", f.noise_columns, 1, 101));
-  f.snr_threshold_db = frontend.number("snr_threshold_db", f.snr_threshold_db, 0.0, 60.0);
-  f.max_candidates_per_column = static_cast<int>(
-      frontend.integer("max_candidates_per_column", f.max_candidates_per_column, 1, 64));
-  f.saturation_level =
-      static_cast<int>(frontend.integer("saturation_level", f.saturation_level, 1, 255));
+  read(frontend, "min_depth_m", f.min_depth_m);
+  read(frontend, "max_depth_m", f.max_depth_m);
+  read(frontend, "normalised_width_px", f.normalised_width_px);
+  read(frontend, "passband_ratio", f.passband_ratio);
+  read(frontend, "noise_rows", f.noise_rows);
+  read(frontend, "noise_columns", f.noise_columns);
+  read(frontend, "snr_threshold_db", f.snr_threshold_db);
+  read(frontend, "max_candidates_per_column", f.max_candidates_per_column);
+  read(frontend, "saturation_level", f.saturation_level);
   pipeline::LineSelectionOptions& l = f.selection;
   hal::YamlMap selection = frontend.map("selection");
   l.enabled = selection.boolean("enabled", l.enabled);
-  l.restart_cost_db = selection.number("restart_cost_db", l.restart_cost_db, 0.0, 10000.0);
-  l.jump_free_px = selection.number("jump_free_px", l.jump_free_px, 0.0, 1000.0);
-  l.jump_cost_db_per_px =
-      selection.number("jump_cost_db_per_px", l.jump_cost_db_per_px, 0.0, 1000.0);
-  l.gap_cost_db = selection.number("gap_cost_db", l.gap_cost_db, 0.0, 1000.0);
-  l.max_gap = static_cast<int>(selection.integer("max_gap", l.max_gap, 0, 64));
-  l.previous_bonus_db = selection.number("previous_bonus_db", l.previous_bonus_db, 0.0, 1000.0);
-  l.previous_tolerance_px =
-      selection.number("previous_tolerance_px", l.previous_tolerance_px, 0.0, 1000.0);
+  read(selection, "restart_cost_db", l.restart_cost_db);
+  read(selection, "jump_free_px", l.jump_free_px);
+  read(selection, "jump_cost_db_per_px", l.jump_cost_db_per_px);
+  read(selection, "gap_cost_db", l.gap_cost_db);
+  read(selection, "max_gap", l.max_gap);
+  read(selection, "previous_bonus_db", l.previous_bonus_db);
+  read(selection, "previous_tolerance_px", l.previous_tolerance_px);
+  checked(selection, [&] { l.validate(); });
   selection.finish();
+  checked(frontend, [&] { f.validate(); });
   frontend.finish();
 
   pipeline::BackgroundOptions& b = options.background;
   hal::YamlMap background = detector.map("background");
-  b.history_frames =
-      static_cast<int>(background.integer("history_frames", b.history_frames, 1, 64));
-  b.min_motion_widths = background.number("min_motion_widths", b.min_motion_widths, 0.0, 100.0);
+  read(background, "history_frames", b.history_frames);
+  read(background, "min_motion_widths", b.min_motion_widths);
+  checked(background, [&] { b.validate(); });
   background.finish();
 
   pipeline::MotionOptions& m = options.motion;
   hal::YamlMap motion = detector.map("motion");
-  m.grid_columns = static_cast<int>(motion.integer("grid_columns", m.grid_columns, 1, 64));
-  m.grid_rows = static_cast<int>(motion.integer("grid_rows", m.grid_rows, 1, 64));
-  m.detect_level = static_cast<int>(motion.integer("detect_level", m.detect_level, 0, 4));
-  m.pyramid_levels = static_cast<int>(motion.integer("pyramid_levels", m.pyramid_levels, 1, 6));
-  if (m.detect_level >= m.pyramid_levels) {
-    motion.fail("detect_level", "must be below pyramid_levels");
-  }
-  m.window_radius = static_cast<int>(motion.integer("window_radius", m.window_radius, 1, 15));
-  m.max_iterations = static_cast<int>(motion.integer("max_iterations", m.max_iterations, 1, 50));
-  m.ransac_iterations =
-      static_cast<int>(motion.integer("ransac_iterations", m.ransac_iterations, 1, 10000));
-  m.inlier_px = motion.number("inlier_px", m.inlier_px, 0.05, 50.0);
-  m.min_inliers = static_cast<int>(motion.integer("min_inliers", m.min_inliers, 4, 4096));
-  m.laser_filter_ratio = motion.number("laser_filter_ratio", m.laser_filter_ratio, 1.0, 1000.0);
-  m.essential_ransac_iterations = static_cast<int>(
-      motion.integer("essential_ransac_iterations", m.essential_ransac_iterations, 1, 10000));
-  m.essential_inlier_px = motion.number("essential_inlier_px", m.essential_inlier_px, 0.05, 50.0);
-  m.essential_min_parallax_px =
-      motion.number("essential_min_parallax_px", m.essential_min_parallax_px, 0.0, 100.0);
-  m.scale_tracks = static_cast<int>(motion.integer("scale_tracks", m.scale_tracks, 0, 4096));
+  read(motion, "grid_columns", m.grid_columns);
+  read(motion, "grid_rows", m.grid_rows);
+  read(motion, "detect_level", m.detect_level);
+  read(motion, "pyramid_levels", m.pyramid_levels);
+  read(motion, "window_radius", m.window_radius);
+  read(motion, "max_iterations", m.max_iterations);
+  read(motion, "ransac_iterations", m.ransac_iterations);
+  read(motion, "inlier_px", m.inlier_px);
+  read(motion, "min_inliers", m.min_inliers);
+  read(motion, "laser_filter_ratio", m.laser_filter_ratio);
+  read(motion, "essential_ransac_iterations", m.essential_ransac_iterations);
+  read(motion, "essential_inlier_px", m.essential_inlier_px);
+  read(motion, "essential_min_parallax_px", m.essential_min_parallax_px);
+  read(motion, "scale_tracks", m.scale_tracks);
+  checked(motion, [&] { m.validate(); });
   motion.finish();
 
   pipeline::ValidationOptions& v = options.validation;
@@ -177,24 +187,19 @@ void read_detector_options(hal::YamlMap& detector, pipeline::DetectorOptions& op
       {"chain_code", "image_features"});
   v.association = association == "chain_code" ? pipeline::SegmentAssociation::chain_code
                                               : pipeline::SegmentAssociation::image_features;
-  v.max_neighbour_gap_px =
-      validation.number("max_neighbour_gap_px", v.max_neighbour_gap_px, 1.0, 64.0);
-  v.min_segment_points =
-      static_cast<int>(validation.integer("min_segment_points", v.min_segment_points, 2, 1000));
-  v.max_box_distance_px =
-      validation.number("max_box_distance_px", v.max_box_distance_px, 0.0, 1000.0);
-  v.max_column_offset =
-      static_cast<int>(validation.integer("max_column_offset", v.max_column_offset, 0, 256));
-  v.min_correlation = validation.number("min_correlation", v.min_correlation, 0.0, 1.0);
-  v.feature_search_px =
-      static_cast<int>(validation.integer("feature_search_px", v.feature_search_px, 0, 32));
-  v.patch_columns = static_cast<int>(validation.integer("patch_columns", v.patch_columns, 4, 256));
-  v.patch_rows = static_cast<int>(validation.integer("patch_rows", v.patch_rows, 4, 256));
-  v.background_px = validation.number("background_px", v.background_px, 0.01, 100.0);
-  v.max_depth_baselines = validation.number("max_depth_baselines", v.max_depth_baselines, 1.0, 1e6);
+  read(validation, "max_neighbour_gap_px", v.max_neighbour_gap_px);
+  read(validation, "min_segment_points", v.min_segment_points);
+  read(validation, "max_box_distance_px", v.max_box_distance_px);
+  read(validation, "max_column_offset", v.max_column_offset);
+  read(validation, "min_correlation", v.min_correlation);
+  read(validation, "feature_search_px", v.feature_search_px);
+  read(validation, "patch_columns", v.patch_columns);
+  read(validation, "patch_rows", v.patch_rows);
+  read(validation, "background_px", v.background_px);
+  read(validation, "max_depth_baselines", v.max_depth_baselines);
   v.require_track = validation.boolean("require_track", v.require_track);
-  v.max_laser_motion_px =
-      validation.number("max_laser_motion_px", v.max_laser_motion_px, 0.0, 1000.0);
+  read(validation, "max_laser_motion_px", v.max_laser_motion_px);
+  checked(validation, [&] { v.validate(); });
   validation.finish();
 }
 
@@ -321,6 +326,43 @@ void check_frame_path(const DaemonConfig& config, const hal::FrameFormat& format
                            std::to_string(config.frame_memory_limit_mb) +
                            " MB: fewer slots, a smaller camera or a higher limit");
   }
+}
+
+RawFrameOptions with_raw_frame_region(RawFrameOptions options, const hal::FrameFormat& format) {
+  if (options.roi_width == 0 || options.roi_height == 0) {
+    options.roi_x = 0;
+    options.roi_y = 0;
+    options.roi_width = format.width;
+    options.roi_height = format.height;
+  }
+  return options;
+}
+
+std::string raw_frame_region_problem(const RawFrameOptions& given, const hal::FrameFormat& format) {
+  const RawFrameOptions o = with_raw_frame_region(given, format);
+  const std::int64_t right = std::int64_t{o.roi_x} + o.roi_width;
+  const std::int64_t bottom = std::int64_t{o.roi_y} + o.roi_height;
+  if (o.roi_x < 0 || o.roi_y < 0 || o.roi_width <= 0 || o.roi_height <= 0 || right > format.width ||
+      bottom > format.height) {
+    return "lcm.image_roi: [" + std::to_string(o.roi_x) + ", " + std::to_string(o.roi_y) + ", " +
+           std::to_string(o.roi_width) + ", " + std::to_string(o.roi_height) +
+           "] is not inside the camera's " + std::to_string(format.width) + "x" +
+           std::to_string(format.height) + " frame";
+  }
+  if (o.downscale < 1 || o.roi_width < o.downscale || o.roi_height < o.downscale) {
+    return "lcm.image_downscale: " + std::to_string(o.downscale) + " leaves no pixel of a " +
+           std::to_string(o.roi_width) + "x" + std::to_string(o.roi_height) + " region";
+  }
+  return "";
+}
+
+std::uint64_t raw_frame_encoder_bytes(const RawFrameOptions& given,
+                                      const hal::FrameFormat& format) {
+  const RawFrameOptions o = with_raw_frame_region(given, format);
+  const int k = std::max(1, o.downscale);
+  const auto out = static_cast<std::uint64_t>(std::max(0, o.roi_width / k)) *
+                   static_cast<std::uint64_t>(std::max(0, o.roi_height / k));
+  return out + out + out / 8 + 4096;  // the scaled region and the compressed output
 }
 
 bool searches_depth_range(const std::string& detector) {

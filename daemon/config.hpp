@@ -118,6 +118,17 @@ std::uint64_t frame_path_memory_bytes(const DaemonConfig& config, const hal::Fra
 void check_frame_path(const DaemonConfig& config, const hal::FrameFormat& format,
                       pipeline::Detector& detector);
 
+// The region a frame of `format` is cut to: the whole frame when none is given.
+RawFrameOptions with_raw_frame_region(RawFrameOptions options, const hal::FrameFormat& format);
+// Why `options` cannot be applied to frames of `format` ("lcm.image_roi: ..." or
+// "lcm.image_downscale: ..."), or "" when they can: the region must lie inside the frame (in
+// 64-bit arithmetic) and hold at least one downscaled pixel.
+std::string raw_frame_region_problem(const RawFrameOptions& options,
+                                     const hal::FrameFormat& format);
+// Bytes a RawFrameEncoder for `options` and `format` allocates.
+std::uint64_t raw_frame_encoder_bytes(const RawFrameOptions& options,
+                                      const hal::FrameFormat& format);
+
 // The configuration compiled into the daemon (config/laserline.yaml).
 const char* builtin_config_text();
 

@@ -9,6 +9,7 @@
 #include "hal/calibration.hpp"
 #include "hal/clock.hpp"
 #include "hal/registry.hpp"
+#include "hal/yaml_reader.hpp"
 
 namespace laserline::daemon {
 

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "daemon/calibration_message.hpp"
 #include "daemon/frame_slots.hpp"
 #include "daemon/raw_frame_encoder.hpp"
 #include "hal/calibration.hpp"
@@ -77,16 +78,6 @@ std::unique_ptr<lcm::LCM> open_lcm(const std::string& url, std::string* error);
 // This process's id in status_t and profile_t: 64 random bits drawn once, never 0, so that two
 // daemons publishing on the same channels can be told apart.
 std::int64_t process_instance_id();
-
-// The calibration as a message (utime left 0): its values and calibration_id.
-laserline::calibration_t calibration_message(const hal::Calibration& calibration,
-                                             std::int64_t instance_id);
-
-// The calibration a message carries, or false with a one-line reason in *problem (the field and
-// what is wrong) when a value is out of the range a calibration file allows, or its
-// calibration_id is not the id of its content.
-bool calibration_from_message(const laserline::calibration_t& message,
-                              hal::Calibration* calibration, std::string* problem);
 
 // Microseconds since the Unix epoch of a frame's exposure (LCM's utime convention).
 std::int64_t frame_utime(const hal::FrameInfo& info);

@@ -22,50 +22,8 @@ std::int8_t image_compression_code(ImageCompression c) {
   return laserline::image_t::COMPRESSION_NONE;
 }
 
-namespace {
-
-// The region a frame of `format` is cut to: the whole frame when none is given.
-RawFrameOptions with_region(RawFrameOptions options, const hal::FrameFormat& format) {
-  if (options.roi_width == 0 || options.roi_height == 0) {
-    options.roi_x = 0;
-    options.roi_y = 0;
-    options.roi_width = format.width;
-    options.roi_height = format.height;
-  }
-  return options;
-}
-
-}  // namespace
-
-std::string raw_frame_region_problem(const RawFrameOptions& given, const hal::FrameFormat& format) {
-  const RawFrameOptions o = with_region(given, format);
-  const std::int64_t right = std::int64_t{o.roi_x} + o.roi_width;
-  const std::int64_t bottom = std::int64_t{o.roi_y} + o.roi_height;
-  if (o.roi_x < 0 || o.roi_y < 0 || o.roi_width <= 0 || o.roi_height <= 0 || right > format.width ||
-      bottom > format.height) {
-    return "lcm.image_roi: [" + std::to_string(o.roi_x) + ", " + std::to_string(o.roi_y) + ", " +
-           std::to_string(o.roi_width) + ", " + std::to_string(o.roi_height) +
-           "] is not inside the camera's " + std::to_string(format.width) + "x" +
-           std::to_string(format.height) + " frame";
-  }
-  if (o.downscale < 1 || o.roi_width < o.downscale || o.roi_height < o.downscale) {
-    return "lcm.image_downscale: " + std::to_string(o.downscale) + " leaves no pixel of a " +
-           std::to_string(o.roi_width) + "x" + std::to_string(o.roi_height) + " region";
-  }
-  return "";
-}
-
-std::uint64_t raw_frame_encoder_bytes(const RawFrameOptions& given,
-                                      const hal::FrameFormat& format) {
-  const RawFrameOptions o = with_region(given, format);
-  const int k = std::max(1, o.downscale);
-  const auto out = static_cast<std::uint64_t>(std::max(0, o.roi_width / k)) *
-                   static_cast<std::uint64_t>(std::max(0, o.roi_height / k));
-  return out + out + out / 8 + 4096;  // the scaled region and the compressed output
-}
-
 RawFrameEncoder::RawFrameEncoder(const RawFrameOptions& options, const hal::FrameFormat& format)
-    : options_(with_region(options, format)), format_(format) {
+    : options_(with_raw_frame_region(options, format)), format_(format) {
   if (const std::string problem = raw_frame_region_problem(options, format); !problem.empty()) {
     throw std::invalid_argument("RawFrameEncoder: " + problem);
   }

@@ -45,15 +45,6 @@ class RawFrameEncoder {
   bool zlib_ready_ = false;
 };
 
-// Why `options` cannot be applied to frames of `format` ("lcm.image_roi: ..." or
-// "lcm.image_downscale: ..."), or "" when they can: the region must lie inside the frame (in
-// 64-bit arithmetic) and hold at least one downscaled pixel.
-std::string raw_frame_region_problem(const RawFrameOptions& options,
-                                     const hal::FrameFormat& format);
-// Bytes a RawFrameEncoder for `options` and `format` allocates.
-std::uint64_t raw_frame_encoder_bytes(const RawFrameOptions& options,
-                                      const hal::FrameFormat& format);
-
 // The message's compression constant for an option.
 std::int8_t image_compression_code(ImageCompression c);
 

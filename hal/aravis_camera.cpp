@@ -13,9 +13,6 @@ namespace laserline::hal {
 namespace {
 
 constexpr std::int64_t kMs = 1'000'000;
-// How fast the tracked clock offset may rise per frame to follow drift: 1 µs per frame is
-// 100 ppm at 10 Hz, far above crystal drift, and small against the transfer delays it filters.
-constexpr std::int64_t kDriftNsPerFrame = 1000;
 // Longest single wait inside grab(), so that stop() is noticed quickly.
 constexpr std::int64_t kWaitSliceUs = 50'000;
 
@@ -55,11 +52,6 @@ constexpr AravisPixelFormat kPixelFormats[] = {
     {"BGR8", {"BGR8", "BGR8Packed"}, {PixelLayout::kBgr, 8}},
 };
 
-void sleep_ns(std::int64_t ns) {
-  const timespec ts{static_cast<time_t>(ns / 1'000'000'000), static_cast<long>(ns % 1'000'000'000)};
-  nanosleep(&ts, nullptr);
-}
-
 }  // namespace
 
 const std::vector<std::string>& aravis_pixel_formats() {
@@ -71,7 +63,8 @@ std::string aravis_pixel_format_problem(const AravisCameraOptions& options) {
   return pixel_format_problem(kPixelFormats, options.pixel_format, options.width, options.height);
 }
 
-AravisCamera::AravisCamera(AravisCameraOptions options) : options_(std::move(options)) {
+AravisCamera::AravisCamera(AravisCameraOptions options)
+    : options_(std::move(options)), backoff_(options_.reconnect_min_ms, options_.reconnect_max_ms) {
   format_.width = options_.width;
   format_.height = options_.height;
   format_.stride = options_.width;
@@ -101,10 +94,10 @@ bool AravisCamera::open(std::string* error) {
   memory_.assign(static_cast<std::size_t>(options_.buffers),
                  std::vector<std::uint8_t>(payload_bytes_, 0));
   stopped_.store(false, std::memory_order_release);
-  offset_valid_ = false;
+  clock_.reset();
   have_frame_id_ = false;
   next_sequence_ = 0;
-  reconnect_delay_ms_ = options_.reconnect_min_ms;
+  backoff_.reset();
   return connect(error);
 }
 
@@ -378,16 +371,16 @@ void AravisCamera::count_bad_buffer(int status) {
   switch (status) {
     case ARV_BUFFER_STATUS_MISSING_PACKETS:
     case ARV_BUFFER_STATUS_WRONG_PACKET_ID:
-      missing_packets_.fetch_add(1, std::memory_order_relaxed);
+      CameraHealthCounters::add(counters_.missing_packets);
       break;
     case ARV_BUFFER_STATUS_TIMEOUT:
-      timeouts_.fetch_add(1, std::memory_order_relaxed);
+      CameraHealthCounters::add(counters_.timeouts);
       break;
     case ARV_BUFFER_STATUS_SIZE_MISMATCH:
-      size_mismatches_.fetch_add(1, std::memory_order_relaxed);
+      CameraHealthCounters::add(counters_.size_mismatches);
       break;
     default:
-      other_errors_.fetch_add(1, std::memory_order_relaxed);
+      CameraHealthCounters::add(counters_.other_errors);
       break;
   }
 }
@@ -395,8 +388,8 @@ void AravisCamera::count_bad_buffer(int status) {
 void AravisCamera::update_stream_statistics() {
   guint64 completed = 0, failures = 0, underruns = 0;
   arv_stream_get_statistics(stream_, &completed, &failures, &underruns);
-  underruns_.store(static_cast<std::int64_t>(underruns_base_ + underruns),
-                   std::memory_order_relaxed);
+  counters_.underruns.store(static_cast<std::int64_t>(underruns_base_ + underruns),
+                            std::memory_order_relaxed);
 }
 
 GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
@@ -408,21 +401,17 @@ GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
 
   if (stream_ == nullptr) {
     // Lost: try again when the backoff has passed, waiting for it (in slices) meanwhile.
-    for (std::int64_t now = start; now < std::min(deadline, next_reconnect_mono_ns_);
-         now = monotonic_ns()) {
-      if (stopped_.load(std::memory_order_acquire)) return GrabStatus::kStopped;
-      sleep_ns(std::min({kWaitSliceUs * 1000, next_reconnect_mono_ns_ - now, deadline - now}));
+    if (const GrabStatus waited = backoff_.wait(deadline, stopped_); waited != GrabStatus::kOk) {
+      return waited;
     }
-    if (monotonic_ns() < next_reconnect_mono_ns_) return GrabStatus::kTimeout;
     std::string ignored;
     if (!connect(&ignored)) {
       disconnect();
-      next_reconnect_mono_ns_ = monotonic_ns() + reconnect_delay_ms_ * kMs;
-      reconnect_delay_ms_ = std::min(reconnect_delay_ms_ * 2, options_.reconnect_max_ms);
+      backoff_.failed();
       return GrabStatus::kError;
     }
-    reconnects_.fetch_add(1, std::memory_order_relaxed);
-    reconnect_delay_ms_ = options_.reconnect_min_ms;
+    CameraHealthCounters::add(counters_.reconnects);
+    backoff_.succeeded();
   }
 
   if (options_.trigger == AravisTrigger::kSoftware) {
@@ -431,7 +420,7 @@ GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
     arv_camera_software_trigger(camera_, &e);
     if (e != nullptr) {
       g_clear_error(&e);
-      other_errors_.fetch_add(1, std::memory_order_relaxed);
+      CameraHealthCounters::add(counters_.other_errors);
     }
   }
 
@@ -443,8 +432,8 @@ GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
         options_.trigger != AravisTrigger::kLine && silent_ns_ > options_.lost_after_ms * kMs;
     if (control_lost_.load(std::memory_order_acquire) || silent_too_long) {
       disconnect();
-      other_errors_.fetch_add(1, std::memory_order_relaxed);
-      next_reconnect_mono_ns_ = now + reconnect_delay_ms_ * kMs;
+      CameraHealthCounters::add(counters_.other_errors);
+      backoff_.lost();
       return GrabStatus::kError;
     }
     if (now >= deadline) return GrabStatus::kTimeout;
@@ -464,7 +453,7 @@ GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
     if (status != ARV_BUFFER_STATUS_SUCCESS || data == nullptr || size != payload_bytes_) {
       // Counted and skipped: the camera is alive (a frame came), this one is unusable.
       if (status == ARV_BUFFER_STATUS_SUCCESS) {
-        size_mismatches_.fetch_add(1, std::memory_order_relaxed);
+        CameraHealthCounters::add(counters_.size_mismatches);
       } else {
         count_bad_buffer(status);
       }
@@ -494,20 +483,13 @@ GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
     next_sequence_ =
         static_cast<std::uint64_t>(sequence_base_ + static_cast<std::int64_t>(frame_id)) + 1;
     if (next_sequence_ > expected + 1) {
-      skipped_frames_.fetch_add(static_cast<std::int64_t>(next_sequence_ - expected - 1),
-                                std::memory_order_relaxed);
+      CameraHealthCounters::add(counters_.skipped_frames,
+                                static_cast<std::int64_t>(next_sequence_ - expected - 1));
     }
 
-    const std::int64_t offset = arrival_mono - camera_ns;
-    if (!offset_valid_ || offset < offset_ns_ + kDriftNsPerFrame) {
-      offset_ns_ = offset;
-      offset_valid_ = true;
-    } else {
-      offset_ns_ += kDriftNsPerFrame;
-    }
     info.sequence = next_sequence_ - 1;
     info.camera_ns = camera_ns;
-    info.exposure_mono_ns = camera_ns + offset_ns_;
+    info.exposure_mono_ns = clock_.to_monotonic(camera_ns, arrival_mono);
     info.arrival_mono_ns = arrival_mono;
     info.arrival_wall_ns = arrival_wall;
     info.exposure_us = exposure_us_;
@@ -518,15 +500,7 @@ GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
 }
 
 CameraHealth AravisCamera::health() const {
-  CameraHealth h;
-  h.missing_packets = missing_packets_.load(std::memory_order_relaxed);
-  h.timeouts = timeouts_.load(std::memory_order_relaxed);
-  h.size_mismatches = size_mismatches_.load(std::memory_order_relaxed);
-  h.underruns = underruns_.load(std::memory_order_relaxed);
-  h.other_errors = other_errors_.load(std::memory_order_relaxed);
-  h.reconnects = reconnects_.load(std::memory_order_relaxed);
-  h.skipped_frames = skipped_frames_.load(std::memory_order_relaxed);
-  return h;
+  return counters_.load();
 }
 
 }  // namespace laserline::hal

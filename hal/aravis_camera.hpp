@@ -2,13 +2,16 @@
 
 #include <atomic>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "hal/camera.hpp"
+#include "hal/camera_link.hpp"
 #include "hal/laser_channel.hpp"
 #include "hal/pixel_conversion.hpp"
+#include "hal/registry.hpp"
 
 struct _ArvCamera;
 struct _ArvStream;
@@ -49,6 +52,8 @@ struct AravisCameraOptions {
 
 // The pixel formats the aravis backend takes, by their GenICam (SFNC) names.
 const std::vector<std::string>& aravis_pixel_formats();
+// The aravis backend's factory (hal/registry.hpp): its options from the `camera:` section.
+std::unique_ptr<Camera> create_aravis_camera(const CameraRequest& request);
 // Empty when the backend takes `options.pixel_format` at the options' size; otherwise why not, one
 // line (a mosaic needs 2x2 pixels, YUYV an even width). open() checks it too.
 std::string aravis_pixel_format_problem(const AravisCameraOptions& options);
@@ -121,25 +126,17 @@ class AravisCamera final : public Camera {
 
   // Camera-thread state.
   std::int64_t silent_ns_ = 0;  // time spent waiting for a frame since the last one
-  std::int64_t next_reconnect_mono_ns_ = 0;
-  int reconnect_delay_ms_ = 0;
+  ReconnectBackoff backoff_;
+  CameraClockOffset clock_;
   double exposure_us_ = 0;  // as read after configure(); NaN: not known or automatic
   double gain_db_ = 0;
-  std::int64_t offset_ns_ = 0;  // host monotonic - camera time, tracked
-  bool offset_valid_ = false;
   std::uint64_t last_frame_id_ = 0;
   std::int64_t sequence_base_ = 0;  // our sequence - the camera's frame id (wraps, reconnects)
   std::uint64_t next_sequence_ = 0;
   bool have_frame_id_ = false;
   std::uint64_t underruns_base_ = 0;  // underruns of streams already closed
 
-  std::atomic<std::int64_t> missing_packets_{0};
-  std::atomic<std::int64_t> timeouts_{0};
-  std::atomic<std::int64_t> size_mismatches_{0};
-  std::atomic<std::int64_t> underruns_{0};
-  std::atomic<std::int64_t> other_errors_{0};
-  std::atomic<std::int64_t> reconnects_{0};
-  std::atomic<std::int64_t> skipped_frames_{0};
+  CameraHealthCounters counters_;
 };
 
 }  // namespace laserline::hal

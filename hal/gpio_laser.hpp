@@ -3,6 +3,7 @@
 #include <pthread.h>
 
 #include <atomic>
+#include <memory>
 #include <string>
 
 #include "hal/laser.hpp"
@@ -20,6 +21,11 @@ struct GpioLaserOptions {
   bool active_low = false;  // the laser driver is enabled by a low level
   std::string consumer = "laserlined";  // shown by gpioinfo while we hold the line
 };
+
+class YamlMap;
+// The gpiod backend's factory (hal/registry.hpp): chip, line, active_low and consumer from the
+// `laser:` section.
+std::unique_ptr<Laser> create_gpio_laser(YamlMap& options);
 
 // The laser's enable input on a GPIO output line, through libgpiod 1.6. open() requests the line
 // as an output already at "off", so the laser is never on before the first frame asks for it;

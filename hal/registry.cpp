@@ -1,112 +1,27 @@
 #include "hal/registry.hpp"
 
-#include <algorithm>
-#include <cmath>
-#include <cstdio>
-#include <cstdlib>
-#include <functional>
+#include <utility>
 
 #include "hal/aravis_camera.hpp"
 #include "hal/gpio_laser.hpp"
-#include "hal/sim/sim_camera.hpp"
-#include "hal/sim/sim_laser.hpp"
+#include "hal/sim_options.hpp"
 #include "hal/v4l2_camera.hpp"
 
 namespace laserline::hal {
 
 namespace {
 
-using LaserFactory = std::function<std::unique_ptr<Laser>(YamlMap&)>;
-
-struct CameraEntry {
+template <typename Factory>
+struct Entry {
   std::string name;
-  CameraFactory create;
-};
-struct LaserEntry {
-  const char* name;
-  LaserFactory create;
+  Factory create;
 };
 
-// Colour scenes (camera.sim.colour) reach the pipeline as request.channel of them.
-std::unique_ptr<Camera> create_sim_camera(const CameraRequest& request) {
-  const double rate = request.options->number("frame_rate_hz", 30.0, 0.1, 1000.0);
-  YamlMap sim = request.options->map("sim");
-  SimSceneOptions options = read_sim_options(sim, *request.calibration, rate);
-  SimCameraStall stall;
-  stall.after_s = sim.number("stall_after_s", 0.0, 0.0, 1e6);
-  stall.for_s = sim.number("stall_for_s", 0.0, 0.0, 1e6);
-  SimCameraExposure exposure;
-  exposure.exposure_us = sim.number("exposure_us", exposure.exposure_us, 1.0, 1e7);
-  exposure.gain_db = sim.number("gain_db", exposure.gain_db, -20.0, 60.0);
-  sim.finish();
-  return std::make_unique<SimCamera>(options, request.laser, stall, request.channel, exposure);
-}
+template <typename Factory>
+using Table = std::vector<Entry<Factory>>;
 
-std::unique_ptr<Camera> create_aravis_camera(const CameraRequest& request) {
-  YamlMap& c = *request.options;
-  AravisCameraOptions o;
-  o.device = c.string("device", o.device);
-  o.pixel_format = c.choice("pixel_format", o.pixel_format, aravis_pixel_formats());
-  o.width = static_cast<int>(c.integer("width", request.calibration->camera.width, 1, 65535));
-  o.height = static_cast<int>(c.integer("height", request.calibration->camera.height, 1, 65535));
-  o.offset_x = static_cast<int>(c.integer("offset_x", 0, 0, 65535));
-  o.offset_y = static_cast<int>(c.integer("offset_y", 0, 0, 65535));
-  o.frame_rate_hz = c.number("frame_rate_hz", 30.0, 0.1, 1000.0);
-  o.exposure_us = c.number("exposure_us", o.exposure_us, 0.0, 10e6);
-  o.gain_db = c.number("gain_db", o.gain_db, -1.0, 100.0);
-  o.packet_size = static_cast<int>(c.integer("packet_size", o.packet_size, -1, 65535));
-  o.packet_delay_ns = c.integer("packet_delay_ns", o.packet_delay_ns, -1, 1'000'000'000);
-  o.buffers = static_cast<int>(c.integer("buffers", o.buffers, 2, 1024));
-  const std::string trigger = c.choice("trigger", "free", {"free", "software", "line"});
-  o.trigger = trigger == "free"       ? AravisTrigger::kFreeRun
-              : trigger == "software" ? AravisTrigger::kSoftware
-                                      : AravisTrigger::kLine;
-  o.trigger_source = c.string("trigger_source", o.trigger_source);
-  if (c.has("features")) {
-    const YAML::Node features = c.node("features");
-    if (!features.IsMap()) c.fail("features", "must be a mapping of GenICam feature: value");
-    for (const auto& f : features) {
-      if (!f.second.IsScalar()) {
-        c.fail("features", "'" + f.first.as<std::string>() + "' must have a single value");
-      }
-      o.features.emplace_back(f.first.as<std::string>(), f.second.Scalar());
-    }
-  }
-  if (const std::string problem = aravis_pixel_format_problem(o); !problem.empty()) {
-    c.fail("pixel_format", problem);
-  }
-  o.channel = request.channel;
-  o.lost_after_ms = static_cast<int>(c.integer("lost_after_ms", o.lost_after_ms, 100, 60000));
-  o.reconnect_min_ms =
-      static_cast<int>(c.integer("reconnect_min_ms", o.reconnect_min_ms, 10, 60000));
-  o.reconnect_max_ms = static_cast<int>(
-      c.integer("reconnect_max_ms", o.reconnect_max_ms, o.reconnect_min_ms, 600000));
-  return std::make_unique<AravisCamera>(o);
-}
-
-std::unique_ptr<Camera> create_v4l2_camera(const CameraRequest& request) {
-  YamlMap& c = *request.options;
-  V4l2CameraOptions o;
-  o.device = c.string("device", o.device);
-  if (o.device.empty()) c.fail("device", "must name the video device, e.g. /dev/video0");
-  o.pixel_format = c.choice("pixel_format", o.pixel_format, v4l2_pixel_formats());
-  o.width = static_cast<int>(c.integer("width", request.calibration->camera.width, 1, 65535));
-  o.height = static_cast<int>(c.integer("height", request.calibration->camera.height, 1, 65535));
-  o.frame_rate_hz = c.number("frame_rate_hz", 30.0, 0.1, 1000.0);
-  o.buffers = static_cast<int>(c.integer("buffers", o.buffers, 2, 32));
-  if (const std::string problem = v4l2_pixel_format_problem(o); !problem.empty()) {
-    c.fail("pixel_format", problem);
-  }
-  o.channel = request.channel;
-  o.reconnect_min_ms =
-      static_cast<int>(c.integer("reconnect_min_ms", o.reconnect_min_ms, 10, 60000));
-  o.reconnect_max_ms = static_cast<int>(
-      c.integer("reconnect_max_ms", o.reconnect_max_ms, o.reconnect_min_ms, 600000));
-  return std::make_unique<V4l2Camera>(o);
-}
-
-std::vector<CameraEntry>& camera_table() {
-  static std::vector<CameraEntry> table = {
+Table<CameraFactory>& camera_table() {
+  static Table<CameraFactory> table = {
       {"sim", create_sim_camera},
       {"aravis", create_aravis_camera},
       {"v4l2", create_v4l2_camera},
@@ -114,145 +29,64 @@ std::vector<CameraEntry>& camera_table() {
   return table;
 }
 
-std::unique_ptr<Laser> create_gpio_laser(YamlMap& options) {
-  GpioLaserOptions o;
-  if (!options.has("chip")) options.fail("chip", "required for the gpiod laser (e.g. gpiochip0)");
-  o.chip = options.string("chip", "");
-  if (!options.has("line")) {
-    options.fail("line", "required for the gpiod laser: a line offset or a line name");
-  }
-  const std::string line = options.string("line", "");
-  char* end = nullptr;
-  const long offset = std::strtol(line.c_str(), &end, 10);
-  if (!line.empty() && *end == '\0') {
-    if (offset < 0 || offset > 511) options.fail("line", "offset must be 0..511, got " + line);
-    o.offset = static_cast<int>(offset);
-  } else {
-    if (line.empty()) options.fail("line", "must not be empty");
-    o.line_name = line;
-  }
-  o.active_low = options.boolean("active_low", o.active_low);
-  o.consumer = options.string("consumer", o.consumer);
-  if (o.consumer.empty() || o.consumer.size() > 31) {
-    options.fail("consumer", "must be 1 to 31 characters (the kernel's limit)");
-  }
-  return std::make_unique<GpioLaser>(o);
-}
-
-const std::vector<LaserEntry>& laser_table() {
-  static const std::vector<LaserEntry> table = {
-      {"sim", [](YamlMap&) -> std::unique_ptr<Laser> { return std::make_unique<SimLaser>(); }},
+Table<LaserFactory>& laser_table() {
+  static Table<LaserFactory> table = {
+      {"sim", create_sim_laser},
       {"gpiod", create_gpio_laser},
   };
   return table;
 }
 
+template <typename Factory>
+void add(Table<Factory>& table, const std::string& name, Factory create) {
+  for (const auto& e : table) {
+    if (e.name == name) return;
+  }
+  table.push_back({name, std::move(create)});
+}
+
+template <typename Factory>
+std::vector<std::string> names(const Table<Factory>& table) {
+  std::vector<std::string> list;
+  for (const auto& e : table)
+    list.push_back(e.name);
+  return list;
+}
+
+template <typename Factory>
+const Factory* find(const Table<Factory>& table, const std::string& name) {
+  for (const auto& e : table) {
+    if (e.name == name) return &e.create;
+  }
+  return nullptr;
+}
+
 }  // namespace
 
 void register_camera_backend(const std::string& name, CameraFactory create) {
-  for (const auto& e : camera_table()) {
-    if (e.name == name) return;
-  }
-  camera_table().push_back({name, std::move(create)});
+  add(camera_table(), name, std::move(create));
+}
+
+void register_laser_backend(const std::string& name, LaserFactory create) {
+  add(laser_table(), name, std::move(create));
 }
 
 std::vector<std::string> camera_backends() {
-  std::vector<std::string> names;
-  for (const auto& e : camera_table())
-    names.emplace_back(e.name);
-  return names;
+  return names(camera_table());
 }
 
 std::vector<std::string> laser_backends() {
-  std::vector<std::string> names;
-  for (const auto& e : laser_table())
-    names.emplace_back(e.name);
-  return names;
+  return names(laser_table());
 }
 
 std::unique_ptr<Camera> make_camera(const std::string& backend, const CameraRequest& request) {
-  for (const auto& e : camera_table()) {
-    if (backend == e.name) return e.create(request);
-  }
-  return nullptr;
+  const CameraFactory* create = find(camera_table(), backend);
+  return create != nullptr ? (*create)(request) : nullptr;
 }
 
 std::unique_ptr<Laser> make_laser(const std::string& backend, YamlMap& options) {
-  for (const auto& e : laser_table()) {
-    if (backend == e.name) return e.create(options);
-  }
-  return nullptr;
-}
-
-SimSceneOptions read_sim_options(YamlMap& sim, const Calibration& calibration,
-                                 double frame_rate_hz) {
-  SimSceneOptions o;
-  o.calibration = calibration;
-  if (calibration.camera.has_distortion()) {
-    sim.fail("", "the simulator renders an ideal pinhole camera; set calibration distortion to 0");
-  }
-  o.frame_rate_hz = frame_rate_hz;
-  o.seed = static_cast<std::uint64_t>(sim.integer("seed", 1, 0, INT64_MAX));
-  o.distance_m = sim.number("distance_m", o.distance_m, 0.1, 100.0);
-  o.tilt_x_deg = sim.number("tilt_x_deg", o.tilt_x_deg, -60.0, 60.0);
-  o.tilt_y_deg = sim.number("tilt_y_deg", o.tilt_y_deg, -60.0, 60.0);
-  o.texture_scale_m = sim.number("texture_scale_m", o.texture_scale_m, 1e-4, 10.0);
-  o.texture_contrast = sim.number("texture_contrast", o.texture_contrast, 0.0, 1.0);
-  o.ambient = sim.number("ambient", o.ambient, 0.0, 255.0);
-  o.laser_peak = sim.number("laser_peak", o.laser_peak, 0.0, 1000.0);
-  o.blur_px = sim.number("blur_px", o.blur_px, 0.0, 20.0);
-  o.noise_sigma = sim.number("noise_sigma", o.noise_sigma, 0.0, 50.0);
-  o.backscatter = sim.number("backscatter", o.backscatter, 0.0, 255.0);
-  o.attenuation_per_m = sim.number("attenuation_per_m", o.attenuation_per_m, 0.0, 10.0);
-  o.sway_m = sim.number("sway_m", o.sway_m, 0.0, 1.0);
-  o.sway_deg = sim.number("sway_deg", o.sway_deg, 0.0, 20.0);
-  o.sway_period_s = sim.number("sway_period_s", o.sway_period_s, 0.1, 3600.0);
-  o.scan_rate_deg_s = sim.number("scan_rate_deg_s", o.scan_rate_deg_s, 0.0, 1000.0);
-  o.scan_amplitude_deg = sim.number("scan_amplitude_deg", o.scan_amplitude_deg, 0.0, 45.0);
-  o.relief_height_m = sim.number("relief_height_m", o.relief_height_m, 0.0, 0.5 * o.distance_m);
-  o.relief_min_height_m =
-      sim.number("relief_min_height_m", std::min(o.relief_min_height_m, o.relief_height_m), 0.0,
-                 o.relief_height_m);
-  o.relief_per_m2 = sim.number("relief_per_m2", o.relief_per_m2, 0.0, 100.0);
-  o.relief_max_slope = sim.number("relief_max_slope", o.relief_max_slope, 0.05, 1.0);
-  if (o.relief_height_m > 0.72 * o.relief_max_slope) {
-    char least[32];
-    std::snprintf(least, sizeof least, "%.3f", std::ceil(o.relief_height_m / 0.72 * 1000) / 1000);
-    sim.fail("relief_max_slope", std::string("must be at least relief_height_m / 0.72 = ") + least +
-                                     " (features must fit the 5.12 m relief tile)");
-  }
-  o.vehicle_speed_m_s = sim.number("vehicle_speed_m_s", o.vehicle_speed_m_s, -10.0, 10.0);
-  o.object_speed_m_s = sim.number("object_speed_m_s", o.object_speed_m_s, -10.0, 10.0);
-  o.scan_pan = sim.boolean("scan_pan", o.scan_pan);
-  o.forward_scatter = sim.number("forward_scatter", o.forward_scatter, 0.0, 1.0);
-  o.scatter_halo_px = sim.number("scatter_halo_px", o.scatter_halo_px, 0.0, 1000.0);
-  o.veiling = sim.number("veiling", o.veiling, 0.0, 1.0);
-  o.caustic_peak = sim.number("caustic_peak", o.caustic_peak, 1.0, 100.0);
-  o.caustic_scale_m = sim.number("caustic_scale_m", o.caustic_scale_m, 0.01, 100.0);
-  o.caustic_speed_m_s = sim.number("caustic_speed_m_s", o.caustic_speed_m_s, -100.0, 100.0);
-  o.snow_per_frame = static_cast<int>(sim.integer("snow_per_frame", o.snow_per_frame, 0, 100000));
-  o.snow_size_px = sim.number("snow_size_px", o.snow_size_px, 0.1, 50.0);
-  o.snow_brightness = sim.number("snow_brightness", o.snow_brightness, 0.0, 100.0);
-  o.snow_min_depth_m = sim.number("snow_min_depth_m", o.snow_min_depth_m, 0.01, 100.0);
-  o.marks_per_m2 = sim.number("marks_per_m2", o.marks_per_m2, 0.0, 10000.0);
-  o.marks_albedo = sim.number("marks_albedo", o.marks_albedo, 0.0, 100.0);
-  const std::string colour = sim.choice(
-      "colour", "mono", {"mono", "rgb", "bayer_rggb", "bayer_grbg", "bayer_gbrg", "bayer_bggr"});
-  o.colour = colour == "rgb"          ? SimColour::kRgb
-             : colour == "bayer_rggb" ? SimColour::kBayerRggb
-             : colour == "bayer_grbg" ? SimColour::kBayerGrbg
-             : colour == "bayer_gbrg" ? SimColour::kBayerGbrg
-             : colour == "bayer_bggr" ? SimColour::kBayerBggr
-                                      : SimColour::kMono;
-  for (const auto& [key, rgb] :
-       {std::pair{"laser_rgb", &o.laser_rgb}, std::pair{"ambient_rgb", &o.ambient_rgb}}) {
-    const std::vector<double> values = sim.numbers(key, {3});
-    for (std::size_t c = 0; c < values.size(); ++c) {
-      if (!(values[c] >= 0 && values[c] <= 10)) sim.fail(key, "each value must be within 0..10");
-      (*rgb)[c] = values[c];
-    }
-  }
-  return o;
+  const LaserFactory* create = find(laser_table(), backend);
+  return create != nullptr ? (*create)(options) : nullptr;
 }
 
 }  // namespace laserline::hal

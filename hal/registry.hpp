@@ -5,18 +5,21 @@
 #include <string>
 #include <vector>
 
-#include "hal/calibration.hpp"
 #include "hal/camera.hpp"
 #include "hal/laser.hpp"
 #include "hal/laser_channel.hpp"
-#include "hal/sim/sim_scene.hpp"
-#include "hal/yaml_reader.hpp"
 
 namespace laserline::hal {
 
-// Backends are chosen by name from the configuration through these two factories (one table
-// each, in registry.cpp). A factory reads and validates its backend's own options from `options`
-// and throws ConfigError for a bad one; it does not touch hardware: that happens in open().
+struct Calibration;
+class YamlMap;
+
+// Backends are chosen by name from the configuration through these two registries, as libcamera
+// chooses its pipeline handlers. Each backend owns its options: its factory (declared beside the
+// backend) reads and validates them from `options` and throws ConfigError for a bad one; it does
+// not touch hardware, which happens in open(). The backends in hal/ are listed in registry.cpp
+// (a static library drops files nothing refers to, so a backend cannot register itself from a
+// static constructor there); backends outside hal/ register with register_*_backend().
 
 struct CameraRequest {
   YamlMap* options = nullptr;  // the `camera:` section
@@ -29,21 +32,20 @@ struct CameraRequest {
 };
 
 using CameraFactory = std::function<std::unique_ptr<Camera>(const CameraRequest&)>;
+// Reads the `laser:` section's backend options.
+using LaserFactory = std::function<std::unique_ptr<Laser>(YamlMap& options)>;
 
-// Adds a camera backend that lives outside hal/ to the same table: the LCM log replay is chosen
-// by name like any camera, but it needs LCM, which hal/ must not know (it registers from
-// daemon/). Call from the setup thread before make_camera(); a second call for a name is ignored.
+// Adds a backend that lives outside hal/ to the same registry: the LCM log replay is chosen by
+// name like any camera, but it needs LCM, which hal/ must not know (it registers from daemon/).
+// Call from the setup thread before make_camera(); a second call for a name is ignored.
 void register_camera_backend(const std::string& name, CameraFactory create);
+void register_laser_backend(const std::string& name, LaserFactory create);
 
 std::vector<std::string> camera_backends();
 std::vector<std::string> laser_backends();
 
+// nullptr for a name no backend has.
 std::unique_ptr<Camera> make_camera(const std::string& backend, const CameraRequest& request);
 std::unique_ptr<Laser> make_laser(const std::string& backend, YamlMap& options);
-
-// The simulator's options from a `sim:` mapping (also used by tests and tools to rebuild the exact
-// scene a daemon ran).
-SimSceneOptions read_sim_options(YamlMap& sim, const Calibration& calibration,
-                                 double frame_rate_hz);
 
 }  // namespace laserline::hal

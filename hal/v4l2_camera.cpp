@@ -20,7 +20,6 @@ namespace {
 
 constexpr std::int64_t kMs = 1'000'000;
 constexpr int kWaitSliceMs = 50;  // longest single poll, so that stop() is noticed quickly
-constexpr std::int64_t kDriftNsPerFrame = 1000;
 
 int xioctl(int fd, unsigned long request, void* arg) {
   int r;
@@ -106,7 +105,8 @@ std::string v4l2_pixel_format_problem(const V4l2CameraOptions& options) {
   return pixel_format_problem(kPixelFormats, options.pixel_format, options.width, options.height);
 }
 
-V4l2Camera::V4l2Camera(V4l2CameraOptions options) : options_(std::move(options)) {
+V4l2Camera::V4l2Camera(V4l2CameraOptions options)
+    : options_(std::move(options)), backoff_(options_.reconnect_min_ms, options_.reconnect_max_ms) {
   format_.width = options_.width;
   format_.height = options_.height;
   format_.stride = options_.width;
@@ -123,10 +123,10 @@ V4l2Camera::~V4l2Camera() {
 bool V4l2Camera::open(std::string* error) {
   disconnect();
   stopped_.store(false, std::memory_order_release);
-  offset_valid_ = false;
+  clock_.reset();
   have_sequence_ = false;
   next_sequence_ = 0;
-  reconnect_delay_ms_ = options_.reconnect_min_ms;
+  backoff_.reset();
   return connect(error);
 }
 
@@ -272,8 +272,8 @@ void V4l2Camera::disconnect() {
 
 void V4l2Camera::lost() {
   disconnect();
-  other_errors_.fetch_add(1, std::memory_order_relaxed);
-  next_reconnect_mono_ns_ = monotonic_ns() + reconnect_delay_ms_ * kMs;
+  CameraHealthCounters::add(counters_.other_errors);
+  backoff_.lost();
 }
 
 void V4l2Camera::stop() {
@@ -287,24 +287,16 @@ GrabStatus V4l2Camera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
   const std::int64_t deadline = monotonic_ns() + timeout.count() * kMs;
 
   if (fd_ < 0) {
-    for (std::int64_t now = monotonic_ns(); now < std::min(deadline, next_reconnect_mono_ns_);
-         now = monotonic_ns()) {
-      if (stopped_.load(std::memory_order_acquire)) return GrabStatus::kStopped;
-      const std::int64_t wait =
-          std::min({kWaitSliceMs * kMs, next_reconnect_mono_ns_ - now, deadline - now});
-      const timespec ts{static_cast<time_t>(wait / 1'000'000'000),
-                        static_cast<long>(wait % 1'000'000'000)};
-      nanosleep(&ts, nullptr);
+    if (const GrabStatus waited = backoff_.wait(deadline, stopped_); waited != GrabStatus::kOk) {
+      return waited;
     }
-    if (monotonic_ns() < next_reconnect_mono_ns_) return GrabStatus::kTimeout;
     std::string ignored;
     if (!connect(&ignored)) {
-      next_reconnect_mono_ns_ = monotonic_ns() + reconnect_delay_ms_ * kMs;
-      reconnect_delay_ms_ = std::min(reconnect_delay_ms_ * 2, options_.reconnect_max_ms);
+      backoff_.failed();
       return GrabStatus::kError;
     }
-    reconnects_.fetch_add(1, std::memory_order_relaxed);
-    reconnect_delay_ms_ = options_.reconnect_min_ms;
+    CameraHealthCounters::add(counters_.reconnects);
+    backoff_.succeeded();
   }
 
   while (true) {
@@ -339,9 +331,9 @@ GrabStatus V4l2Camera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
     if (buf.index >= mappings_.size() || (buf.flags & V4L2_BUF_FLAG_ERROR) != 0 ||
         buf.bytesused < expected) {
       if (buf.index < mappings_.size() && (buf.flags & V4L2_BUF_FLAG_ERROR) == 0) {
-        size_mismatches_.fetch_add(1, std::memory_order_relaxed);
+        CameraHealthCounters::add(counters_.size_mismatches);
       } else {
-        other_errors_.fetch_add(1, std::memory_order_relaxed);
+        CameraHealthCounters::add(counters_.other_errors);
       }
       if (xioctl(fd_, VIDIOC_QBUF, &buf) != 0) {
         lost();
@@ -366,7 +358,10 @@ GrabStatus V4l2Camera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
       sequence_base_ = static_cast<std::int64_t>(next_sequence_) - driver_sequence;
       have_sequence_ = true;
     } else if (driver_sequence > last_driver_sequence_ + 1) {
-      underruns_.fetch_add(driver_sequence - last_driver_sequence_ - 1, std::memory_order_relaxed);
+      // The driver's sequence skips only frames it had no buffer for.
+      const std::int64_t lost = driver_sequence - last_driver_sequence_ - 1;
+      CameraHealthCounters::add(counters_.underruns, lost);
+      CameraHealthCounters::add(counters_.skipped_frames, lost);
     }
     last_driver_sequence_ = driver_sequence;
     next_sequence_ = static_cast<std::uint64_t>(sequence_base_ + driver_sequence) + 1;
@@ -376,10 +371,7 @@ GrabStatus V4l2Camera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
     if (monotonic) {
       info.exposure_mono_ns = stamp;
     } else {
-      const std::int64_t offset = arrival_mono - stamp;
-      offset_ns_ = !offset_valid_ ? offset : std::min(offset_ns_ + kDriftNsPerFrame, offset);
-      offset_valid_ = true;
-      info.exposure_mono_ns = stamp + offset_ns_;
+      info.exposure_mono_ns = clock_.to_monotonic(stamp, arrival_mono);
     }
     info.arrival_mono_ns = arrival_mono;
     info.arrival_wall_ns = arrival_wall;
@@ -388,13 +380,7 @@ GrabStatus V4l2Camera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
 }
 
 CameraHealth V4l2Camera::health() const {
-  CameraHealth h;
-  h.underruns = underruns_.load(std::memory_order_relaxed);
-  h.skipped_frames = h.underruns;  // the driver's sequence skips only frames it had no buffer for
-  h.size_mismatches = size_mismatches_.load(std::memory_order_relaxed);
-  h.other_errors = other_errors_.load(std::memory_order_relaxed);
-  h.reconnects = reconnects_.load(std::memory_order_relaxed);
-  return h;
+  return counters_.load();
 }
 
 }  // namespace laserline::hal

@@ -2,12 +2,15 @@
 
 #include <atomic>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "hal/camera.hpp"
+#include "hal/camera_link.hpp"
 #include "hal/laser_channel.hpp"
 #include "hal/pixel_conversion.hpp"
+#include "hal/registry.hpp"
 
 namespace laserline::hal {
 
@@ -28,6 +31,8 @@ struct V4l2CameraOptions {
 
 // The pixel formats the v4l2 backend takes (names of the V4L2_PIX_FMT_ macros).
 const std::vector<std::string>& v4l2_pixel_formats();
+// The v4l2 backend's factory (hal/registry.hpp): its options from the `camera:` section.
+std::unique_ptr<Camera> create_v4l2_camera(const CameraRequest& request);
 // Empty when the backend takes `options.pixel_format` at the options' size; otherwise why not, one
 // line (a mosaic needs 2x2 pixels, YUYV an even width). open() checks it too.
 std::string v4l2_pixel_format_problem(const V4l2CameraOptions& options);
@@ -88,19 +93,14 @@ class V4l2Camera final : public Camera {
   std::atomic<bool> stopped_{false};
 
   // Camera-thread state.
-  std::int64_t next_reconnect_mono_ns_ = 0;
-  int reconnect_delay_ms_ = 0;
-  std::int64_t offset_ns_ = 0;  // for drivers without monotonic timestamps
-  bool offset_valid_ = false;
+  ReconnectBackoff backoff_;
+  CameraClockOffset clock_;         // for drivers without monotonic timestamps
   std::int64_t sequence_base_ = 0;  // our sequence - the driver's (it restarts on reopen)
   std::uint64_t next_sequence_ = 0;
   bool have_sequence_ = false;
   std::uint32_t last_driver_sequence_ = 0;
 
-  std::atomic<std::int64_t> underruns_{0};  // gaps in the driver's sequence: frames it lost
-  std::atomic<std::int64_t> size_mismatches_{0};
-  std::atomic<std::int64_t> other_errors_{0};
-  std::atomic<std::int64_t> reconnects_{0};
+  CameraHealthCounters counters_;  // underruns: gaps in the driver's sequence, frames it lost
 };
 
 }  // namespace laserline::hal

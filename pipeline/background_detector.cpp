@@ -15,12 +15,7 @@ BackgroundDetector::BackgroundDetector(const DetectorOptions& options, bool esti
       options_(options.background),
       estimate_camera_motion_(estimate_camera_motion),
       motion_(options.motion) {
-  if (options_.history_frames < 1 || options_.history_frames > 64) {
-    throw std::invalid_argument("background history_frames must be 1..64");
-  }
-  if (!(options_.min_motion_widths >= 0) || !(options_.min_motion_widths <= 100)) {
-    throw std::invalid_argument("background min_motion_widths must be 0..100");
-  }
+  options_.validate();
 }
 
 std::size_t BackgroundDetector::max_points(int width, int /*height*/) const {

@@ -32,6 +32,10 @@ struct FrontendOptions {
   int saturation_level = 255;  // a run at or above this is a clipped core: its centre is the peak
   // Which candidate of each epipolar line is the laser point (the others stay, not valid).
   LineSelectionOptions selection;
+
+  // Throws OptionError (pipeline/options.hpp) naming the first field outside what the pipeline
+  // supports.
+  void validate() const;
 };
 
 // Which earlier frame `background` subtracts (paper III-A). The previous frame only removes the
@@ -45,6 +49,10 @@ struct BackgroundOptions {
   // How far the scene must have moved across the line, in laser line widths (the width the
   // calibration gives where the line is).
   double min_motion_widths = 1.0;
+
+  // Throws OptionError (pipeline/options.hpp) naming the first field outside what the pipeline
+  // supports.
+  void validate() const;
 };
 
 // Options of every detector, filled from the configuration. Each detector reads its own part.
@@ -56,6 +64,10 @@ struct DetectorOptions {
   BackgroundOptions background;
   MotionOptions motion;
   ValidationOptions validation;  // `backprojection` (Section IV)
+
+  // Every part above but the geometry: throws OptionError naming the first field outside what
+  // the pipeline supports.
+  void validate() const;
 };
 
 // What the pipeline may know about a frame besides its pixels.

@@ -41,7 +41,7 @@ int odd_at_least_one(double x) {
 RowNormalisation::RowNormalisation(const ScannerGeometry& g, const FrontendOptions& options,
                                    int margin) {
   const auto& [a, b, c, e] = g.laser_plane;
-  if (!(g.sheet_width_m > 0)) throw std::invalid_argument("laser.sheet_width_m must be > 0");
+  if (!(g.sheet_width_m > 0)) throw std::invalid_argument("the sheet width must be > 0");
   if (e == 0.0) throw std::invalid_argument("laser plane passes through the camera centre");
   // l(v) = fy l_w / Z(cx, v), 1 / Z = -(b (v - cy) / fy + c) / e: the width is modelled on the
   // centre column. The columns are searched when the sheet's depth changes along them within a
@@ -75,8 +75,7 @@ RowNormalisation::RowNormalisation(const ScannerGeometry& g, const FrontendOptio
   v_hi = std::min(v_hi, static_cast<double>(g.height - 1));
   if (!(v_lo < v_hi)) {
     throw std::invalid_argument(
-        "detector.frontend: no image row sees the laser sheet between min_depth_m and "
-        "max_depth_m");
+        "no image row sees the laser sheet between min_depth_m and max_depth_m");
   }
   r0_ = 0.0;
   r0_ = static_cast<double>(margin) - to_normalised(v_lo);
@@ -110,13 +109,8 @@ float RowNormalisation::to_source_single(float r) const {
 
 Frontend::Frontend(const ScannerGeometry& geometry, const FrontendOptions& options)
     : geometry_(geometry), options_(options), selector_(options.selection) {
+  options.validate();
   use_intrinsics(true);
-  if (!(options.min_depth_m > 0) || !(options.max_depth_m > options.min_depth_m)) {
-    throw std::invalid_argument("detector.frontend: need 0 < min_depth_m < max_depth_m");
-  }
-  if (options.max_candidates_per_column < 1 || options.max_candidates_per_column > 255) {
-    throw std::invalid_argument("detector.frontend.max_candidates_per_column must be 1..255");
-  }
   inner_ = odd_at_least_one(options.normalised_width_px);
   outer_ = odd_at_least_one(options.normalised_width_px * options.passband_ratio);
   if (outer_ <= inner_) outer_ = inner_ + 2;

@@ -14,16 +14,7 @@ constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 }  // namespace
 
 LineSelector::LineSelector(const LineSelectionOptions& options) : options_(options) {
-  const LineSelectionOptions& o = options;
-  auto nonnegative = [](double x) { return std::isfinite(x) && x >= 0; };
-  if (!nonnegative(o.restart_cost_db) || !nonnegative(o.jump_free_px) ||
-      !nonnegative(o.jump_cost_db_per_px) || !nonnegative(o.gap_cost_db) ||
-      !nonnegative(o.previous_bonus_db) || !nonnegative(o.previous_tolerance_px)) {
-    throw std::invalid_argument("line selection: costs, bonus and distances must be >= 0");
-  }
-  if (o.max_gap < 0 || o.max_gap > 64) {
-    throw std::invalid_argument("line selection: max_gap must be 0..64");
-  }
+  options.validate();
 }
 
 void LineSelector::reset(int lines, int per_line) {

@@ -31,6 +31,10 @@ struct LineSelectionOptions {
   int max_gap = 8;  // lines a piece of curve can skip (a dark patch, an occlusion)
   double previous_bonus_db = 6.0;
   double previous_tolerance_px = 2.5;
+
+  // Throws OptionError (pipeline/options.hpp) naming the first field outside what the pipeline
+  // supports.
+  void validate() const;
 };
 
 // A candidate of one epipolar line: its position along the line (original pixels), SNR and

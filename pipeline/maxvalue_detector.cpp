@@ -3,11 +3,13 @@
 #include <algorithm>
 #include <cmath>
 
+#include "pipeline/options.hpp"
 #include "pipeline/subpixel.hpp"
 
 namespace laserline::pipeline {
 
 MaxValueDetector::MaxValueDetector(int threshold) : threshold_(threshold) {
+  validate_maxvalue_threshold(threshold);
   for (int i = 0; i < 256; ++i)
     log_lut_[i] = std::log(static_cast<float>(std::max(i, 1)));
 }

@@ -17,29 +17,7 @@ using namespace motion_detail;
 
 MotionEstimator::MotionEstimator(const MotionOptions& options)
     : options_(options), camera_(options) {
-  const auto require = [](bool ok, const char* what) {
-    if (!ok) throw std::invalid_argument(std::string("MotionOptions: ") + what);
-  };
-  require(options.grid_columns >= 1 && options.grid_rows >= 1,
-          "grid_columns and grid_rows must be >= 1");
-  require(options.pyramid_levels >= 1 && options.pyramid_levels <= kMaxLevels,
-          "pyramid_levels must be within [1, 8]");
-  require(options.detect_level >= 0 && options.detect_level < options.pyramid_levels,
-          "detect_level must be within [0, pyramid_levels)");
-  require(options.window_radius >= 1 && options.window_radius <= kMaxWindowRadius,
-          "window_radius must be within [1, 15]");
-  require(options.max_iterations >= 1, "max_iterations must be >= 1");
-  require(options.ransac_iterations >= 1, "ransac_iterations must be >= 1");
-  require(std::isfinite(options.inlier_px) && options.inlier_px > 0, "inlier_px must be > 0");
-  require(options.min_inliers >= 4, "min_inliers must be >= 4");
-  require(options.laser_filter_ratio >= 1.0, "laser_filter_ratio must be >= 1");
-  require(options.essential_ransac_iterations >= 1, "essential_ransac_iterations must be >= 1");
-  require(std::isfinite(options.essential_inlier_px) && options.essential_inlier_px > 0,
-          "essential_inlier_px must be > 0");
-  require(
-      std::isfinite(options.essential_min_parallax_px) && options.essential_min_parallax_px >= 0,
-      "essential_min_parallax_px must be >= 0");
-  require(options.scale_tracks >= 0, "scale_tracks must be >= 0");
+  options.validate();
   state_ = new State;
 }
 

@@ -41,6 +41,14 @@ struct MotionOptions {
   // Inlier tracks of a pair followed on into the next frame, for CameraMotion::relative_scale
   // (0: no relative scale). Each costs one more tracked feature per frame.
   int scale_tracks = 64;
+
+  // What the tracker's fixed-size buffers hold.
+  static constexpr int kMaxPyramidLevels = 8;
+  static constexpr int kMaxWindowRadius = 15;
+
+  // Throws OptionError (pipeline/options.hpp) naming the first field outside what the pipeline
+  // supports.
+  void validate() const;
 };
 
 // The camera's motion between consecutive frames: X_current = R * X_previous + t, camera

@@ -13,8 +13,8 @@
 
 namespace laserline::pipeline::motion_detail {
 
-constexpr int kMaxLevels = 8;
-constexpr int kMaxWindowRadius = 15;
+constexpr int kMaxLevels = MotionOptions::kMaxPyramidLevels;
+constexpr int kMaxWindowRadius = MotionOptions::kMaxWindowRadius;
 // Sampled patch around a tracked point: the window plus one pixel each side for the gradient.
 constexpr int kMaxPatch = 2 * kMaxWindowRadius + 3;
 // Shi-Tomasi floor: the weaker eigenvalue of the 3x3 structure tensor (half central differences,

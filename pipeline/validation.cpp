@@ -269,20 +269,7 @@ bool back_project(const ScannerGeometry& camera, const PairMotion& first, const 
 
 LineValidator::LineValidator(const ScannerGeometry& geometry, const ValidationOptions& options)
     : geometry_(geometry), options_(options) {
-  if (!(options.max_neighbour_gap_px >= 1.0))
-    throw std::invalid_argument("detector.validation.max_neighbour_gap_px must be >= 1");
-  if (options.min_segment_points < 2)
-    throw std::invalid_argument("detector.validation.min_segment_points must be >= 2");
-  if (!(options.background_px > 0))
-    throw std::invalid_argument("detector.validation.background_px must be > 0");
-  if (!(options.max_depth_baselines > 0))
-    throw std::invalid_argument("detector.validation.max_depth_baselines must be > 0");
-  if (options.max_column_offset < 0 || options.feature_search_px < 0 || options.patch_columns < 4 ||
-      options.patch_rows < 4) {
-    throw std::invalid_argument(
-        "detector.validation: max_column_offset and feature_search_px must be >= 0, "
-        "patch_columns and patch_rows >= 4");
-  }
+  options.validate();
 }
 
 void LineValidator::reset(int width, int height, std::size_t max_points) {

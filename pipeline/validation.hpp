@@ -60,6 +60,10 @@ struct ValidationOptions {
   // the line (rows, median over its points) is not the laser line, which moves with the camera: its
   // image moves across the line only as the depth along the sheet changes. 0: no such test.
   double max_laser_motion_px = 4.0;
+
+  // Throws OptionError (pipeline/options.hpp) naming the first field outside what the pipeline
+  // supports.
+  void validate() const;
 };
 
 // The camera motion between two consecutive frames, as the validation needs it:

@@ -5,10 +5,10 @@
 
 Runs inside a private network namespace (nothing leaves the machine), with the project's
 test-only parts from the build tree:
-  - the simulated scanner served as a GigE Vision camera over loopback (tests/fake_gige_scanner,
+  - the simulated scanner served as a GigE Vision camera over loopback (tests/standins/fake_gige_scanner,
     Aravis's fake camera) losing --lost-per-thousand of its stream packets;
   - laserlined on it (aravis backend, the default detector), the laser on a stand-in GPIO chip
-    (tests/gpiochip_shim.cpp, LD_PRELOAD) whose pin changes are logged with their time;
+    (tests/standins/gpiochip_shim.cpp, LD_PRELOAD) whose pin changes are logged with their time;
   - the camera killed (SIGKILL) every --outage-every seconds and started again --outage-s later;
   - a malformed LCM message every second on each of the daemon's channels (lengths that lie,
     negative counts, truncated bodies), while laserline-listen and lcm-logger listen.

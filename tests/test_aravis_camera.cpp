@@ -2,7 +2,7 @@
 // (arv-fake-gv-camera-0.8 -i 127.0.0.1), over the real GVCP/GVSP network path on loopback, inside
 // a private network namespace this test makes for itself (discovery would otherwise broadcast on
 // the machine's interfaces). The daemon tests run laserlined as a separate process with the
-// stand-in GPIO chip (tests/gpiochip_shim.cpp) preloaded, so the laser's pin is logged.
+// stand-in GPIO chip (tests/standins/gpiochip_shim.cpp) preloaded, so the laser's pin is logged.
 #include <arv.h>
 #include <gtest/gtest.h>
 #include <signal.h>

@@ -111,6 +111,26 @@ TEST(Config, OutOfRangeNamesTheLimits) {
             "");
 }
 
+// The pipeline checks its options (one range each); the configuration names the key and the line.
+TEST(Config, DetectorOptionsTakeThePipelinesRanges) {
+  EXPECT_EQ(error_of("detector:\n  frontend:\n    max_candidates_per_column: 100\n"), "");
+  EXPECT_EQ(error_of("detector:\n  frontend:\n    max_candidates_per_column: 300\n"),
+            "test.yaml:3: detector.frontend.max_candidates_per_column: must be between 1 and 255, "
+            "got 300");
+  EXPECT_EQ(error_of("detector:\n  motion: {pyramid_levels: 7, detect_level: 2}\n"), "");
+  EXPECT_EQ(error_of("detector:\n  motion:\n    pyramid_levels: 9\n"),
+            "test.yaml:3: detector.motion.pyramid_levels: must be between 1 and 8, got 9");
+  EXPECT_EQ(error_of("detector:\n  motion:\n    pyramid_levels: 4\n    detect_level: 4\n"),
+            "test.yaml:4: detector.motion.detect_level: must be between 0 and 3 (below "
+            "pyramid_levels), got 4");
+  EXPECT_EQ(error_of("detector:\n  frontend:\n    selection: {max_gap: 65}\n"),
+            "test.yaml:3: detector.frontend.selection.max_gap: must be between 0 and 64, got 65");
+  EXPECT_EQ(error_of("detector:\n  frontend: {min_depth_m: 3}\n"),
+            "test.yaml:2: detector.frontend.max_depth_m: must be above min_depth_m");
+  EXPECT_EQ(error_of("detector:\n  background:\n    history_frames: 0\n"),
+            "test.yaml:3: detector.background.history_frames: must be between 1 and 64, got 0");
+}
+
 TEST(Config, CameraMotionOptions) {
   const DaemonConfig config =
       parse_config(hal::load_yaml_text("detector:\n  motion: {essential_ransac_iterations: 50, "

@@ -20,8 +20,9 @@
 
 #include "daemon/config.hpp"
 #include "hal/clock.hpp"
-#include "hal/registry.hpp"
 #include "hal/sim/sim_scene.hpp"
+#include "hal/sim_options.hpp"
+#include "hal/yaml_reader.hpp"
 #include "private_network.hpp"
 
 namespace {

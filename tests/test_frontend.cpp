@@ -13,6 +13,7 @@
 
 #include "allocation_counter.hpp"
 #include "pipeline/frontend_detectors.hpp"
+#include "pipeline/options.hpp"
 #include "tools/evaluation.hpp"
 
 namespace laserline::pipeline {
@@ -400,6 +401,22 @@ TEST(Detectors, AreMadeByNameAndRefuseImpossibleOptions) {
   o.frontend.min_depth_m = 3.0;
   o.frontend.max_depth_m = 2.0;
   EXPECT_THROW(make_detector("fir", o), std::invalid_argument);
+  // The option's own range and name, no configuration key.
+  DetectorOptions many;
+  many.frontend.max_candidates_per_column = 300;
+  try {
+    make_detector("fir", many);
+    FAIL() << "300 candidates per column should be refused";
+  } catch (const OptionError& e) {
+    EXPECT_EQ(e.field(), "max_candidates_per_column");
+    EXPECT_STREQ(e.what(), "max_candidates_per_column must be between 1 and 255, got 300");
+  }
+  many.frontend.max_candidates_per_column = 255;
+  EXPECT_NE(make_detector("fir", many), nullptr);
+  DetectorOptions dim;
+  dim.maxvalue_threshold = 0;
+  EXPECT_THROW(make_detector("maxvalue", dim), OptionError);
+  EXPECT_THROW(dim.validate(), OptionError);
   auto fir = make_detector("fir", DetectorOptions{});
   EXPECT_THROW(fir->reset(640, 480), std::invalid_argument);  // not the calibrated size
 }

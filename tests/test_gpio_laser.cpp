@@ -1,7 +1,7 @@
 // The gpiod laser backend against the real libgpiod 1.6 library, through the stand-in chip of
-// tests/gpiochip_shim.cpp: linked into this test for the in-process tests, LD_PRELOADed into
-// laserlined for the daemon's safety paths and the alternate-mode timing. The shim's log is the
-// "oscilloscope": every level change on the pin with its host time.
+// tests/standins/gpiochip_shim.cpp: linked into this test for the in-process tests, LD_PRELOADed
+// into laserlined for the daemon's safety paths and the alternate-mode timing. The shim's log is
+// the "oscilloscope": every level change on the pin with its host time.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/resource.h>
@@ -25,6 +25,7 @@
 #include "hal/clock.hpp"
 #include "hal/gpio_laser.hpp"
 #include "hal/registry.hpp"
+#include "hal/yaml_reader.hpp"
 #include "run_command.hpp"
 #include "thread_allocations.hpp"
 

@@ -1,7 +1,7 @@
-// The v4l2 camera backend against the stand-in device of tests/v4l2_fuse_device.cpp: a FUSE file
-// answering the V4L2 ioctls and serving frames through mmap, run as a separate process. Checks
-// the content of every frame (the stand-in draws a known pattern per sequence number: every pixel
-// is compared with the per-pixel reference conversion of it, pixel_reference.hpp), the
+// The v4l2 camera backend against the stand-in device of tests/standins/v4l2_fuse_device.cpp: a
+// FUSE file answering the V4L2 ioctls and serving frames through mmap, run as a separate process.
+// Checks the content of every frame (the stand-in draws a known pattern per sequence number: every
+// pixel is compared with the per-pixel reference conversion of it, pixel_reference.hpp), the
 // timestamps, every pixel format with a laser channel, clear errors, and reconnection when the
 // device goes away and comes back.
 #include <gtest/gtest.h>
@@ -25,8 +25,8 @@
 #include "hal/laser_channel.hpp"
 #include "hal/v4l2_camera.hpp"
 #include "pixel_reference.hpp"
+#include "standins/v4l2_test_pattern.hpp"
 #include "thread_allocations.hpp"
-#include "v4l2_test_pattern.hpp"
 
 namespace {
 

@@ -31,8 +31,8 @@
 #include <string>
 #include <vector>
 
+#include "daemon/calibration_message.hpp"
 #include "daemon/config.hpp"
-#include "daemon/lcm_publisher.hpp"
 #include "hal/calibration.hpp"
 #include "hal/laser_channel.hpp"
 #include "lcmtypes/checked_decode.hpp"

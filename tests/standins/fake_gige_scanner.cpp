@@ -5,9 +5,9 @@
 //   fake_gige_scanner --serial LL01 --width 640 --height 480 [--pins FILE]
 //                     [--lost-per-thousand N]
 //
-// The laser in each frame is the level the stand-in GPIO chip (tests/gpiochip_shim.cpp) logged
-// last for line 0 in FILE when the frame is filled (its exposure): the image shows what the pin
-// really did, not what the daemon meant, so a test can check the daemon's per-frame laser state
+// The laser in each frame is the level the stand-in GPIO chip (tests/standins/gpiochip_shim.cpp)
+// logged last for line 0 in FILE when the frame is filled (its exposure): the image shows what the
+// pin really did, not what the daemon meant, so a test can check the daemon's per-frame laser state
 // against the light. Without --pins the laser is always on. --lost-per-thousand: stream packets
 // the camera leaves out, as arv-fake-gv-camera's -r. Runs until SIGTERM/SIGINT.
 #include <arv.h>
