@@ -24,6 +24,7 @@
 #include "hal/sim_options.hpp"
 #include "hal/yaml_reader.hpp"
 #include "private_network.hpp"
+#include "run_command.hpp"
 
 namespace {
 
@@ -111,28 +112,11 @@ class DaemonOverLcm : public ::testing::Test {
   }
 
   void start_daemon(const std::string& config_path) {
-    std::vector<std::string> args = {LASERLINED_PATH, "--config", config_path};
-    std::vector<char*> argv;
-    for (auto& a : args)
-      argv.push_back(a.data());
-    argv.push_back(nullptr);
-    const std::string log = (dir_ / "daemon.log").string();
-    const pid_t parent = getpid();
-    pid_ = fork();
+    // The daemon must not outlive this test, even when the test dies (a sanitizer abort skips
+    // TearDown).
+    pid_ = laserline::test_support::spawn_tied_child({LASERLINED_PATH, "--config", config_path},
+                                                     (dir_ / "daemon.log").string());
     ASSERT_GE(pid_, 0);
-    if (pid_ == 0) {
-      // The daemon must not outlive this test, even when the test dies (a sanitizer abort
-      // skips TearDown): the kernel kills it when its parent goes.
-      prctl(PR_SET_PDEATHSIG, SIGKILL);
-      if (getppid() != parent) _exit(127);
-      const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-      if (fd >= 0) {
-        dup2(fd, 1);
-        dup2(fd, 2);
-      }
-      execv(argv[0], argv.data());
-      _exit(127);
-    }
   }
 
   // Sends `sig` and returns the seconds until the daemon exited; *status gets its wait status.

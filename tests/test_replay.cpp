@@ -35,6 +35,7 @@
 #include "lcmtypes/checked_decode.hpp"
 #include "lcmtypes/lcm_log.hpp"
 #include "private_network.hpp"
+#include "run_command.hpp"
 
 namespace {
 
@@ -68,24 +69,8 @@ class TempDir {
 // A child process that dies with this test (PR_SET_PDEATHSIG), output to a file.
 class Child {
  public:
-  Child(std::vector<std::string> args, std::string log) : log_(std::move(log)) {
-    std::vector<char*> argv;
-    for (auto& a : args)
-      argv.push_back(a.data());
-    argv.push_back(nullptr);
-    const pid_t parent = getpid();
-    pid_ = fork();
-    if (pid_ == 0) {
-      prctl(PR_SET_PDEATHSIG, SIGKILL);
-      if (getppid() != parent) _exit(127);
-      const int fd = open(log_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-      if (fd >= 0) {
-        dup2(fd, 1);
-        dup2(fd, 2);
-      }
-      execv(argv[0], argv.data());
-      _exit(127);
-    }
+  Child(const std::vector<std::string>& args, std::string log) : log_(std::move(log)) {
+    pid_ = laserline::test_support::spawn_tied_child(args, log_);
   }
   ~Child() {
     if (pid_ > 0) {

@@ -53,28 +53,6 @@ lcm: {url: "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304", image_every_
       image_downscale: 1, image_compression: jpeg, profile_points: all, status_period_s: 1.0}
 )";
 
-pid_t spawn(const std::vector<std::string>& args, const std::string& log) {
-  std::vector<char*> argv;
-  for (const auto& a : args)
-    argv.push_back(const_cast<char*>(a.c_str()));
-  argv.push_back(nullptr);
-  const pid_t parent = getpid();
-  const pid_t pid = fork();
-  if (pid == 0) {
-    // Never outlives the test, even one a sanitizer aborts.
-    prctl(PR_SET_PDEATHSIG, SIGKILL);
-    if (getppid() != parent) _exit(127);
-    const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    if (fd >= 0) {
-      dup2(fd, 1);
-      dup2(fd, 2);
-    }
-    execv(argv[0], argv.data());
-    _exit(127);
-  }
-  return pid;
-}
-
 std::string read_file(const std::filesystem::path& path) {
   std::ifstream in(path);
   return std::string(std::istreambuf_iterator<char>(in), {});
@@ -146,11 +124,13 @@ class LiveView : public ::testing::Test {
     dir_ = std::filesystem::temp_directory_path() / ("laserline_view_" + std::to_string(getpid()));
     std::filesystem::create_directories(dir_);
     std::ofstream(dir_ / "sim.yaml") << kConfig;
-    daemon_ = spawn({LASERLINED_PATH, "--config", (dir_ / "sim.yaml").string()},
-                    (dir_ / "daemon.log").string());
-    view_ = spawn({LASERLINE_VIEW_PATH, "--url", kUrl, "--listen",
-                   std::string(kHost) + ":" + std::to_string(kPort)},
-                  (dir_ / "view.log").string());
+    daemon_ = laserline::test_support::spawn_tied_child(
+        {LASERLINED_PATH, "--config", (dir_ / "sim.yaml").string()},
+        (dir_ / "daemon.log").string());
+    view_ = laserline::test_support::spawn_tied_child(
+        {LASERLINE_VIEW_PATH, "--url", kUrl, "--listen",
+         std::string(kHost) + ":" + std::to_string(kPort)},
+        (dir_ / "view.log").string());
     // Up when the page is served and a status (1 Hz) and a frame have arrived.
     httplib::Client client(kHost, kPort);
     const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(30);
