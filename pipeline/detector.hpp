@@ -76,7 +76,8 @@ struct FrameContext {
   bool laser_on = true;  // the laser state the frame was exposed with
 };
 
-// Finds laser points in one frame, along each epipolar line. A detector itself looks along image
+// Finds laser points in one frame, along each epipolar line; a frame exposed with the laser off
+// gives none (it may serve a later frame as background). A detector itself looks along image
 // columns; make_detector() runs it on the frame's search image (pipeline/search_axes.hpp) when the
 // calibration puts the epipolar lines along rows or at an angle, and the profile says how its
 // points map to the frame. reset() sizes every buffer for a frame size (allocates); detect() then

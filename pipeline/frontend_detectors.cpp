@@ -13,7 +13,11 @@ void FirDetector::reset(int width, int height) {
   frontend_.reset(width, height);
 }
 
-void FirDetector::detect(const ImageView& image, const FrameContext& /*frame*/, Profile& out) {
+void FirDetector::detect(const ImageView& image, const FrameContext& frame, Profile& out) {
+  if (!frame.laser_on) {
+    out.clear();
+    return;
+  }
   frontend_.set_frame(image);
   frontend_.find_candidates(out);
 }

@@ -22,10 +22,11 @@ void MaxValueDetector::reset(int width, int height) {
   sum_.assign(width, 0);
 }
 
-void MaxValueDetector::detect(const ImageView& image, const FrameContext& /*frame*/, Profile& out) {
+void MaxValueDetector::detect(const ImageView& image, const FrameContext& frame, Profile& out) {
   out.clear();
   const int width = image.width;
-  if (static_cast<int>(max_value_.size()) != width || image.height > 65535) return;
+  if (!frame.laser_on || static_cast<int>(max_value_.size()) != width || image.height > 65535)
+    return;
   std::fill(max_value_.begin(), max_value_.end(), 0);
   std::fill(first_row_.begin(), first_row_.end(), 0);
   std::fill(last_row_.begin(), last_row_.end(), 0);

@@ -451,6 +451,31 @@ TEST(Detectors, DoNotAllocatePerFrame) {
   }
 }
 
+TEST(Detectors, GiveNoPointsOnALaserOffFrame) {
+  // The same frame, said to be exposed with the laser off (laser.mode alternate or off): every
+  // detector gives nothing, where with the laser on each finds the line.
+  const tools::Scenario scenario = tools::standard_scenarios(640, 512)[1];  // ambient, scanning
+  hal::SimScene scene(scenario.scene);
+  DetectorOptions o;
+  o.geometry.width = 640;
+  o.geometry.height = 512;
+  o.geometry.fx = o.geometry.fy = scenario.scene.calibration.camera.fx;
+  o.geometry.cx = scenario.scene.calibration.camera.cx;
+  o.geometry.cy = scenario.scene.calibration.camera.cy;
+  std::vector<std::uint8_t> pixels(640 * 512);
+  scene.render(0, true, pixels);
+  const ImageView view{pixels.data(), 640, 512, 640};
+  for (const std::string& name : detector_names()) {
+    auto detector = make_detector(name, o);
+    detector->reset(640, 512);
+    Profile out(detector->max_points(640, 512));
+    detector->detect(view, {0, true}, out);
+    EXPECT_GT(out.size(), 0u) << name;
+    detector->detect(view, {1, false}, out);
+    EXPECT_EQ(out.size(), 0u) << name;
+  }
+}
+
 // ---- Accuracy against the simulator's exact ground truth ---------------------------------------
 
 tools::Score score(const std::string& scenario_name, const std::string& detector,
