@@ -324,12 +324,17 @@ void LineValidator::validate(Profile& profile, const PairMotion& motion, const I
       s.background = s.match_count == 0;
   }
 
-  // The verdict: candidates outside any segment are noise, those of background segments are not
-  // laser. Every other candidate stays eligible (valid) for the line selection that follows.
+  // The verdict: candidates of background segments are not laser. Where the motion let some
+  // segment be tested by its parallax, candidates outside any segment are noise; where nothing
+  // could be (the camera holding still, no tracks yet) they stay as the front-end left them, for
+  // the line selection to weigh alone. Every other candidate stays eligible.
+  bool parallax_seen = false;
+  for (const LineSegment& seg : frame.segments)
+    parallax_seen = parallax_seen || (seg.tested && std::isfinite(seg.residual_px));
   const std::span<ProfilePoint> points = profile.mutable_points();
   for (ProfilePoint& p : points) {
     p.segment = -1;
-    p.valid = false;
+    if (parallax_seen) p.valid = false;
   }
   // Validation only takes points away: the front-end's eligibility of the others stands.
   for (std::size_t s = 0; s < frame.segments.size(); ++s) {
@@ -337,15 +342,8 @@ void LineValidator::validate(Profile& profile, const PairMotion& motion, const I
     for (int i = seg.first; i < seg.first + seg.count; ++i) {
       ProfilePoint& p = points[static_cast<std::size_t>(frame.points[i].profile_index)];
       p.segment = static_cast<std::int32_t>(s);
-    }
-  }
-  for (std::size_t s = 0; s < frame.segments.size(); ++s) {
-    const LineSegment& seg = frame.segments[s];
-    if (seg.background) continue;
-    for (int i = seg.first; i < seg.first + seg.count; ++i) {
-      const SegmentPoint& sp = frame.points[i];
-      points[static_cast<std::size_t>(sp.profile_index)].valid =
-          eligible_[static_cast<std::size_t>(sp.profile_index)] != 0;
+      p.valid = !seg.background &&
+                eligible_[static_cast<std::size_t>(frame.points[i].profile_index)] != 0;
     }
   }
 
