@@ -1,5 +1,6 @@
 // The `memory` camera backend: frames rendered by the simulator or loaded from an LCM log, held in
-// memory and delivered at a set rate, alone and through the daemon's frame path (LCM on memq://).
+// memory and delivered at a set rate, alone and through the daemon's frame path (its LCM output
+// written to a log, file://, and read back).
 // Counts and content only: nothing here depends on how fast this machine is.
 #include "hal/memory_camera.hpp"
 
@@ -10,7 +11,6 @@
 #include <lcm/lcm-cpp.hpp>
 
 #include <filesystem>
-#include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
@@ -25,6 +25,8 @@
 #include "hal/sim/sim_laser.hpp"
 #include "hal/sim_options.hpp"
 #include "hal/yaml_reader.hpp"
+#include "lcmtypes/checked_decode.hpp"
+#include "lcmtypes/lcm_log.hpp"
 
 namespace laserline {
 namespace {
@@ -200,20 +202,14 @@ TEST_F(MemoryCameraLog, RefusesALiveSourceAndItself) {
   }
 }
 
-// Profiles as a subscriber on the same memq:// LCM receives them.
-struct Received {
-  std::mutex mutex;
-  std::vector<laserline::profile_t> profiles;
-  void on_profile(const lcm::ReceiveBuffer*, const std::string&, const laserline::profile_t* p) {
-    const std::lock_guard lock(mutex);
-    profiles.push_back(*p);
-  }
-};
-
 TEST(MemoryCameraFramePath, DeliversItsFramesAtTheSetRateThroughTheDaemon) {
   // 100 frames/s: frame n is due 10 ms after frame 0, which its camera timestamp says exactly.
   // Laser alternating: the unlit frames are the ones held without the laser (maxvalue finds
   // almost nothing in them, and a line in the lit ones).
+  // Published into an LCM log (one writer, the publisher thread), read back once stopped.
+  const std::filesystem::path log_path =
+      std::filesystem::temp_directory_path() /
+      ("laserline_memory_path_" + std::to_string(getpid()) + ".lcmlog");
   daemon::DaemonConfig config = make_config(std::string(R"(
 camera:
   backend: memory
@@ -222,39 +218,49 @@ camera:
   sim: {ambient: 20, texture_contrast: 0.3, laser_peak: 150, noise_sigma: 1, tilt_y_deg: 8}
 laser: {mode: alternate}
 detector: {name: maxvalue}
-lcm: {url: "memq://", image_every_n: 0, status_period_s: 0.1}
-)") + kSmallCamera);
+lcm: {url: "file://)") + log_path.string() + R"(?mode=w", image_every_n: 0}
+)" + kSmallCamera);
   daemon::Backends backends = daemon::create_backends(config);
   std::string error;
   ASSERT_TRUE(backends.laser->open(&error));
   ASSERT_TRUE(backends.camera->open(&error)) << error;
   EXPECT_FALSE(backends.camera->paced_by_consumer()) << "a set rate: a free-running camera";
-  lcm::LCM lcm(config.lcm_url);
-  ASSERT_TRUE(lcm.good());
-  Received received;
-  lcm.subscribe(config.profile_channel, &Received::on_profile, &received);
-  daemon::FramePath path(config, *backends.camera, *backends.laser, *backends.detector, lcm);
-  ASSERT_TRUE(path.start(&error)) << error;
-  std::thread handler([&] {
-    while (!path.source_ended() || lcm.handleTimeout(200) > 0)
-      lcm.handleTimeout(50);
-  });
-  handler.join();
-  path.stop();
-  while (lcm.handleTimeout(0) > 0) {
+  daemon::FramePathSummary s;
+  std::int64_t skipped = 0;
+  {
+    lcm::LCM lcm(config.lcm_url);
+    ASSERT_TRUE(lcm.good());
+    daemon::FramePath path(config, *backends.camera, *backends.laser, *backends.detector, lcm);
+    ASSERT_TRUE(path.start(&error)) << error;
+    while (!path.source_ended())
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    path.stop();
+    s = path.summary();
+    skipped = backends.camera->health().skipped_frames;
   }
-  const daemon::FramePathSummary s = path.summary();
-  const std::int64_t skipped = backends.camera->health().skipped_frames;
+  std::vector<laserline::profile_t> profiles;
+  messages::LcmLogReader reader;
+  ASSERT_TRUE(reader.open(log_path.string(), &error)) << error;
+  messages::LcmLogReader::Event event;
+  messages::LcmLogReader::Damage damage;
+  messages::Limits limits;
+  while (reader.next(&event, &damage)) {
+    if (event.channel != config.profile_channel) continue;
+    profiles.emplace_back();
+    ASSERT_TRUE(
+        messages::decode(event.data.data(), event.data.size(), &profiles.back(), limits, &error))
+        << error;
+  }
+  std::filesystem::remove(log_path);
   EXPECT_EQ(s.frames_captured + skipped, 40) << "ten loops of four frames, each delivered or lost";
   EXPECT_EQ(s.frames_processed, s.frames_captured - s.frames_dropped);
   EXPECT_FALSE(backends.laser->is_on());
 
-  const std::lock_guard lock(received.mutex);
-  ASSERT_EQ(static_cast<std::int64_t>(received.profiles.size()), s.profiles_published);
-  ASSERT_GE(received.profiles.size(), 20u) << "most of the 40 frames arrive on any machine";
+  ASSERT_EQ(static_cast<std::int64_t>(profiles.size()), s.profiles_published);
+  ASSERT_GE(profiles.size(), 20u) << "most of the 40 frames arrive on any machine";
   std::int64_t previous = -1;
   int lit = 0, unlit = 0;
-  for (const laserline::profile_t& p : received.profiles) {
+  for (const laserline::profile_t& p : profiles) {
     EXPECT_GT(p.sequence, previous);
     EXPECT_LT(p.sequence, 40);
     previous = p.sequence;
