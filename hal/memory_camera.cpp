@@ -117,14 +117,15 @@ GrabStatus MemoryCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
   }
   std::int64_t exposure = now;
   if (period_ns_ > 0) {
-    // A free-running sensor: frame n is due at start + n * period; frames whose time passed
-    // while the caller was late are lost.
+    // A free-running camera: frame n is due at start + n * period. A late caller gets the
+    // frames of the last `buffers` periods at once; older ones were overwritten.
     exposure = start_mono_ns_ + static_cast<std::int64_t>(next_sequence_) * period_ns_;
-    if (exposure < now - period_ns_) {
-      const auto missed = static_cast<std::uint64_t>((now - exposure) / period_ns_);
-      next_sequence_ += missed;
-      exposure += static_cast<std::int64_t>(missed) * period_ns_;
-      skipped_frames_.fetch_add(static_cast<std::int64_t>(missed), std::memory_order_relaxed);
+    const std::int64_t behind = exposure < now ? (now - exposure) / period_ns_ : 0;
+    if (behind >= options_.buffers) {
+      const std::int64_t missed = behind - options_.buffers + 1;
+      next_sequence_ += static_cast<std::uint64_t>(missed);
+      exposure += missed * period_ns_;
+      skipped_frames_.fetch_add(missed, std::memory_order_relaxed);
     }
   }
   if (end_sequence_ > 0 && next_sequence_ >= end_sequence_) return GrabStatus::kStopped;

@@ -18,6 +18,9 @@ struct MemoryCameraOptions {
   // Frames delivered per second, paced on CLOCK_MONOTONIC like a free-running sensor; 0 = as fast
   // as the frame path takes them (paced_by_consumer(): nothing dropped).
   double rate_hz = 30;
+  // Frames a late caller still gets, as a driver's queue of buffers keeps them (v4l2 4, aravis
+  // 16); older ones are lost. 1: a sensor without a queue.
+  int buffers = 4;
   std::int64_t loops = 0;  // times the frames are delivered before the source ends; 0 = endless
   double duration_s = 0;   // seconds after open() the source ends; 0 = endless
 };
@@ -29,8 +32,9 @@ struct MemoryCameraOptions {
 //  - or read from a recording (a camera that is paced_by_consumer(), e.g. the `lcm` backend on
 //    a file:// log): its first `frames` frames, with the laser state each was recorded with.
 // After open() a grab is a copy from memory: no allocation, no syscall but the pacing sleep.
-// Frames are numbered in the order delivered, across loops; frames due while the caller was late
-// are lost as a free-running sensor loses them (counted in health().skipped_frames).
+// Frames are numbered in the order due, across loops. A caller late by up to `buffers` frames
+// gets them at once, as from a driver's queue; frames older than that are lost as a free-running
+// camera loses them (counted in health().skipped_frames, a gap in the numbers).
 //
 // Thread context: open()/format() from the setup thread; grab() from the camera thread; stop()
 // and health() from any thread.
@@ -78,7 +82,7 @@ class MemoryCamera final : public Camera {
 
 // The `memory` backend's factory (hal/registry.hpp). Options under `camera.memory`: source
 // (sim, or the name of a recording backend such as lcm, whose own section then says which
-// recording), frames, rate_hz (default camera.frame_rate_hz), loops, duration_s.
+// recording), frames, rate_hz (default camera.frame_rate_hz), buffers, loops, duration_s.
 std::unique_ptr<Camera> create_memory_camera(const CameraRequest& request);
 
 }  // namespace laserline::hal

@@ -76,7 +76,7 @@ camera: {backend: sim, sim: {seed: 4}}
     const std::vector<std::uint8_t> pixels = grab_ok(*camera, info);
     hal::FrameInfo expected_info;
     sim->render_frame(k % 3, on, expected, expected_info);
-    EXPECT_EQ(info.sequence, k) << "numbered in the order delivered, across loops";
+    EXPECT_EQ(info.sequence, k) << "numbered in the order due, across loops";
     EXPECT_EQ(info.laser_on, on) << "frame " << k;
     EXPECT_TRUE(pixels == expected)
         << "frame " << k << " is not rendered frame " << k % 3 << (on ? " lit" : " unlit");
@@ -87,6 +87,33 @@ camera: {backend: sim, sim: {seed: 4}}
   EXPECT_EQ(camera->grab(pixels, info, std::chrono::milliseconds(100)), hal::GrabStatus::kStopped)
       << "two loops of three frames, then the source ends";
   EXPECT_EQ(camera->health().skipped_frames, 0);
+}
+
+TEST(MemoryCamera, ALateCallerGetsTheBufferedFramesAndLosesOlderOnes) {
+  // 10 frames/s and a queue of two: after 5.5 periods away, the frames due in the last two
+  // periods are still there and come at once; the ones before them are lost and counted.
+  daemon::DaemonConfig config = make_config(std::string(R"(
+camera: {backend: memory, memory: {frames: 4, rate_hz: 10, buffers: 2}}
+)") + kSmallCamera);
+  hal::CameraRequest request{&config.camera_options, &config.calibration, nullptr,
+                             config.laser_channel};
+  std::unique_ptr<hal::Camera> camera = hal::make_camera("memory", request);
+  std::string error;
+  ASSERT_TRUE(camera->open(&error)) << error;
+  hal::FrameInfo first, late, next;
+  grab_ok(*camera, first);
+  EXPECT_EQ(first.sequence, 0u);
+  std::this_thread::sleep_for(std::chrono::milliseconds(550));
+  grab_ok(*camera, late);
+  grab_ok(*camera, next);
+  EXPECT_GE(late.sequence, 3u) << "frames 1 and 2 were overwritten in a queue of two";
+  EXPECT_EQ(camera->health().skipped_frames, static_cast<std::int64_t>(late.sequence) - 1)
+      << "every frame not delivered is counted";
+  EXPECT_GE(late.arrival_mono_ns - late.exposure_mono_ns, 100'000'000)
+      << "the oldest frame of the queue comes first: one due at least a period before";
+  EXPECT_EQ(next.sequence, late.sequence + 1) << "the next frame was queued too";
+  EXPECT_EQ(late.camera_ns, static_cast<std::int64_t>(late.sequence) * 100'000'000)
+      << "a queued frame keeps the time it was due";
 }
 
 // An LCM log of `count` 32x16 frames: frame s has pixels s * 7 + i and the laser on when s is even.
