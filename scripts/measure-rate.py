@@ -181,7 +181,7 @@ def main():
     parser.add_argument("--height", type=int, default=1536)
     parser.add_argument("--detector", default="background",
                         choices=["maxvalue", "fir", "background", "backprojection"])
-    parser.add_argument("--rates", default="0,100,150,200,250,300,350,400,450,500",
+    parser.add_argument("--rates", default="100,150,200,250,300,350,400,450,500",
                         help="frames/s to try, ascending, comma-separated; 0: as fast as the "
                         "frame path takes them (its throughput, nothing lost by design)")
     parser.add_argument("--seconds", type=float, default=20, help="per rate")
