@@ -120,8 +120,10 @@ def run_rate(args, rate, status_t):
         load_before = os.getloadavg()[0]
         while True:
             if time.monotonic() >= next_sample:
-                # The last sample before the daemon exits: its threads' CPU over the run.
-                threads = thread_cpu_seconds(daemon.pid) or threads
+                # CPU time only grows: the largest seen is each thread's over the run, also
+                # for threads that ended before the last sample.
+                for name, cpu in thread_cpu_seconds(daemon.pid).items():
+                    threads[name] = max(cpu, threads.get(name, 0))
                 next_sample = time.monotonic() + 0.5
             try:
                 data = sock.recv(1 << 17)
