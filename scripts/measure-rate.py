@@ -85,6 +85,13 @@ def thread_cpu_seconds(pid):
     return seconds
 
 
+def steal_ms():
+    """Time the hypervisor gave this virtual machine's CPUs to others, so far (0 on bare metal)."""
+    with open("/proc/stat") as f:
+        fields = f.readline().split()
+    return int(fields[8]) * 1000 / os.sysconf("SC_CLK_TCK") if len(fields) > 8 else 0
+
+
 def status_socket():
     s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)
     s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -117,7 +124,7 @@ def run_rate(args, rate, status_t):
                                   stderr=subprocess.STDOUT)
         statuses = []
         threads, next_sample = {}, 0
-        load_before = os.getloadavg()[0]
+        load_before, steal_before = os.getloadavg()[0], steal_ms()
         while True:
             if time.monotonic() >= next_sample:
                 # CPU time only grows: the largest seen is each thread's over the run, also
@@ -154,6 +161,7 @@ def run_rate(args, rate, status_t):
         "rate": rate,
         "achieved": last.frames_processed / seconds if seconds > 0 else 0,
         "load": (load_before + os.getloadavg()[0]) / 2,
+        "steal": steal_ms() - steal_before,
         "threads": ", ".join("%s %.0f%%" % (name, 100 * cpu / seconds)
                              for name, cpu in sorted(threads.items(), key=lambda t: -t[1])
                              if seconds > 0 and cpu / seconds >= 0.02),
@@ -212,24 +220,24 @@ def main():
              args.seconds, time.strftime("%Y-%m-%d", time.gmtime()), args.p99_ms))
     print("| frames/s asked | processed (per s) | lost (ring full, late) | over budget | "
           "arrival->published p50 / p99 / max ms | p99 per second: median / worst ms | "
-          "CPU % of a core, by thread | load average | holds |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+          "CPU % of a core, by thread | load average | CPU stolen by the host, ms | holds |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     best = None
     for rate in rates:
         r = run_rate(args, rate, status_t)
         if rate == 0:  # throughput, not a rate to hold
             print("| 0 (as fast as taken) | %d (%.1f) | - | %d | %.2f / %.2f / %.2f | %.2f / %.2f "
-                  "| %.0f: %s | %.1f | - |"
+                  "| %.0f: %s | %.1f | %.0f | - |"
                   % (r["frames"], r["achieved"], r["over_budget"], r["p50"], r["p99"], r["max"],
                      r["period_p99_median"], r["period_p99_worst"], r["cpu"], r["threads"],
-                     r["load"]), flush=True)
+                     r["load"], r["steal"]), flush=True)
             continue
         print("| %s | %d (%.1f) | %d (%d, %d) | %d | %.2f / %.2f / %.2f | %.2f / %.2f | %.0f: %s "
-              "| %.1f | %s |"
+              "| %.1f | %.0f | %s |"
               % ("%g" % rate if rate > 0 else "0 (as fast as taken)", r["frames"], r["achieved"],
                  r["lost"], r["ring_full"], r["late"], r["over_budget"], r["p50"], r["p99"],
                  r["max"], r["period_p99_median"], r["period_p99_worst"], r["cpu"], r["threads"],
-                 r["load"], "yes" if r["holds"] else "no"), flush=True)
+                 r["load"], r["steal"], "yes" if r["holds"] else "no"), flush=True)
         if not r["holds"]:
             break
         best = rate
