@@ -21,7 +21,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.ticker import LogLocator, ScalarFormatter  # noqa: E402
+from matplotlib.ticker import FuncFormatter, LogLocator  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ORDER = ["maxvalue", "fir", "background", "backprojection"]
@@ -81,7 +81,7 @@ def main():
                                      key=lambda s: s[0] * s[1])], fontsize=8)
         axes.minorticks_off()
         axes.yaxis.set_major_locator(LogLocator(subs=(1, 2, 5)))
-        axes.yaxis.set_major_formatter(ScalarFormatter())
+        axes.yaxis.set_major_formatter(FuncFormatter(lambda v, _: "%g" % v))
         axes.grid(True, which="major", alpha=0.3)
     per_frame.legend(fontsize=8)
     fig.suptitle("laserline detectors, one thread, %s time (%s, %s)"
