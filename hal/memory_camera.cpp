@@ -47,8 +47,8 @@ bool MemoryCamera::open(std::string* error) {
       *error = "camera.memory.frames: " + std::to_string(options_.frames) + " frames of " +
                std::to_string(format_.width) + "x" + std::to_string(format_.height) +
                (sim_ ? " (each with the laser on and off)" : "") + " need " + megabytes(need) +
-               ", more than half of this computer's memory (" + megabytes(memory_for_frames() * 2) +
-               "): hold fewer frames";
+               ", more than half of this computer's " + megabytes(memory_for_frames() * 2) +
+               ": hold fewer frames";
       return false;
     }
     try {

@@ -27,10 +27,11 @@ std::unique_ptr<Camera> create_memory_camera(const CameraRequest& request) {
   if (!recording) {
     std::string names;
     for (const std::string& name : camera_backends()) {
-      if (name != "memory") names += (names.empty() ? "" : ", ") + name;
+      if (name != "memory" && name != "sim") names += (names.empty() ? "" : ", ") + name;
     }
-    memory.fail("source",
-                "unknown camera backend '" + source + "' (sim, or a recording: " + names + ")");
+    memory.fail("source", "unknown camera backend '" + source +
+                              "' (expected sim or the backend of a recording; backends: " + names +
+                              ")");
   }
   if (!recording->paced_by_consumer()) {
     memory.fail("source", "the " + source +
