@@ -15,6 +15,7 @@
 #include <thread>
 #include <vector>
 
+#include "allocation_counter.hpp"
 #include "daemon/backends.hpp"
 #include "daemon/config.hpp"
 #include "daemon/frame_path.hpp"
@@ -87,6 +88,30 @@ camera: {backend: sim, sim: {seed: 4}}
   EXPECT_EQ(camera->grab(pixels, info, std::chrono::milliseconds(100)), hal::GrabStatus::kStopped)
       << "two loops of three frames, then the source ends";
   EXPECT_EQ(camera->health().skipped_frames, 0);
+}
+
+TEST(MemoryCamera, AGrabAllocatesNothing) {
+  daemon::DaemonConfig config = make_config(std::string(R"(
+camera: {backend: memory, memory: {frames: 3, rate_hz: 0}}
+)") + kSmallCamera);
+  hal::SimLaser laser;
+  hal::CameraRequest request{&config.camera_options, &config.calibration, &laser,
+                             config.laser_channel};
+  std::unique_ptr<hal::Camera> camera = hal::make_camera("memory", request);
+  std::string error;
+  ASSERT_TRUE(camera->open(&error)) << error;
+  std::vector<std::uint8_t> pixels(camera->format().bytes());
+  hal::FrameInfo info;
+  ASSERT_TRUE(testing::allocation_counter_works());
+  testing::start_counting_allocations();
+  int delivered = 0;
+  for (int k = 0; k < 20; ++k) {
+    laser.set(k % 2 == 0, static_cast<std::uint64_t>(k), nullptr);
+    delivered += camera->grab(pixels, info, std::chrono::milliseconds(100)) == hal::GrabStatus::kOk;
+  }
+  const testing::Allocations counted = testing::stop_counting_allocations();
+  EXPECT_EQ(delivered, 20);
+  EXPECT_EQ(counted.count, 0) << counted.bytes << " bytes allocated over 20 grabs";
 }
 
 TEST(MemoryCamera, ALateCallerGetsTheBufferedFramesAndLosesOlderOnes) {
