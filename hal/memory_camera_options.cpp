@@ -12,6 +12,9 @@ std::unique_ptr<Camera> create_memory_camera(const CameraRequest& request) {
   const std::string source = memory.string("source", "sim");
   o.frames = static_cast<int>(memory.integer("frames", o.frames, 1, 100000));
   o.rate_hz = memory.number("rate_hz", camera.number("frame_rate_hz", 30.0, 0.1, 1000.0), 0.0, 1e6);
+  if (o.rate_hz > 0 && o.rate_hz < 0.1) {
+    memory.fail("rate_hz", "must be 0 (as fast as the frame path takes them) or 0.1 to 1000000");
+  }
   o.buffers = static_cast<int>(memory.integer("buffers", o.buffers, 1, 1024));
   o.loops = memory.integer("loops", o.loops, 0, INT64_MAX / 100000);
   o.duration_s = memory.number("duration_s", o.duration_s, 0.0, 1e9);

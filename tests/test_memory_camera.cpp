@@ -90,6 +90,22 @@ camera: {backend: sim, sim: {seed: 4}}
   EXPECT_EQ(camera->health().skipped_frames, 0);
 }
 
+TEST(MemoryCamera, RefusesARateTooLowToPace) {
+  daemon::DaemonConfig config = make_config(std::string(R"(
+camera: {backend: memory, memory: {rate_hz: 0.01}}
+)") + kSmallCamera);
+  hal::CameraRequest request{&config.camera_options, &config.calibration, nullptr,
+                             config.laser_channel};
+  try {
+    hal::make_camera("memory", request);
+    FAIL() << "rate_hz 0.01 accepted";
+  } catch (const hal::ConfigError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "test.yaml:2: camera.memory.rate_hz: must be 0 (as fast as the frame path takes "
+              "them) or 0.1 to 1000000");
+  }
+}
+
 TEST(MemoryCamera, AGrabAllocatesNothing) {
   daemon::DaemonConfig config = make_config(std::string(R"(
 camera: {backend: memory, memory: {frames: 3, rate_hz: 0}}
