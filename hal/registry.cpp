@@ -4,6 +4,7 @@
 
 #include "hal/aravis_camera.hpp"
 #include "hal/gpio_laser.hpp"
+#include "hal/memory_camera.hpp"
 #include "hal/sim_options.hpp"
 #include "hal/v4l2_camera.hpp"
 
@@ -25,6 +26,7 @@ Table<CameraFactory>& camera_table() {
       {"sim", create_sim_camera},
       {"aravis", create_aravis_camera},
       {"v4l2", create_v4l2_camera},
+      {"memory", create_memory_camera},
   };
   return table;
 }

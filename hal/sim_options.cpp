@@ -84,6 +84,10 @@ SimSceneOptions read_sim_options(YamlMap& sim, const Calibration& calibration,
 
 // Colour scenes (camera.sim.colour) reach the pipeline as request.channel of them.
 std::unique_ptr<Camera> create_sim_camera(const CameraRequest& request) {
+  return make_sim_camera(request);
+}
+
+std::unique_ptr<SimCamera> make_sim_camera(const CameraRequest& request) {
   const double rate = request.options->number("frame_rate_hz", 30.0, 0.1, 1000.0);
   YamlMap sim = request.options->map("sim");
   SimSceneOptions options = read_sim_options(sim, *request.calibration, rate);

@@ -9,6 +9,7 @@
 namespace laserline::hal {
 
 class YamlMap;
+class SimCamera;
 
 // The simulator's options from a `sim:` mapping (also used by tests and tools to rebuild the exact
 // scene a daemon ran).
@@ -18,6 +19,8 @@ SimSceneOptions read_sim_options(YamlMap& sim, const Calibration& calibration,
 // The sim backends' factories (hal/registry.hpp): the camera renders the `camera.sim` scene, the
 // laser has no options.
 std::unique_ptr<Camera> create_sim_camera(const CameraRequest& request);
+// The same camera as its own type, for the memory camera, which renders its frames ahead.
+std::unique_ptr<SimCamera> make_sim_camera(const CameraRequest& request);
 std::unique_ptr<Laser> create_sim_laser(YamlMap& options);
 
 }  // namespace laserline::hal

@@ -11,6 +11,8 @@ packages=(
   liblcm-dev liblcm-bin liblcm-java libglib2.0-dev
   # the Java message types (a jar for lcm-spy) and the Python log reader
   default-jdk-headless python3
+  # scripts/plot-scaling.py (docs/figures/scaling.png)
+  python3-matplotlib
   # laserline-spy: lcm-spy's window and charts; Xvfb for its test
   default-jre libjchart2d-java fonts-dejavu-core xvfb xauth
   libyaml-cpp-dev

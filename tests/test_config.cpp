@@ -173,7 +173,7 @@ TEST(Config, ChoicesListTheAlternatives) {
             "test.yaml:2: laser.mode: must be one of on, alternate, off, pattern, got 'blink'");
   EXPECT_EQ(error_of("camera:\n  backend: gige\n"),
             "test.yaml:2: camera.backend: unknown camera backend 'gige' (available: sim, aravis, "
-            "v4l2, lcm)");
+            "v4l2, memory, lcm)");
   EXPECT_EQ(error_of("laser:\n  backend: gpio\n"),
             "test.yaml:2: laser.backend: unknown laser backend 'gpio' (available: sim, gpiod)");
 }

@@ -448,6 +448,52 @@ TEST_F(DaemonOverLcm, AlternatingLaserSwitchesPerFrameAndSigintStops) {
   EXPECT_FALSE(rx.statuses.back().laser_on);
 }
 
+// The memory camera through the real daemon: 100 frames/s held in memory, four frames looped
+// twenty times; the daemon stops by itself at their end. Counts and content, not speed: every frame
+// is delivered or counted as lost, each profile carries the time its frame was due (10 ms apart),
+// and lit and unlit frames follow the alternating laser.
+TEST_F(DaemonOverLcm, MemoryCameraDeliversItsFramesAtTheSetRateAndEnds) {
+  std::string config_text = test_config("mode: alternate");
+  config_text.replace(config_text.find("backend: sim"), 12,
+                      "backend: memory\n  memory: {frames: 4, loops: 20}");
+  config_text.replace(config_text.find("frame_rate_hz: 50"), 17, "frame_rate_hz: 100");
+  const std::string config_path = write_config(config_text);
+  lcm::LCM lcm(kUrl);
+  ASSERT_TRUE(lcm.good());
+  Received rx;
+  rx.subscribe(lcm);
+  start_daemon(config_path);
+  int status = 0;
+  const std::int64_t give_up = laserline::hal::monotonic_ns() + 60'000'000'000;
+  while (waitpid(pid_, &status, WNOHANG) == 0 && laserline::hal::monotonic_ns() < give_up)
+    lcm.handleTimeout(50);
+  receive_for(lcm, 0.3);
+  pid_ = -1;
+  ASSERT_TRUE(WIFEXITED(status)) << daemon_log();
+  EXPECT_EQ(WEXITSTATUS(status), 0) << daemon_log();
+  EXPECT_NE(daemon_log().find("stopped (end of recording)"), std::string::npos) << daemon_log();
+  ASSERT_FALSE(rx.statuses.empty());
+  const laserline::status_t& last = rx.statuses.back();
+  EXPECT_EQ(last.camera_backend, "memory");
+  EXPECT_EQ(last.frames_captured + last.camera_skipped_frames, 80)
+      << "each frame delivered or lost";
+  EXPECT_EQ(last.frames_processed + last.frames_dropped, last.frames_captured);
+  ASSERT_GE(rx.profiles.size(), 40u) << "most of the 80 frames arrive on any machine";
+  int lit = 0, unlit = 0;
+  for (const laserline::profile_t& p : rx.profiles) {
+    EXPECT_LT(p.sequence, 80);
+    EXPECT_EQ(p.camera_timestamp_ns, p.sequence * 10'000'000) << "frame " << p.sequence;
+    (p.laser_on ? lit : unlit) += 1;
+    if (p.laser_on) {
+      EXPECT_GT(p.num_points, 500) << "lit frame " << p.sequence;
+    } else {
+      EXPECT_LT(p.num_points, 20) << "unlit frame " << p.sequence;
+    }
+  }
+  EXPECT_GT(lit, 10);
+  EXPECT_GT(unlit, 10);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {

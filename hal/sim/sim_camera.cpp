@@ -1,31 +1,11 @@
 #include "hal/sim/sim_camera.hpp"
 
-#include <time.h>
-
 #include <algorithm>
 #include <cmath>
 
 #include "hal/clock.hpp"
 
 namespace laserline::hal {
-
-namespace {
-
-// Sleeps until an absolute CLOCK_MONOTONIC time, in slices so that stop() is noticed quickly.
-bool sleep_until(std::int64_t deadline_ns, const std::atomic<bool>& stopped) {
-  constexpr std::int64_t kSlice = 20'000'000;
-  while (!stopped.load(std::memory_order_acquire)) {
-    const std::int64_t now = monotonic_ns();
-    if (now >= deadline_ns) return true;
-    const std::int64_t until = std::min(deadline_ns, now + kSlice);
-    timespec ts{static_cast<time_t>(until / 1'000'000'000),
-                static_cast<long>(until % 1'000'000'000)};
-    clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
-  }
-  return false;
-}
-
-}  // namespace
 
 SimCamera::SimCamera(const SimSceneOptions& options, const Laser* laser, SimCameraStall stall,
                      const LaserChannel& channel, SimCameraExposure exposure)
@@ -79,25 +59,30 @@ GrabStatus SimCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
   }
   if (!sleep_until(exposure, stopped_)) return GrabStatus::kStopped;
 
-  const bool laser_on = laser_ != nullptr && laser_->is_on();
-  if (raw_.empty()) {
-    scene_.render(next_sequence_, laser_on, dst);
-  } else {
-    scene_.render(next_sequence_, laser_on, raw_);
-    const FrameFormat f = scene_.format();
-    converter_.convert(raw_.data(), raw_.size() / static_cast<std::size_t>(f.height), dst.data(),
-                       static_cast<std::size_t>(f.stride));
-  }
+  render_frame(next_sequence_, laser_ != nullptr && laser_->is_on(), dst, info);
   info.sequence = next_sequence_;
   info.camera_ns = exposure - start_mono_ns_;
   info.exposure_mono_ns = exposure;
   info.arrival_mono_ns = monotonic_ns();
   info.arrival_wall_ns = wall_ns();
+  ++next_sequence_;
+  return GrabStatus::kOk;
+}
+
+void SimCamera::render_frame(std::uint64_t sequence, bool laser_on, std::span<std::uint8_t> dst,
+                             FrameInfo& info) {
+  if (raw_.empty()) {
+    scene_.render(sequence, laser_on, dst);
+  } else {
+    scene_.render(sequence, laser_on, raw_);
+    const FrameFormat f = scene_.format();
+    converter_.convert(raw_.data(), raw_.size() / static_cast<std::size_t>(f.height), dst.data(),
+                       static_cast<std::size_t>(f.stride));
+  }
+  info.sequence = sequence;
   info.laser_on = laser_on;
   info.exposure_us = exposure_.exposure_us;
   info.gain_db = exposure_.gain_db;
-  ++next_sequence_;
-  return GrabStatus::kOk;
 }
 
 void SimCamera::stop() {

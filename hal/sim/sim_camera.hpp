@@ -41,6 +41,12 @@ class SimCamera final : public Camera {
                   std::chrono::milliseconds timeout) override;
   void stop() override;
 
+  // Writes frame `sequence` as grab() delivers it (pixels; the info's laser state, exposure and
+  // gain) without waiting for its time and without open(): for sources that render ahead (the
+  // memory camera). Timestamps are left to the caller.
+  void render_frame(std::uint64_t sequence, bool laser_on, std::span<std::uint8_t> dst,
+                    FrameInfo& info);
+
  private:
   SimScene scene_;
   PixelConverter converter_;       // colour scenes: raw_ -> the frame
