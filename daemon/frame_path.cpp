@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 
 #include "daemon/thread_priorities.hpp"
@@ -166,8 +167,8 @@ void FramePath::stop() {
   if (image_thread_.joinable()) image_thread_.join();
 }
 
-bool FramePath::desired_laser(std::uint64_t grab_index) const {
-  switch (config_.laser_mode) {
+bool FramePath::desired_laser(LaserMode mode, std::uint64_t grab_index) const {
+  switch (mode) {
     case LaserMode::kOn:
       return true;
     case LaserMode::kOff:
@@ -208,9 +209,11 @@ void FramePath::camera_loop() {
   // The last switch this thread made: time and the grab it was for. Each frame carries its time,
   // so a frame whose exposure began before its switch is known (and counted) as uncertain.
   hal::LaserSwitch last_switch;
+  LaserMode laser_mode = config_.laser_mode;
 
   while (!stopping_.load(std::memory_order_relaxed)) {
-    const bool want_laser = frames_flowing && desired_laser(grab_index);
+    run_commands(laser_mode, frames_flowing, grab_index);
+    const bool want_laser = frames_flowing && desired_laser(laser_mode, grab_index);
     if (want_laser != laser_.is_on()) switch_laser(want_laser, grab_index, &last_switch);
 
     FrameSlot* slot = lossless ? claim_waiting(*frames_, stopping_) : frames_->try_claim();
@@ -264,6 +267,71 @@ void FramePath::camera_loop() {
   }
   if (laser_.is_on()) switch_laser(false, grab_index);
   counters_.camera_state.store(CameraState::kStopped, std::memory_order_relaxed);
+}
+
+bool FramePath::submit_command(const Command& command) {
+  Command* slot = commands_.try_claim();
+  if (slot == nullptr) return false;
+  *slot = command;
+  commands_.publish();
+  return true;
+}
+
+bool FramePath::take_command_result(Command* command) {
+  Command* slot = command_results_.front();
+  if (slot == nullptr) return false;
+  *command = *slot;
+  command_results_.pop();
+  return true;
+}
+
+void FramePath::run_commands(LaserMode& mode, bool frames_flowing, std::uint64_t grab_index) {
+  // A command stays queued until its result has room to go back.
+  while (Command* command = commands_.front()) {
+    Command* result = command_results_.try_claim();
+    if (result == nullptr) return;
+    *result = *command;
+    commands_.pop();
+    run_command(*result, mode, frames_flowing, grab_index);
+    command_results_.publish();
+  }
+}
+
+void FramePath::run_command(Command& command, LaserMode& mode, bool frames_flowing,
+                            std::uint64_t grab_index) {
+  hal::SettingResult& r = command.result;
+  switch (command.kind) {
+    case CommandKind::kCamera:
+      camera_.apply_setting(command.setting, r);
+      return;
+    case CommandKind::kLaserMode:
+      hal::write_setting_text(r.old_value, to_string(mode));
+      if (command.laser_mode != LaserMode::kOff && (!frames_flowing || grab_index == 0)) {
+        r.accepted = false;
+        hal::write_setting_line(
+            r.reason, "laser.mode: no frames are flowing (camera %s), the laser stays off",
+            to_string(counters_.camera_state.load(std::memory_order_relaxed)));
+        return;
+      }
+      mode = command.laser_mode;
+      hal::write_setting_text(r.in_force, to_string(mode));
+      r.accepted = true;
+      return;
+    case CommandKind::kGet: {
+      // "name=value" for every setting the camera has, then the laser's mode.
+      std::span<char> rest(r.in_force);
+      for (const char* name : {"exposure_us", "gain_db", "frame_rate_hz"}) {
+        char value[hal::CameraSetting::kTextBytes];
+        if (!camera_.read_setting(name, value)) continue;
+        const int written = std::snprintf(rest.data(), rest.size(), "%s=%s ", name, value);
+        if (written < 0 || static_cast<std::size_t>(written) >= rest.size()) break;
+        rest = rest.subspan(static_cast<std::size_t>(written));
+      }
+      hal::write_setting_line(rest, "laser.mode=%s", to_string(mode));
+      r.accepted = true;
+      return;
+    }
+  }
 }
 
 void FramePath::worker_loop() {
@@ -355,7 +423,7 @@ void FramePath::fill_status(std::int64_t now_mono, std::int64_t period_ns) {
   s.camera_underruns = health.underruns;
   s.camera_other_errors = health.other_errors;
   s.camera_skipped_frames = health.skipped_frames;
-  s.bad_messages = health.bad_messages;
+  s.bad_messages = health.bad_messages + counters_.bad_commands.load(std::memory_order_relaxed);
   s.bad_frames = health.bad_frames;
   const double seconds = static_cast<double>(std::max<std::int64_t>(period_ns, 1)) * 1e-9;
   s.frame_rate_hz =
