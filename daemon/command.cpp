@@ -3,6 +3,9 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <sstream>
+
+#include "pipeline/options.hpp"
 
 namespace laserline::daemon {
 
@@ -40,8 +43,24 @@ std::string printable(const std::string& text) {
   return out;
 }
 
+const char* threshold_name(const std::string& detector) {
+  return detector == "maxvalue" ? "detector.maxvalue.threshold"
+                                : "detector.frontend.snr_threshold_db";
+}
+
+std::string threshold_value(const std::string& detector, const pipeline::DetectorOptions& options) {
+  std::ostringstream out;
+  if (detector == "maxvalue") {
+    out << options.maxvalue_threshold;
+  } else {
+    out << options.frontend.snr_threshold_db;
+  }
+  return out.str();
+}
+
 bool parse_command(const laserline::command_t& message, const DaemonConfig& config,
-                   const hal::Camera& camera, Command* out, std::string* reason) {
+                   const hal::Camera& camera, const pipeline::DetectorOptions& detector_options,
+                   Command* out, pipeline::DetectorOptions* options, std::string* reason) {
   auto refuse = [&](const std::string& why) {
     *reason = why;
     return false;
@@ -80,6 +99,33 @@ bool parse_command(const laserline::command_t& message, const DaemonConfig& conf
     }
     return true;
   }
+  if (name == "detector.maxvalue.threshold" || name == "detector.frontend.snr_threshold_db") {
+    c.kind = CommandKind::kThreshold;
+    if (name != threshold_name(config.detector)) {
+      return refuse(name + ": the detector is " + config.detector + ", its threshold is " +
+                    threshold_name(config.detector));
+    }
+    const double v = c.setting.number;
+    if (!std::isfinite(v))
+      return refuse(name + ": must be a number, got '" + printable(message.value) + "'");
+    *options = detector_options;
+    try {
+      if (config.detector == "maxvalue") {
+        if (v != std::floor(v) || std::fabs(v) > 1e6) {
+          return refuse(name + ": must be a whole grey level, got '" + printable(message.value) +
+                        "'");
+        }
+        pipeline::validate_maxvalue_threshold(static_cast<int>(v));
+        options->maxvalue_threshold = static_cast<int>(v);
+      } else {
+        options->frontend.snr_threshold_db = v;
+        options->frontend.validate();
+      }
+    } catch (const pipeline::OptionError& e) {
+      return refuse(name + ": " + e.problem());
+    }
+    return true;
+  }
   if (is_camera_setting(name)) {
     c.kind = CommandKind::kCamera;
     const std::string problem = camera.check_setting(c.setting);
@@ -88,7 +134,8 @@ bool parse_command(const laserline::command_t& message, const DaemonConfig& conf
   }
   return refuse(
       "'" + printable(name) +
-      "' is not a setting (exposure_us, gain_db, frame_rate_hz, laser.mode, genicam:<Feature>, "
+      "' is not a setting (exposure_us, gain_db, frame_rate_hz, laser.mode, "
+      "detector.maxvalue.threshold, detector.frontend.snr_threshold_db, genicam:<Feature>, "
       "v4l2:<control>, get)");
 }
 

@@ -2,6 +2,7 @@
 
 #include <laserline/command_ack_t.hpp>
 
+#include <cstring>
 #include <vector>
 
 #include "daemon/lcm_publisher.hpp"
@@ -23,6 +24,7 @@ CommandServer::CommandServer(const DaemonConfig& config, lcm::LCM& lcm, FramePat
       lcm_(lcm),
       path_(path),
       camera_(camera),
+      detector_options_(config.detector_options),
       problems_("laserlined: " + config.command_channel + ": ") {}
 
 CommandServer::~CommandServer() {
@@ -60,10 +62,31 @@ void CommandServer::receive(const lcm::ReceiveBuffer& buffer) {
   }
   Command command;
   std::string reason;
-  if (!parse_command(message, config_, camera_, &command, &reason)) {
+  pipeline::DetectorOptions options;
+  if (!parse_command(message, config_, camera_, detector_options_, &command, &options, &reason)) {
     hal::write_setting_text(command.result.reason, reason.c_str());
     command.result.accepted = false;
     answer(command);
+    return;
+  }
+  if (command.kind == CommandKind::kThreshold) {
+    std::unique_ptr<pipeline::Detector> detector;
+    try {
+      detector = pipeline::make_detector(config_.detector, options);
+      const hal::FrameFormat format = camera_.format();
+      detector->reset(format.width, format.height);
+    } catch (const std::exception& e) {
+      hal::write_setting_line(command.result.reason, "%s: %s", command.setting.name, e.what());
+      answer(command);
+      return;
+    }
+    if (!path_.submit_detector(command, std::move(detector))) {
+      hal::write_setting_line(command.result.reason,
+                              "busy: a change of the detector is under way already");
+      answer(command);
+      return;
+    }
+    pending_options_ = options;
     return;
   }
   if (!path_.submit_command(command)) {
@@ -89,8 +112,24 @@ void CommandServer::run() {
   }
 }
 
-void CommandServer::answer(const Command& command) {
-  const hal::SettingResult& r = command.result;
+void CommandServer::answer(const Command& given) {
+  Command command = given;
+  hal::SettingResult& r = command.result;
+  // The detector's settings are known here, not on the threads that carried the command out.
+  if (command.kind == CommandKind::kThreshold) {
+    hal::write_setting_text(r.old_value,
+                            threshold_value(config_.detector, detector_options_).c_str());
+    if (r.accepted) {
+      detector_options_ = pending_options_;
+      hal::write_setting_text(r.in_force,
+                              threshold_value(config_.detector, detector_options_).c_str());
+    }
+  } else if (command.kind == CommandKind::kGet && r.accepted) {
+    const std::size_t used = std::strlen(r.in_force);
+    hal::write_setting_line(std::span<char>(r.in_force).subspan(used), " %s=%s",
+                            threshold_name(config_.detector),
+                            threshold_value(config_.detector, detector_options_).c_str());
+  }
   if (r.accepted && command.kind != CommandKind::kGet) {
     log(LogLevel::kInfo, "laserlined: command %lld from '%s': %s %s -> %s",
         static_cast<long long>(command.id), command.sender, command.setting.name, r.old_value,

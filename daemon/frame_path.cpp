@@ -78,7 +78,7 @@ const char* to_string(CameraState state) {
 
 FramePath::FramePath(const DaemonConfig& config, hal::Camera& camera, hal::Laser& laser,
                      pipeline::Detector& detector, lcm::LCM& lcm)
-    : config_(config), camera_(camera), laser_(laser), detector_(detector), lcm_(lcm) {}
+    : config_(config), camera_(camera), laser_(laser), detector_(&detector), lcm_(lcm) {}
 
 FramePath::~FramePath() {
   stop();
@@ -87,13 +87,13 @@ FramePath::~FramePath() {
 bool FramePath::start(std::string* error) {
   format_ = camera_.format();
   try {
-    detector_.reset(format_.width, format_.height);  // allocates: before any thread runs
+    detector_->reset(format_.width, format_.height);  // allocates: before any thread runs
   } catch (const std::exception& e) {
     // E.g. a camera whose frames are not the size the calibration describes.
-    if (error != nullptr) *error = std::string("detector ") + detector_.name() + ": " + e.what();
+    if (error != nullptr) *error = std::string("detector ") + detector_->name() + ": " + e.what();
     return false;
   }
-  const std::size_t max_points = detector_.max_points(format_.width, format_.height);
+  const std::size_t max_points = detector_->max_points(format_.width, format_.height);
 
   FrameSlot frame_prototype;
   frame_prototype.pixels.assign(format_.bytes(), 0);
@@ -270,19 +270,52 @@ void FramePath::camera_loop() {
 }
 
 bool FramePath::submit_command(const Command& command) {
-  Command* slot = commands_.try_claim();
+  SpscRing<Command>& ring = command.kind == CommandKind::kThreshold ? worker_commands_ : commands_;
+  Command* slot = ring.try_claim();
   if (slot == nullptr) return false;
   *slot = command;
-  commands_.publish();
+  ring.publish();
+  return true;
+}
+
+bool FramePath::submit_detector(const Command& command,
+                                std::unique_ptr<pipeline::Detector> detector) {
+  if (pending_detector_ != nullptr) return false;
+  Command with = command;
+  with.detector = detector.get();
+  if (!submit_command(with)) return false;
+  pending_detector_ = std::move(detector);
   return true;
 }
 
 bool FramePath::take_command_result(Command* command) {
-  Command* slot = command_results_.front();
-  if (slot == nullptr) return false;
-  *command = *slot;
-  command_results_.pop();
-  return true;
+  for (SpscRing<Command>* ring : {&command_results_, &worker_results_}) {
+    Command* slot = ring->front();
+    if (slot == nullptr) continue;
+    *command = *slot;
+    ring->pop();
+    if (command->kind == CommandKind::kThreshold) {
+      // The worker put the pending detector in place and no longer touches the one it replaced:
+      // that one is freed here, unless it is the one this path was built with (its owner's).
+      current_detector_ = std::move(pending_detector_);
+      command->detector = nullptr;
+    }
+    return true;
+  }
+  return false;
+}
+
+void FramePath::run_worker_commands() {
+  while (Command* command = worker_commands_.front()) {
+    Command* result = worker_results_.try_claim();
+    if (result == nullptr) return;
+    *result = *command;
+    worker_commands_.pop();
+    // The replacement was built and sized (reset) for this frame size by the command thread.
+    std::swap(detector_, result->detector);
+    result->result.accepted = true;
+    worker_results_.publish();
+  }
 }
 
 void FramePath::run_commands(LaserMode& mode, bool frames_flowing, std::uint64_t grab_index) {
@@ -317,6 +350,8 @@ void FramePath::run_command(Command& command, LaserMode& mode, bool frames_flowi
       hal::write_setting_text(r.in_force, to_string(mode));
       r.accepted = true;
       return;
+    case CommandKind::kThreshold:  // the worker's (run_worker_commands)
+      return;
     case CommandKind::kGet: {
       // "name=value" for every setting the camera has, then the laser's mode.
       std::span<char> rest(r.in_force);
@@ -345,6 +380,7 @@ void FramePath::worker_loop() {
           : 0;
   std::int64_t last_image_ns = INT64_MIN / 2;
   while (true) {
+    run_worker_commands();
     if (!frames_->wait(100 * kMs)) {
       if (stopping_.load(std::memory_order_acquire)) break;
       continue;
@@ -371,7 +407,7 @@ void FramePath::worker_loop() {
         lossless ? claim_waiting(*profiles_, stop_requested_) : profiles_->try_claim();
     {
       const std::int64_t t0 = hal::monotonic_ns();  // vDSO clock read, no syscall
-      detector_.detect(view, context, out ? out->profile : unpublished_profile_);
+      detector_->detect(view, context, out ? out->profile : unpublished_profile_);
       const std::int64_t took = hal::monotonic_ns() - t0;
       if (took > budget_ns) counters_.frames_over_budget.fetch_add(1, std::memory_order_relaxed);
       if (took > counters_.processing_max_ns.load(std::memory_order_relaxed)) {

@@ -76,9 +76,15 @@ class FramePath {
   std::int64_t images_published() const {
     return images_published_.load(std::memory_order_relaxed);
   }
-  // Queues a parsed command for the camera thread; false when kCommandSlots are waiting already.
+  // Queues a parsed command for the thread that carries it out (the camera thread; the worker for
+  // kThreshold); false when kCommandSlots are waiting already.
   bool submit_command(const Command& command);
-  // The next command carried out, with its result; false when none is back yet.
+  // kThreshold: `detector` (built with the new threshold and reset() to the camera's frame size)
+  // replaces the worker's between two frames; the path owns it from here. False while another
+  // replacement is under way.
+  bool submit_detector(const Command& command, std::unique_ptr<pipeline::Detector> detector);
+  // The next command carried out, with its result; false when none is back yet. A detector
+  // replaced by a threshold command is freed here, on the command thread.
   bool take_command_result(Command* command);
   // A message on the command channel that is not a command (status_t.bad_messages).
   void count_bad_command() { counters_.bad_commands.fetch_add(1, std::memory_order_relaxed); }
@@ -93,6 +99,8 @@ class FramePath {
   void publisher_loop();
   void image_loop();
   bool desired_laser(LaserMode mode, std::uint64_t grab_index) const;
+  // Worker thread: puts replacement detectors in place, between two frames.
+  void run_worker_commands();
   // Camera thread: carries out the commands waiting, between two grabs.
   void run_commands(LaserMode& mode, bool frames_flowing, std::uint64_t grab_index);
   void run_command(Command& command, LaserMode& mode, bool frames_flowing,
@@ -104,7 +112,7 @@ class FramePath {
   const DaemonConfig& config_;
   hal::Camera& camera_;
   hal::Laser& laser_;
-  pipeline::Detector& detector_;
+  pipeline::Detector* detector_;  // the worker's; replaced by a threshold command
   lcm::LCM& lcm_;
   std::unique_ptr<lcm::LCM> image_lcm_;  // raw frames over UDP: their own socket and lock
   hal::FrameFormat format_;
@@ -115,6 +123,12 @@ class FramePath {
   std::unique_ptr<SpscRing<ImageSlot>> images_;
   SpscRing<Command> commands_{kCommandSlots, Command{}};         // command thread -> camera thread
   SpscRing<Command> command_results_{kCommandSlots, Command{}};  // and back
+  SpscRing<Command> worker_commands_{kCommandSlots, Command{}};  // command thread -> worker
+  SpscRing<Command> worker_results_{kCommandSlots, Command{}};   // and back
+  // Command-thread state: the detector submitted and not yet answered, and the replacement in
+  // force (null while the original is).
+  std::unique_ptr<pipeline::Detector> pending_detector_;
+  std::unique_ptr<pipeline::Detector> current_detector_;
   std::unique_ptr<LcmPublisher> publisher_;
   std::unique_ptr<RawFrameEncoder> encoder_;
   std::unique_ptr<LatencyStats> latency_;   // exposure -> published

@@ -210,7 +210,9 @@ TEST_F(CommandTest, ExposureChangesWhatTheNextFramesCarryAndBadInputIsRefusedInO
   EXPECT_EQ(listener.received().statuses.back().bad_messages, 2);
   const auto get = ctl("get");
   EXPECT_EQ(get.exit_code, 0) << get.out;
-  EXPECT_EQ(get.out, "exposure_us=2000 gain_db=0 frame_rate_hz=20 laser.mode=on\n");
+  EXPECT_EQ(get.out,
+            "exposure_us=2000 gain_db=0 frame_rate_hz=20 laser.mode=on "
+            "detector.maxvalue.threshold=60\n");
   EXPECT_TRUE(daemon.running());
   EXPECT_EQ(daemon.stop(), 0);
   const std::string log = daemon.log();
@@ -276,6 +278,45 @@ TEST_F(CommandTest, TokenIsRequiredWhenTheDaemonHasOne) {
   const auto right = ctl("--token s3cret set gain_db 6");
   EXPECT_EQ(right.exit_code, 0) << right.out;
   EXPECT_EQ(right.out, "gain_db = 6 (was 0)\n");
+}
+
+// The detector's threshold: a new detector built by the command thread, put in place by the
+// worker between two frames; its range is the pipeline's.
+TEST_F(CommandTest, ThresholdChangesThePointsFoundFromTheNextFrame) {
+  Listener listener;
+  Daemon daemon("threshold", sim_config("", "mode: on"));
+  ASSERT_TRUE(listener.wait_for([](const Received& r) { return r.profiles.size() >= 3; }, 15))
+      << daemon.log();
+  const int before = listener.received().profiles.back().num_points;
+  EXPECT_GT(before, 100);
+  // The laser peaks at about 190 grey levels here: hardly anything reaches 250.
+  const auto high = ctl("set detector.maxvalue.threshold 250");
+  EXPECT_EQ(high.exit_code, 0) << high.out;
+  EXPECT_EQ(high.out, "detector.maxvalue.threshold = 250 (was 60)\n");
+  listener.clear();
+  ASSERT_TRUE(listener.wait_for([](const Received& r) { return r.profiles.size() >= 3; }, 5))
+      << daemon.log();
+  for (const auto& p : listener.received().profiles)
+    EXPECT_LT(p.num_points, before / 10) << p.sequence;
+  const auto back = ctl("set detector.maxvalue.threshold 60");
+  EXPECT_EQ(back.exit_code, 0) << back.out;
+  EXPECT_EQ(back.out, "detector.maxvalue.threshold = 60 (was 250)\n");
+  listener.clear();
+  ASSERT_TRUE(listener.wait_for(
+      [](const Received& r) { return !r.profiles.empty() && r.profiles.back().num_points > 100; },
+      5))
+      << daemon.log();
+
+  const auto too_high = ctl("set detector.maxvalue.threshold 300");
+  EXPECT_EQ(too_high.exit_code, 1) << too_high.out;
+  EXPECT_EQ(too_high.out.rfind("refused: detector.maxvalue.threshold: ", 0), 0u) << too_high.out;
+  EXPECT_NE(too_high.out.find("300"), std::string::npos) << too_high.out;
+  const auto other = ctl("set detector.frontend.snr_threshold_db 3");
+  EXPECT_EQ(other.exit_code, 1) << other.out;
+  EXPECT_EQ(other.out,
+            "refused: detector.frontend.snr_threshold_db: the detector is maxvalue, its threshold "
+            "is detector.maxvalue.threshold\n");
+  EXPECT_EQ(daemon.stop(), 0) << daemon.log();
 }
 
 TEST_F(CommandTest, NoDaemonIsNoAnswer) {
@@ -381,7 +422,9 @@ lcm: {url: ")") + kUrl + R"(", image_every_n: 0, status_period_s: 0.25}
   EXPECT_EQ(too_high.out, "refused: gain_db: must be between -1 and 100, got 200\n");
   const auto get = ctl("get");
   EXPECT_EQ(get.exit_code, 0) << get.out;
-  EXPECT_EQ(get.out, "exposure_us=5000 gain_db=3 frame_rate_hz=10 laser.mode=on\n");
+  EXPECT_EQ(get.out,
+            "exposure_us=5000 gain_db=3 frame_rate_hz=10 laser.mode=on "
+            "detector.maxvalue.threshold=40\n");
   EXPECT_EQ(daemon.stop(), 0) << daemon.log();
 }
 

@@ -104,7 +104,10 @@ lcm: {url: "udpm://239.255.76.67:7667?ttl=0", image_every_n: 0, status_period_s:
     message.name = name;
     message.value = value;
     Command command;
-    ASSERT_TRUE(parse_command(message, config, *backends.camera, &command, &error)) << error;
+    pipeline::DetectorOptions options;
+    ASSERT_TRUE(parse_command(message, config, *backends.camera, config.detector_options, &command,
+                              &options, &error))
+        << error;
     commands.push_back(command);
   }
   Command done;

@@ -28,6 +28,7 @@ constexpr const char* kUsage =
     "usage: laserline-ctl [OPTIONS] set NAME VALUE | get | laser on|off|alternate|pattern\n"
     "Sends one command to a running laserlined and prints its answer in one line.\n"
     "  set NAME VALUE       exposure_us, gain_db, frame_rate_hz, laser.mode,\n"
+    "                       detector.maxvalue.threshold, detector.frontend.snr_threshold_db,\n"
     "                       genicam:<Feature> (aravis), v4l2:<control name> (v4l2)\n"
     "  get                  every value in force\n"
     "  laser MODE           the same as set laser.mode MODE\n"

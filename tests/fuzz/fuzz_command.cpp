@@ -48,8 +48,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   Command command;
   std::string reason;
   const DaemonConfig& config = (message.id & 1) != 0 ? setup.guarded : setup.plain;
-  const bool accepted =
-      laserline::daemon::parse_command(message, config, setup.camera, &command, &reason);
+  laserline::pipeline::DetectorOptions options;
+  const bool accepted = laserline::daemon::parse_command(
+      message, config, setup.camera, config.detector_options, &command, &options, &reason);
   if (!terminated(command.sender, sizeof command.sender) ||
       !terminated(command.setting.name, sizeof command.setting.name) ||
       !terminated(command.setting.value, sizeof command.setting.value)) {
@@ -60,6 +61,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     return 0;
   }
   if (command.id != message.id || message.name != command.setting.name) std::abort();
+  if (command.kind == CommandKind::kThreshold) {
+    options.validate();  // what was accepted is what the pipeline takes: this must not throw
+  }
   if (command.kind == CommandKind::kCamera) {
     const std::string name = command.setting.name;
     const double v = command.setting.number;
