@@ -25,7 +25,8 @@ CommandServer::CommandServer(const DaemonConfig& config, lcm::LCM& lcm, FramePat
       path_(path),
       camera_(camera),
       detector_options_(config.detector_options),
-      problems_("laserlined: " + config.command_channel + ": ") {}
+      problems_("laserlined: " + config.command_channel + ": "),
+      refusals_("laserlined: ") {}
 
 CommandServer::~CommandServer() {
   stop();
@@ -135,8 +136,9 @@ void CommandServer::answer(const Command& given) {
         static_cast<long long>(command.id), command.sender, command.setting.name, r.old_value,
         r.in_force);
   } else if (!r.accepted) {
-    log(LogLevel::kWarning, "laserlined: command %lld from '%s' refused: %s",
-        static_cast<long long>(command.id), command.sender, r.reason);
+    // At a limited rate per setting: a sender repeating a refused command cannot flood the log.
+    refusals_.report(command.setting.name, "command " + std::to_string(command.id) + " from '" +
+                                               command.sender + "' refused: " + r.reason);
   }
   laserline::command_ack_t ack;
   ack.utime = hal::wall_ns() / 1000;

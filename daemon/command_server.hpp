@@ -21,8 +21,9 @@ namespace laserline::daemon {
 // the value read back from the device. A threshold change builds a new detector here (sized for
 // the camera's frames, which allocates) and hands it to the worker (FramePath::submit_detector);
 // it starts without the history of earlier frames the old one kept. Every change is logged with its
-// old and new values; a message that is no command_t is counted (status_t.bad_messages), reported
-// at a limited rate and otherwise ignored.
+// old and new values, every refusal with its reason (at a limited rate per setting); a message
+// that is no command_t is counted (status_t.bad_messages), reported at a limited rate and
+// otherwise ignored.
 //
 // Its own thread receives (lcm handle) and answers; the instance is the daemon's, which the
 // publisher thread publishes on meanwhile (LCM allows that). A file:// URL (the daemon writing a
@@ -55,7 +56,8 @@ class CommandServer {
   pipeline::DetectorOptions detector_options_;  // in force
   pipeline::DetectorOptions pending_options_;   // of the threshold change under way
   lcm::Subscription* subscription_ = nullptr;
-  messages::ProblemLog problems_;
+  messages::ProblemLog problems_;  // messages that are no command_t
+  messages::ProblemLog refusals_;  // commands refused, by setting
   std::atomic<bool> running_{false};
   std::thread thread_;
 };
