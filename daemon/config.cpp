@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <stdexcept>
 
+#include "hal/camera.hpp"
 #include "pipeline/options.hpp"
 #include "pipeline/profile.hpp"
 
@@ -369,6 +370,31 @@ bool searches_depth_range(const std::string& detector) {
   return detector != "maxvalue";
 }
 
+const char* to_string(LaserMode mode) {
+  switch (mode) {
+    case LaserMode::kOn:
+      return "on";
+    case LaserMode::kAlternate:
+      return "alternate";
+    case LaserMode::kOff:
+      return "off";
+    case LaserMode::kPattern:
+      return "pattern";
+  }
+  return "unknown";
+}
+
+bool laser_mode_from_name(const std::string& name, LaserMode* mode) {
+  for (LaserMode m :
+       {LaserMode::kOn, LaserMode::kAlternate, LaserMode::kOff, LaserMode::kPattern}) {
+    if (name == to_string(m)) {
+      *mode = m;
+      return true;
+    }
+  }
+  return false;
+}
+
 DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source) {
   DaemonConfig c;
   c.source = source;
@@ -376,7 +402,8 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
 
   hal::YamlMap camera = root.map("camera");
   c.camera_backend = camera.string("backend", c.camera_backend);
-  c.frame_rate_hz = camera.number("frame_rate_hz", c.frame_rate_hz, 0.1, 1000.0);
+  c.frame_rate_hz = camera.number("frame_rate_hz", c.frame_rate_hz, hal::kFrameRateRange.min,
+                                  hal::kFrameRateRange.max);
   c.grab_timeout_ms = static_cast<int>(camera.integer("timeout_ms", c.grab_timeout_ms, 10, 60000));
   try {
     c.laser_channel = hal::parse_laser_channel(camera.string("channel", c.laser_channel.text));
@@ -390,11 +417,8 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
 
   hal::YamlMap laser = root.map("laser");
   c.laser_backend = laser.string("backend", c.laser_backend);
-  const std::string mode = laser.choice("mode", "on", {"on", "alternate", "off", "pattern"});
-  c.laser_mode = mode == "on"          ? LaserMode::kOn
-                 : mode == "off"       ? LaserMode::kOff
-                 : mode == "alternate" ? LaserMode::kAlternate
-                                       : LaserMode::kPattern;
+  laser_mode_from_name(laser.choice("mode", "on", {"on", "alternate", "off", "pattern"}),
+                       &c.laser_mode);
   if (c.laser_mode == LaserMode::kPattern) {
     if (!laser.has("pattern")) {
       laser.fail("pattern", "required with mode: pattern, e.g. \"110\" (on, on, off, repeated)");
@@ -453,6 +477,24 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
     *channel = lcm.string(key, *channel);
     // LCM carries channel names in the packet header, which caps them at 63 bytes.
     if (channel->empty() || channel->size() > 63) lcm.fail(key, "must be 1 to 63 characters");
+  }
+  c.command_channel = lcm.string("command_channel", c.command_channel);
+  c.command_ack_channel = lcm.string("command_ack_channel", c.command_channel + "_ACK");
+  for (auto [key, channel] : {std::pair{"command_channel", &c.command_channel},
+                              std::pair{"command_ack_channel", &c.command_ack_channel}}) {
+    if (channel->empty() || channel->size() > 63) lcm.fail(key, "must be 1 to 63 characters");
+    for (const std::string* output :
+         {&c.profile_channel, &c.image_channel, &c.status_channel, &c.calibration_channel}) {
+      if (*channel == *output) lcm.fail(key, "'" + *channel + "' is already an output channel");
+    }
+  }
+  if (c.command_channel == c.command_ack_channel) {
+    lcm.fail("command_ack_channel", "must differ from lcm.command_channel");
+  }
+  c.command_token = lcm.string("command_token", c.command_token);
+  if (c.command_token.size() > kMaxCommandTokenBytes) {
+    lcm.fail("command_token",
+             "must be at most " + std::to_string(kMaxCommandTokenBytes) + " characters");
   }
   c.profile_all_points = lcm.choice("profile_points", "accepted", {"accepted", "all"}) == "all";
   c.image_every_n = static_cast<int>(lcm.integer("image_every_n", c.image_every_n, 0, 1000000));

@@ -14,6 +14,13 @@ namespace laserline::daemon {
 
 enum class LaserMode : std::uint8_t { kOn, kAlternate, kOff, kPattern };
 
+// laser.mode's names: "on", "alternate", "off", "pattern"; from_name false for any other.
+const char* to_string(LaserMode mode);
+bool laser_mode_from_name(const std::string& name, LaserMode* mode);
+
+// lcm.command_token: at most this long (a command's strings fit the checked decode's limit).
+inline constexpr std::size_t kMaxCommandTokenBytes = 255;
+
 enum class ImageCompression : std::uint8_t { kNone, kZlib, kPng, kJpeg };
 
 // What goes out on the raw frame channel: which frames, which part, how packed.
@@ -78,6 +85,11 @@ struct DaemonConfig {
   std::string image_channel = "LASERLINE_IMAGE";
   std::string status_channel = "LASERLINE_STATUS";
   std::string calibration_channel = "LASERLINE_CALIBRATION";
+  // Settings changed while running (laserline.command_t), answered on command_ack_channel
+  // (default: command_channel + "_ACK"); a command must carry command_token when one is set.
+  std::string command_channel = "LASERLINE_COMMAND";
+  std::string command_ack_channel = "LASERLINE_COMMAND_ACK";
+  std::string command_token;
   int image_every_n = 30;  // = raw_frames.every_n, kept for the existing readers
   RawFrameOptions raw_frames;
   double status_period_s = 1.0;

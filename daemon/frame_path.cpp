@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 
 #include "daemon/thread_priorities.hpp"
@@ -77,7 +78,7 @@ const char* to_string(CameraState state) {
 
 FramePath::FramePath(const DaemonConfig& config, hal::Camera& camera, hal::Laser& laser,
                      pipeline::Detector& detector, lcm::LCM& lcm)
-    : config_(config), camera_(camera), laser_(laser), detector_(detector), lcm_(lcm) {}
+    : config_(config), camera_(camera), laser_(laser), detector_(&detector), lcm_(lcm) {}
 
 FramePath::~FramePath() {
   stop();
@@ -86,13 +87,13 @@ FramePath::~FramePath() {
 bool FramePath::start(std::string* error) {
   format_ = camera_.format();
   try {
-    detector_.reset(format_.width, format_.height);  // allocates: before any thread runs
+    detector_->reset(format_.width, format_.height);  // allocates: before any thread runs
   } catch (const std::exception& e) {
     // E.g. a camera whose frames are not the size the calibration describes.
-    if (error != nullptr) *error = std::string("detector ") + detector_.name() + ": " + e.what();
+    if (error != nullptr) *error = std::string("detector ") + detector_->name() + ": " + e.what();
     return false;
   }
-  const std::size_t max_points = detector_.max_points(format_.width, format_.height);
+  const std::size_t max_points = detector_->max_points(format_.width, format_.height);
 
   FrameSlot frame_prototype;
   frame_prototype.pixels.assign(format_.bytes(), 0);
@@ -166,8 +167,8 @@ void FramePath::stop() {
   if (image_thread_.joinable()) image_thread_.join();
 }
 
-bool FramePath::desired_laser(std::uint64_t grab_index) const {
-  switch (config_.laser_mode) {
+bool FramePath::desired_laser(LaserMode mode, std::uint64_t grab_index) const {
+  switch (mode) {
     case LaserMode::kOn:
       return true;
     case LaserMode::kOff:
@@ -208,9 +209,11 @@ void FramePath::camera_loop() {
   // The last switch this thread made: time and the grab it was for. Each frame carries its time,
   // so a frame whose exposure began before its switch is known (and counted) as uncertain.
   hal::LaserSwitch last_switch;
+  LaserMode laser_mode = config_.laser_mode;
 
   while (!stopping_.load(std::memory_order_relaxed)) {
-    const bool want_laser = frames_flowing && desired_laser(grab_index);
+    run_commands(laser_mode, frames_flowing, grab_index);
+    const bool want_laser = frames_flowing && desired_laser(laser_mode, grab_index);
     if (want_laser != laser_.is_on()) switch_laser(want_laser, grab_index, &last_switch);
 
     FrameSlot* slot = lossless ? claim_waiting(*frames_, stopping_) : frames_->try_claim();
@@ -266,6 +269,106 @@ void FramePath::camera_loop() {
   counters_.camera_state.store(CameraState::kStopped, std::memory_order_relaxed);
 }
 
+bool FramePath::submit_command(const Command& command) {
+  SpscRing<Command>& ring = command.kind == CommandKind::kThreshold ? worker_commands_ : commands_;
+  Command* slot = ring.try_claim();
+  if (slot == nullptr) return false;
+  *slot = command;
+  ring.publish();
+  return true;
+}
+
+bool FramePath::submit_detector(const Command& command,
+                                std::unique_ptr<pipeline::Detector> detector) {
+  if (pending_detector_ != nullptr) return false;
+  Command with = command;
+  with.detector = detector.get();
+  if (!submit_command(with)) return false;
+  pending_detector_ = std::move(detector);
+  return true;
+}
+
+bool FramePath::take_command_result(Command* command) {
+  for (SpscRing<Command>* ring : {&command_results_, &worker_results_}) {
+    Command* slot = ring->front();
+    if (slot == nullptr) continue;
+    *command = *slot;
+    ring->pop();
+    if (command->kind == CommandKind::kThreshold) {
+      // The worker put the pending detector in place and no longer touches the one it replaced:
+      // that one is freed here, unless it is the one this path was built with (its owner's).
+      current_detector_ = std::move(pending_detector_);
+      command->detector = nullptr;
+    }
+    return true;
+  }
+  return false;
+}
+
+void FramePath::run_worker_commands() {
+  while (Command* command = worker_commands_.front()) {
+    Command* result = worker_results_.try_claim();
+    if (result == nullptr) return;
+    *result = *command;
+    worker_commands_.pop();
+    // The replacement was built and sized (reset) for this frame size by the command thread.
+    std::swap(detector_, result->detector);
+    result->result.accepted = true;
+    worker_results_.publish();
+  }
+}
+
+void FramePath::run_commands(LaserMode& mode, bool frames_flowing, std::uint64_t grab_index) {
+  // A command stays queued until its result has room to go back.
+  while (Command* command = commands_.front()) {
+    Command* result = command_results_.try_claim();
+    if (result == nullptr) return;
+    *result = *command;
+    commands_.pop();
+    run_command(*result, mode, frames_flowing, grab_index);
+    command_results_.publish();
+  }
+}
+
+void FramePath::run_command(Command& command, LaserMode& mode, bool frames_flowing,
+                            std::uint64_t grab_index) {
+  hal::SettingResult& r = command.result;
+  switch (command.kind) {
+    case CommandKind::kCamera:
+      camera_.apply_setting(command.setting, r);
+      return;
+    case CommandKind::kLaserMode:
+      hal::write_setting_text(r.old_value, to_string(mode));
+      if (command.laser_mode != LaserMode::kOff && (!frames_flowing || grab_index == 0)) {
+        r.accepted = false;
+        hal::write_setting_line(
+            r.reason, "laser.mode: no frames are flowing (camera %s), the laser stays off",
+            to_string(counters_.camera_state.load(std::memory_order_relaxed)));
+        return;
+      }
+      mode = command.laser_mode;
+      hal::write_setting_text(r.in_force, to_string(mode));
+      r.accepted = true;
+      return;
+    case CommandKind::kThreshold:  // the worker's (run_worker_commands)
+      return;
+    case CommandKind::kGet: {
+      // "name=value" for every setting the camera has, then the laser's mode.
+      std::span<char> rest(r.in_force);
+      for (const char* name : {"exposure_us", "gain_db", "frame_rate_hz"}) {
+        char value[hal::CameraSetting::kTextBytes];
+        if (!camera_.read_setting(name, value)) continue;
+        const int written = std::snprintf(rest.data(), rest.size(), "%s=%s ", name, value);
+        if (written < 0 || static_cast<std::size_t>(written) >= rest.size()) break;
+        rest = rest.subspan(static_cast<std::size_t>(written));
+      }
+      hal::write_setting_line(rest, "laser.mode=%s", to_string(mode));
+      r.accepted = true;
+      return;
+    }
+  }
+}
+
 void FramePath::worker_loop() {
   std::int64_t processed = 0;
   const bool lossless = camera_.paced_by_consumer();
@@ -277,6 +380,7 @@ void FramePath::worker_loop() {
           : 0;
   std::int64_t last_image_ns = INT64_MIN / 2;
   while (true) {
+    run_worker_commands();
     if (!frames_->wait(100 * kMs)) {
       if (stopping_.load(std::memory_order_acquire)) break;
       continue;
@@ -303,7 +407,7 @@ void FramePath::worker_loop() {
         lossless ? claim_waiting(*profiles_, stop_requested_) : profiles_->try_claim();
     {
       const std::int64_t t0 = hal::monotonic_ns();  // vDSO clock read, no syscall
-      detector_.detect(view, context, out ? out->profile : unpublished_profile_);
+      detector_->detect(view, context, out ? out->profile : unpublished_profile_);
       const std::int64_t took = hal::monotonic_ns() - t0;
       if (took > budget_ns) counters_.frames_over_budget.fetch_add(1, std::memory_order_relaxed);
       if (took > counters_.processing_max_ns.load(std::memory_order_relaxed)) {
@@ -355,7 +459,7 @@ void FramePath::fill_status(std::int64_t now_mono, std::int64_t period_ns) {
   s.camera_underruns = health.underruns;
   s.camera_other_errors = health.other_errors;
   s.camera_skipped_frames = health.skipped_frames;
-  s.bad_messages = health.bad_messages;
+  s.bad_messages = health.bad_messages + counters_.bad_commands.load(std::memory_order_relaxed);
   s.bad_frames = health.bad_frames;
   const double seconds = static_cast<double>(std::max<std::int64_t>(period_ns, 1)) * 1e-9;
   s.frame_rate_hz =

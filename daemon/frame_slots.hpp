@@ -50,6 +50,7 @@ struct FramePathCounters {
   std::atomic<std::int64_t> processing_max_ns{0};   // longest detection since the last status
   std::atomic<std::int64_t> laser_late_switches{0};
   std::atomic<std::int64_t> last_frame_mono_ns{0};
+  std::atomic<std::int64_t> bad_commands{0};  // command channel: not a valid command_t
   std::atomic<CameraState> camera_state{CameraState::kStarting};
 };
 

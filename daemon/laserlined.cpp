@@ -20,6 +20,7 @@
 #include <thread>
 
 #include "daemon/backends.hpp"
+#include "daemon/command_server.hpp"
 #include "daemon/config.hpp"
 #include "daemon/cpu_usage.hpp"
 #include "daemon/frame_path.hpp"
@@ -389,11 +390,20 @@ int main(int argc, char** argv) {
     log(LogLevel::kError, "laserlined: %s: %s", config.source.c_str(), error.c_str());
     return 1;
   }
+  laserline::daemon::CommandServer commands(config, *lcm, path, *backends.camera);
+  const bool takes_commands = commands.start();
   const auto format = backends.camera->format();
   log(LogLevel::kInfo,
       "laserlined: running %s camera %dx%d at %.1f Hz, detector %s, laser %s, LCM %s",
       config.camera_backend.c_str(), format.width, format.height, config.frame_rate_hz,
       config.detector.c_str(), config.laser_backend.c_str(), config.lcm_url.c_str());
+  if (takes_commands) {
+    log(LogLevel::kInfo, "laserlined: commands on %s, answers on %s%s",
+        config.command_channel.c_str(), config.command_ack_channel.c_str(),
+        config.command_token.empty() ? "" : " (token required)");
+  } else {
+    log(LogLevel::kInfo, "laserlined: %s writes a log: no commands", config.lcm_url.c_str());
+  }
 
   const std::int64_t start = laserline::hal::monotonic_ns();
   const auto duration_ns = static_cast<std::int64_t>(options.duration_s * 1e9);
@@ -447,6 +457,7 @@ int main(int argc, char** argv) {
     if (duration_ns > 0 && laserline::hal::monotonic_ns() - start >= duration_ns) break;
   }
   notifier.stopping(std::string("stopping (") + reason + ")");
+  commands.stop();
   path.stop();
   backends.laser->set(false, 0, nullptr);
 

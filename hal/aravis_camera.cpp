@@ -4,6 +4,9 @@
 #include <time.h>
 
 #include <algorithm>
+#include <cctype>
+#include <cstdio>
+#include <cstring>
 #include <limits>
 
 #include "hal/clock.hpp"
@@ -501,6 +504,121 @@ GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
 
 CameraHealth AravisCamera::health() const {
   return counters_.load();
+}
+
+namespace {
+
+constexpr const char* kGenicamPrefix = "genicam:";
+constexpr std::size_t kGenicamPrefixBytes = 8;
+
+// A GError's message into a setting's reason, the error cleared.
+void take_error_into(GError*& e, const char* what, std::span<char> reason) {
+  write_setting_line(reason, "%s: %s", what, e != nullptr ? e->message : "refused");
+  g_clear_error(&e);
+}
+
+// GenICam feature names are identifiers (SFNC: letters, digits, underscore).
+bool is_feature_name(const char* name) {
+  if (*name == '\0') return false;
+  for (const char* c = name; *c != '\0'; ++c) {
+    if (!std::isalnum(static_cast<unsigned char>(*c)) && *c != '_') return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+std::string AravisCamera::check_setting(const CameraSetting& setting) const {
+  const std::string name = setting.name;
+  if (name == "exposure_us") {
+    return range_problem(setting.name, setting.value, setting.number, kAravisExposureRange);
+  }
+  if (name == "gain_db") {
+    return range_problem(setting.name, setting.value, setting.number, kAravisGainRange);
+  }
+  if (name == "frame_rate_hz") {
+    if (options_.trigger != AravisTrigger::kFreeRun) {
+      return "frame_rate_hz: the camera is triggered (camera.trigger), its trigger sets the rate";
+    }
+    return range_problem(setting.name, setting.value, setting.number, kFrameRateRange);
+  }
+  if (name.rfind(kGenicamPrefix, 0) == 0) {
+    if (!is_feature_name(setting.name + kGenicamPrefixBytes)) {
+      return name + ": a GenICam feature name is letters, digits and '_'";
+    }
+    return "";
+  }
+  return name +
+         ": not a setting of the aravis camera (exposure_us, gain_db, frame_rate_hz, "
+         "genicam:<Feature>)";
+}
+
+bool AravisCamera::read_setting(const char* name, std::span<char> value) {
+  if (camera_ == nullptr) return false;
+  GError* e = nullptr;
+  double number = 0;
+  if (std::strcmp(name, "exposure_us") == 0) {
+    number = arv_camera_get_exposure_time(camera_, &e);
+  } else if (std::strcmp(name, "gain_db") == 0) {
+    number = arv_camera_get_gain(camera_, &e);
+  } else if (std::strcmp(name, "frame_rate_hz") == 0) {
+    number = arv_camera_get_frame_rate(camera_, &e);
+  } else if (std::strncmp(name, kGenicamPrefix, kGenicamPrefixBytes) == 0) {
+    ArvGcNode* node =
+        arv_device_get_feature(arv_camera_get_device(camera_), name + kGenicamPrefixBytes);
+    if (node == nullptr || !ARV_IS_GC_FEATURE_NODE(node)) return false;
+    const char* text = arv_gc_feature_node_get_value_as_string(ARV_GC_FEATURE_NODE(node), &e);
+    if (e != nullptr) {
+      g_clear_error(&e);
+      return false;
+    }
+    write_setting_text(value, text);
+    return true;
+  } else {
+    return false;
+  }
+  if (e != nullptr) {
+    g_clear_error(&e);
+    return false;
+  }
+  write_setting_value(value, number);
+  return true;
+}
+
+void AravisCamera::apply_setting(const CameraSetting& setting, SettingResult& result) {
+  result.accepted = false;
+  if (camera_ == nullptr) {
+    write_setting_text(result.reason, "the camera is not connected (reconnecting)");
+    return;
+  }
+  GError* e = nullptr;
+  const char* name = setting.name;
+  if (!read_setting(name, result.old_value)) {
+    write_setting_line(result.reason, "%s: the camera has no such feature", name);
+    return;
+  }
+  if (std::strcmp(name, "exposure_us") == 0) {
+    arv_camera_set_exposure_time(camera_, setting.number, &e);
+  } else if (std::strcmp(name, "gain_db") == 0) {
+    arv_camera_set_gain(camera_, setting.number, &e);
+  } else if (std::strcmp(name, "frame_rate_hz") == 0) {
+    arv_camera_set_frame_rate(camera_, setting.number, &e);
+  } else {
+    ArvGcNode* node =
+        arv_device_get_feature(arv_camera_get_device(camera_), name + kGenicamPrefixBytes);
+    arv_gc_feature_node_set_value_from_string(ARV_GC_FEATURE_NODE(node), setting.value, &e);
+  }
+  if (e != nullptr) {
+    take_error_into(e, name, result.reason);
+    return;
+  }
+  // Any feature may move exposure or gain (ExposureAuto, a selector): the frames carry them.
+  read_exposure_and_gain(camera_);
+  if (!read_setting(name, result.in_force)) {
+    write_setting_line(result.reason, "%s: written but cannot be read back", name);
+    return;
+  }
+  result.accepted = true;
 }
 
 }  // namespace laserline::hal

@@ -50,6 +50,11 @@ struct AravisCameraOptions {
   int reconnect_max_ms = 2000;
 };
 
+// camera.exposure_us and gain_db (0 and -1: leave the camera's setting); a change while streaming
+// is checked against the same ranges, then by the camera.
+inline constexpr NumberRange kAravisExposureRange{0.0, 10e6};
+inline constexpr NumberRange kAravisGainRange{-1.0, 100.0};
+
 // The pixel formats the aravis backend takes, by their GenICam (SFNC) names.
 const std::vector<std::string>& aravis_pixel_formats();
 // The aravis backend's factory (hal/registry.hpp): its options from the `camera:` section.
@@ -101,6 +106,11 @@ class AravisCamera final : public Camera {
                   std::chrono::milliseconds timeout) override;
   void stop() override;
   CameraHealth health() const override;
+  // exposure_us, gain_db, frame_rate_hz (free-running trigger only) and any GenICam feature by
+  // name ("genicam:ExposureTime"), written while streaming and read back.
+  std::string check_setting(const CameraSetting& setting) const override;
+  void apply_setting(const CameraSetting& setting, SettingResult& result) override;
+  bool read_setting(const char* name, std::span<char> value) override;
 
  private:
   bool connect(std::string* error);

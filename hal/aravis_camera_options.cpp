@@ -14,9 +14,10 @@ std::unique_ptr<Camera> create_aravis_camera(const CameraRequest& request) {
   o.height = static_cast<int>(c.integer("height", request.calibration->camera.height, 1, 65535));
   o.offset_x = static_cast<int>(c.integer("offset_x", 0, 0, 65535));
   o.offset_y = static_cast<int>(c.integer("offset_y", 0, 0, 65535));
-  o.frame_rate_hz = c.number("frame_rate_hz", 30.0, 0.1, 1000.0);
-  o.exposure_us = c.number("exposure_us", o.exposure_us, 0.0, 10e6);
-  o.gain_db = c.number("gain_db", o.gain_db, -1.0, 100.0);
+  o.frame_rate_hz = c.number("frame_rate_hz", 30.0, kFrameRateRange.min, kFrameRateRange.max);
+  o.exposure_us =
+      c.number("exposure_us", o.exposure_us, kAravisExposureRange.min, kAravisExposureRange.max);
+  o.gain_db = c.number("gain_db", o.gain_db, kAravisGainRange.min, kAravisGainRange.max);
   o.packet_size = static_cast<int>(c.integer("packet_size", o.packet_size, -1, 65535));
   o.packet_delay_ns = c.integer("packet_delay_ns", o.packet_delay_ns, -1, 1'000'000'000);
   o.buffers = static_cast<int>(c.integer("buffers", o.buffers, 2, 1024));

@@ -88,15 +88,17 @@ std::unique_ptr<Camera> create_sim_camera(const CameraRequest& request) {
 }
 
 std::unique_ptr<SimCamera> make_sim_camera(const CameraRequest& request) {
-  const double rate = request.options->number("frame_rate_hz", 30.0, 0.1, 1000.0);
+  const double rate =
+      request.options->number("frame_rate_hz", 30.0, kFrameRateRange.min, kFrameRateRange.max);
   YamlMap sim = request.options->map("sim");
   SimSceneOptions options = read_sim_options(sim, *request.calibration, rate);
   SimCameraStall stall;
   stall.after_s = sim.number("stall_after_s", 0.0, 0.0, 1e6);
   stall.for_s = sim.number("stall_for_s", 0.0, 0.0, 1e6);
   SimCameraExposure exposure;
-  exposure.exposure_us = sim.number("exposure_us", exposure.exposure_us, 1.0, 1e7);
-  exposure.gain_db = sim.number("gain_db", exposure.gain_db, -20.0, 60.0);
+  exposure.exposure_us =
+      sim.number("exposure_us", exposure.exposure_us, kSimExposureRange.min, kSimExposureRange.max);
+  exposure.gain_db = sim.number("gain_db", exposure.gain_db, kSimGainRange.min, kSimGainRange.max);
   sim.finish();
   return std::make_unique<SimCamera>(options, request.laser, stall, request.channel, exposure);
 }

@@ -9,7 +9,10 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
+#include <cmath>
+#include <cstdio>
 #include <cstring>
 
 #include "hal/clock.hpp"
@@ -375,12 +378,176 @@ GrabStatus V4l2Camera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
     }
     info.arrival_mono_ns = arrival_mono;
     info.arrival_wall_ns = arrival_wall;
+    info.exposure_us = exposure_us_;
     return GrabStatus::kOk;
   }
 }
 
 CameraHealth V4l2Camera::health() const {
   return counters_.load();
+}
+
+namespace {
+
+constexpr const char* kControlPrefix = "v4l2:";
+constexpr std::size_t kControlPrefixBytes = 5;
+constexpr double kExposureUnitUs = 100;  // V4L2_CID_EXPOSURE_ABSOLUTE counts 100 us
+
+// A control's name as v4l2-ctl writes it: lower case, every run of other characters one '_',
+// none at the end ("Exposure Time, Absolute" -> "exposure_time_absolute").
+void control_key(const char* name, std::span<char> out) {
+  std::size_t n = 0;
+  bool gap = false;
+  for (const char* c = name; *c != '\0' && n + 1 < out.size(); ++c) {
+    const auto u = static_cast<unsigned char>(*c);
+    if (std::isalnum(u)) {
+      if (gap && n > 0 && n + 2 < out.size()) out[n++] = '_';
+      out[n++] = static_cast<char>(std::tolower(u));
+      gap = false;
+    } else {
+      gap = true;
+    }
+  }
+  out[n] = '\0';
+}
+
+// The control `name` names (as v4l2-ctl writes it or as the driver reports it), found by walking
+// the driver's controls; false when there is none.
+bool find_control(int fd, const char* name, v4l2_queryctrl* found) {
+  char wanted[64];
+  char key[64];
+  control_key(name, wanted);
+  v4l2_queryctrl q{};
+  q.id = V4L2_CTRL_FLAG_NEXT_CTRL;
+  while (xioctl(fd, VIDIOC_QUERYCTRL, &q) == 0) {
+    if ((q.flags & V4L2_CTRL_FLAG_DISABLED) == 0) {
+      control_key(reinterpret_cast<const char*>(q.name), key);
+      if (std::strcmp(key, wanted) == 0) {
+        *found = q;
+        return true;
+      }
+    }
+    q.id |= V4L2_CTRL_FLAG_NEXT_CTRL;
+  }
+  return false;
+}
+
+bool integral_control(const v4l2_queryctrl& q) {
+  return q.type == V4L2_CTRL_TYPE_INTEGER || q.type == V4L2_CTRL_TYPE_BOOLEAN ||
+         q.type == V4L2_CTRL_TYPE_MENU || q.type == V4L2_CTRL_TYPE_INTEGER_MENU;
+}
+
+}  // namespace
+
+std::string V4l2Camera::check_setting(const CameraSetting& setting) const {
+  const std::string name = setting.name;
+  if (name == "exposure_us") {
+    // The range is the device's (QUERYCTRL), checked where the device is.
+    return range_problem(setting.name, setting.value, setting.number,
+                         {kExposureUnitUs, std::numeric_limits<double>::max()});
+  }
+  if (name == "frame_rate_hz") {
+    return range_problem(setting.name, setting.value, setting.number, kFrameRateRange);
+  }
+  if (name == "gain_db") {
+    return "gain_db: V4L2's gain has no unit; set the driver's control, e.g. v4l2:gain";
+  }
+  if (name.rfind(kControlPrefix, 0) == 0) {
+    if (name.size() == kControlPrefixBytes) return name + ": a control name is missing";
+    const double v = setting.number;
+    if (!(v == std::floor(v) && v >= INT32_MIN && v <= INT32_MAX)) {
+      return name + ": must be a whole number (the control's value, a menu's index), got '" +
+             setting.value + "'";
+    }
+    return "";
+  }
+  return name + ": not a setting of the v4l2 camera (exposure_us, frame_rate_hz, v4l2:<control>)";
+}
+
+bool V4l2Camera::read_setting(const char* name, std::span<char> value) {
+  if (fd_ < 0) return false;
+  if (std::strcmp(name, "frame_rate_hz") == 0) {
+    v4l2_streamparm parm{};
+    parm.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
+    if (xioctl(fd_, VIDIOC_G_PARM, &parm) != 0 || parm.parm.capture.timeperframe.numerator == 0) {
+      return false;
+    }
+    write_setting_value(value, static_cast<double>(parm.parm.capture.timeperframe.denominator) /
+                                   parm.parm.capture.timeperframe.numerator);
+    return true;
+  }
+  const bool exposure = std::strcmp(name, "exposure_us") == 0;
+  v4l2_control control{};
+  if (exposure) {
+    control.id = V4L2_CID_EXPOSURE_ABSOLUTE;
+  } else if (std::strncmp(name, kControlPrefix, kControlPrefixBytes) == 0) {
+    v4l2_queryctrl q{};
+    if (!find_control(fd_, name + kControlPrefixBytes, &q) || !integral_control(q)) return false;
+    control.id = q.id;
+  } else {
+    return false;
+  }
+  if (xioctl(fd_, VIDIOC_G_CTRL, &control) != 0) return false;
+  write_setting_value(value, exposure ? control.value * kExposureUnitUs : control.value);
+  return true;
+}
+
+void V4l2Camera::apply_setting(const CameraSetting& setting, SettingResult& result) {
+  result.accepted = false;
+  const char* name = setting.name;
+  if (fd_ < 0) {
+    write_setting_text(result.reason, "the camera is not open (reconnecting)");
+    return;
+  }
+  if (!read_setting(name, result.old_value)) {
+    write_setting_line(result.reason,
+                       "%s: the device has no such control (integer, boolean or menu)", name);
+    return;
+  }
+  if (std::strcmp(name, "frame_rate_hz") == 0) {
+    v4l2_streamparm parm{};
+    parm.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
+    parm.parm.capture.timeperframe.numerator = 1000;
+    parm.parm.capture.timeperframe.denominator =
+        static_cast<std::uint32_t>(setting.number * 1000.0 + 0.5);
+    if (xioctl(fd_, VIDIOC_S_PARM, &parm) != 0) {
+      write_setting_line(result.reason, "frame_rate_hz: the driver refused it (S_PARM: %s)",
+                         std::strerror(errno));
+      return;
+    }
+  } else {
+    const bool exposure = std::strcmp(name, "exposure_us") == 0;
+    v4l2_queryctrl q{};
+    if (exposure) {
+      q.id = V4L2_CID_EXPOSURE_ABSOLUTE;
+      if (xioctl(fd_, VIDIOC_QUERYCTRL, &q) != 0) {
+        write_setting_text(result.reason, "exposure_us: the device has no absolute exposure");
+        return;
+      }
+    } else {
+      find_control(fd_, name + kControlPrefixBytes, &q);
+    }
+    const double wanted = exposure ? std::round(setting.number / kExposureUnitUs) : setting.number;
+    const double scale = exposure ? kExposureUnitUs : 1;
+    if (wanted < q.minimum || wanted > q.maximum) {
+      write_setting_line(result.reason,
+                         "%s: must be between %g and %g (the device's range), got %s", name,
+                         q.minimum * scale, q.maximum * scale, setting.value);
+      return;
+    }
+    v4l2_control control{q.id, static_cast<std::int32_t>(wanted)};
+    if (xioctl(fd_, VIDIOC_S_CTRL, &control) != 0) {
+      write_setting_line(result.reason, "%s: the driver refused it (S_CTRL: %s)", name,
+                         std::strerror(errno));
+      return;
+    }
+  }
+  if (!read_setting(name, result.in_force)) {
+    write_setting_line(result.reason, "%s: written but cannot be read back", name);
+    return;
+  }
+  if (std::strcmp(name, "exposure_us") == 0) exposure_us_ = std::strtod(result.in_force, nullptr);
+  result.accepted = true;
 }
 
 }  // namespace laserline::hal

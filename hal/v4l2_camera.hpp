@@ -2,6 +2,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -72,6 +73,13 @@ class V4l2Camera final : public Camera {
                   std::chrono::milliseconds timeout) override;
   void stop() override;
   CameraHealth health() const override;
+  // exposure_us (V4L2_CID_EXPOSURE_ABSOLUTE, in its 100 us units, within the device's range),
+  // frame_rate_hz (S_PARM, where the driver takes it while streaming) and any integer, boolean or
+  // menu control by name ("v4l2:gain"; the name as v4l2-ctl writes it or as the driver reports
+  // it), found with VIDIOC_QUERYCTRL and set with VIDIOC_S_CTRL, read back with VIDIOC_G_CTRL.
+  std::string check_setting(const CameraSetting& setting) const override;
+  void apply_setting(const CameraSetting& setting, SettingResult& result) override;
+  bool read_setting(const char* name, std::span<char> value) override;
 
  private:
   struct Mapping {
@@ -98,6 +106,7 @@ class V4l2Camera final : public Camera {
   std::int64_t sequence_base_ = 0;  // our sequence - the driver's (it restarts on reopen)
   std::uint64_t next_sequence_ = 0;
   bool have_sequence_ = false;
+  double exposure_us_ = std::numeric_limits<double>::quiet_NaN();  // once set by a command
   std::uint32_t last_driver_sequence_ = 0;
 
   CameraHealthCounters counters_;  // underruns: gaps in the driver's sequence, frames it lost

@@ -13,7 +13,7 @@ std::unique_ptr<Camera> create_v4l2_camera(const CameraRequest& request) {
   o.pixel_format = c.choice("pixel_format", o.pixel_format, v4l2_pixel_formats());
   o.width = static_cast<int>(c.integer("width", request.calibration->camera.width, 1, 65535));
   o.height = static_cast<int>(c.integer("height", request.calibration->camera.height, 1, 65535));
-  o.frame_rate_hz = c.number("frame_rate_hz", 30.0, 0.1, 1000.0);
+  o.frame_rate_hz = c.number("frame_rate_hz", 30.0, kFrameRateRange.min, kFrameRateRange.max);
   o.buffers = static_cast<int>(c.integer("buffers", o.buffers, 2, 32));
   if (const std::string problem = v4l2_pixel_format_problem(o); !problem.empty()) {
     c.fail("pixel_format", problem);

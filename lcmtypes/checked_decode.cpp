@@ -149,6 +149,21 @@ bool walk_status(Walker& w, const Limits& limits) {
          w.end("laserline.status_t");
 }
 
+bool walk_command(Walker& w, const Limits& limits) {
+  const std::int32_t max = limits.max_string_bytes;
+  return w.hash(laserline::command_t::getHash(), "laserline.command_t") &&
+         w.skip(2 * kI64, "utime, id") && w.string("sender", max) && w.string("name", max) &&
+         w.string("value", max) && w.string("token", max) && w.end("laserline.command_t");
+}
+
+bool walk_command_ack(Walker& w, const Limits& limits) {
+  const std::int32_t max = limits.max_string_bytes;
+  return w.hash(laserline::command_ack_t::getHash(), "laserline.command_ack_t") &&
+         w.skip(2 * kI64, "utime, id") && w.string("name", max) && w.skip(kBool, "accepted") &&
+         w.string("reason", max) && w.string("value", max) && w.string("old_value", max) &&
+         w.skip(kI64, "instance_id") && w.end("laserline.command_ack_t");
+}
+
 bool walk_image(Walker& w, const Limits& limits) {
   std::int32_t n = 0;
   return w.hash(image_t::getHash(), "laserline.image_t") &&
@@ -229,6 +244,18 @@ bool decode(const void* data, std::size_t size, laserline::calibration_t* out, c
             std::string* problem) {
   Walker w(data, size, problem);
   return walk_calibration(w) && generated_decode(data, size, out, problem);
+}
+
+bool decode(const void* data, std::size_t size, laserline::command_t* out, const Limits& limits,
+            std::string* problem) {
+  Walker w(data, size, problem);
+  return walk_command(w, limits) && generated_decode(data, size, out, problem);
+}
+
+bool decode(const void* data, std::size_t size, laserline::command_ack_t* out, const Limits& limits,
+            std::string* problem) {
+  Walker w(data, size, problem);
+  return walk_command_ack(w, limits) && generated_decode(data, size, out, problem);
 }
 
 bool decode(const void* data, std::size_t size, laserline::image_t* out, const Limits& limits,

@@ -1,6 +1,8 @@
 #pragma once
 
 #include <laserline/calibration_t.hpp>
+#include <laserline/command_ack_t.hpp>
+#include <laserline/command_t.hpp>
 #include <laserline/image_t.hpp>
 #include <laserline/point_t.hpp>
 #include <laserline/profile_t.hpp>
@@ -20,8 +22,9 @@ namespace laserline::messages {
 // gigabytes), so every message is walked first: each length against these limits and against
 // the bytes received, and only then decoded.
 struct Limits {
-  std::int32_t max_string_bytes = 256;      // detector, camera_backend, camera_state (without NUL)
-  std::int32_t max_points = 1 << 16;        // per profile (point_t.u is 16 bit)
+  std::int32_t max_string_bytes = 256;  // detector, camera_backend, camera_state, command_t's and
+                                        // command_ack_t's texts (without NUL)
+  std::int32_t max_points = 1 << 16;    // per profile (point_t.u is 16 bit)
   std::int64_t max_image_bytes = 64 << 20;  // image_t.data (compressed or not)
   std::int32_t max_width = 16384;           // image_t.width and height, also inside PNG/JPEG
   std::int32_t max_height = 16384;
@@ -40,6 +43,10 @@ bool decode(const void* data, std::size_t size, laserline::status_t* out, const 
 bool decode(const void* data, std::size_t size, laserline::image_t* out, const Limits& limits,
             std::string* problem);
 bool decode(const void* data, std::size_t size, laserline::calibration_t* out, const Limits& limits,
+            std::string* problem);
+bool decode(const void* data, std::size_t size, laserline::command_t* out, const Limits& limits,
+            std::string* problem);
+bool decode(const void* data, std::size_t size, laserline::command_ack_t* out, const Limits& limits,
             std::string* problem);
 
 // The type fingerprint in front of an encoded message (0 when shorter than one).

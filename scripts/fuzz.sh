@@ -9,7 +9,7 @@ seconds=${1:-20}
 shift || true
 harnesses=("$@")
 [ ${#harnesses[@]} -gt 0 ] || harnesses=(profile status point calibration_message image_message image_payload lcm_log
-                                          config calibration poses)
+                                          config calibration poses command)
 build=build/fuzz
 CC=clang-16 CXX=clang++-16 cmake -S tests/fuzz -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
 cmake --build "$build" -j2 --target make_fuzz_seeds "${harnesses[@]/#/fuzz_}"

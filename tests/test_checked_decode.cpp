@@ -250,3 +250,64 @@ TEST(CheckedDecode, ImagePixelsAreBoundedByTheirBytes) {
 }
 
 }  // namespace
+
+namespace {
+
+laserline::command_t command() {
+  laserline::command_t c{};
+  c.utime = 1'700'000'000'000'000;
+  c.id = 42;
+  c.sender = "laserline-ctl@rov";
+  c.name = "exposure_us";
+  c.value = "1500";
+  c.token = "";
+  return c;
+}
+
+laserline::command_ack_t command_ack() {
+  laserline::command_ack_t a{};
+  a.id = 42;
+  a.name = "exposure_us";
+  a.accepted = true;
+  a.reason = "";
+  a.value = "1500";
+  a.old_value = "1000";
+  a.instance_id = -3;
+  return a;
+}
+
+}  // namespace
+
+// command_t and command_ack_t: bounded like the others; a string length in them that lies, or a
+// string over the limit, is one line naming the field and its byte.
+TEST(CheckedDecode, CommandsAndTheirAnswersAreBounded) {
+  std::string problem;
+  const Bytes c = encode(command());
+  laserline::command_t cb;
+  ASSERT_TRUE(decode(c.data(), c.size(), &cb, Limits{}, &problem)) << problem;
+  EXPECT_EQ(encode(cb), c);
+  EXPECT_EQ(cb.value, "1500");
+  every_prefix_refused<laserline::command_t>(c);
+  const Bytes a = encode(command_ack());
+  laserline::command_ack_t ab;
+  ASSERT_TRUE(decode(a.data(), a.size(), &ab, Limits{}, &problem)) << problem;
+  EXPECT_EQ(encode(ab), a);
+  EXPECT_EQ(ab.old_value, "1000");
+  every_prefix_refused<laserline::command_ack_t>(a);
+
+  // The sender's length (after the hash and two int64) made negative, then huge.
+  constexpr std::size_t kSenderAt = 8 + 16;
+  for (std::int32_t length : {-1, 0x7fffffff}) {
+    Bytes bytes = c;
+    put_i32(bytes, kSenderAt, length);
+    EXPECT_FALSE(decode(bytes.data(), bytes.size(), &cb, Limits{}, &problem));
+    EXPECT_EQ(problem, "sender at byte 24: length " + std::to_string(length) + " outside 1..257");
+  }
+  laserline::command_t long_value = command();
+  long_value.value = std::string(300, '1');
+  const Bytes too_long = encode(long_value);
+  EXPECT_FALSE(decode(too_long.data(), too_long.size(), &cb, Limits{}, &problem));
+  EXPECT_EQ(problem, "value at byte 62: length 301 outside 1..257");
+  EXPECT_FALSE(decode(a.data(), a.size(), &cb, Limits{}, &problem));
+  EXPECT_EQ(problem, "not a laserline.command_t (another type's fingerprint)");
+}

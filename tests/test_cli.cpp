@@ -29,6 +29,7 @@ const std::vector<Tool>& tools() {
       {"laserline-evaluate", LASERLINE_EVALUATE_PATH, "--frames"},
       {"laserline-example-subscriber", LASERLINE_EXAMPLE_SUBSCRIBER_PATH, nullptr},
       {"laserline-view", LASERLINE_VIEW_PATH, "--listen"},
+      {"laserline-ctl", LASERLINE_CTL_PATH, "--timeout"},
   };
   return all;
 }

@@ -319,6 +319,27 @@ TEST(Config, LcmChannelsAndUrl) {
             "test.yaml:2: lcm.calibration_period_s: must be between 0.05 and 3600, got 0");
 }
 
+TEST(Config, CommandChannelsAndToken) {
+  const DaemonConfig defaults = builtin_config();
+  EXPECT_EQ(defaults.command_channel, "LASERLINE_COMMAND");
+  EXPECT_EQ(defaults.command_ack_channel, "LASERLINE_COMMAND_ACK");
+  EXPECT_EQ(defaults.command_token, "");
+  const DaemonConfig renamed = parse_config(
+      hal::load_yaml_text("lcm: {command_channel: ROV2_CMD, command_token: abc}\n", "t"), "t");
+  EXPECT_EQ(renamed.command_channel, "ROV2_CMD");
+  EXPECT_EQ(renamed.command_ack_channel, "ROV2_CMD_ACK");
+  EXPECT_EQ(renamed.command_token, "abc");
+  EXPECT_EQ(error_of("lcm:\n  command_channel: ''\n"),
+            "test.yaml:2: lcm.command_channel: must be 1 to 63 characters");
+  EXPECT_EQ(error_of("lcm:\n  command_ack_channel: LASERLINE_STATUS\n"),
+            "test.yaml:2: lcm.command_ack_channel: 'LASERLINE_STATUS' is already an output "
+            "channel");
+  EXPECT_EQ(error_of("lcm:\n  command_ack_channel: LASERLINE_COMMAND\n"),
+            "test.yaml:2: lcm.command_ack_channel: must differ from lcm.command_channel");
+  EXPECT_EQ(error_of("lcm:\n  command_token: " + std::string(256, 't') + "\n"),
+            "test.yaml:2: lcm.command_token: must be at most 255 characters");
+}
+
 TEST(Config, Realtime) {
   EXPECT_EQ(error_of("realtime: {enabled: sure}\n"),
             "test.yaml:1: realtime.enabled: must be true or false, got 'sure'");

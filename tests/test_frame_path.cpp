@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cstdlib>
 #include <thread>
+#include <vector>
 
 #include "allocation_counter.hpp"
 #include "daemon/backends.hpp"
@@ -71,6 +72,66 @@ lcm: {url: "udpm://239.255.76.67:7667?ttl=0", image_every_n: 5, image_compressio
   EXPECT_GT(s.images_published, kMinFrames / 10) << "every 5th frame is published raw";
   EXPECT_EQ(s.publish_errors, 0);
   EXPECT_EQ(allocations, 0) << bytes << " bytes allocated over " << processed << " frames";
+}
+
+// Commands are carried out by the camera thread between grabs without allocating: parsed
+// beforehand (as the command thread does), then submitted and their results taken while every
+// allocation of the process is counted.
+TEST(FramePath, CommandsAreCarriedOutBetweenGrabsWithoutAllocating) {
+  if (!g_namespace_problem.empty()) {
+    GTEST_SKIP() << "no private network namespace for LCM over UDP: " << g_namespace_problem;
+  }
+  DaemonConfig config = make_config(R"(
+camera: {frame_rate_hz: 100, sim: {tilt_y_deg: 8}}
+calibration:
+  camera: {width: 320, height: 240, fx: 350, fy: 350}
+laser: {mode: on}
+detector: {name: maxvalue}
+lcm: {url: "udpm://239.255.76.67:7667?ttl=0", image_every_n: 0, status_period_s: 0.2}
+)");
+  Backends backends = create_backends(config);
+  std::string error;
+  ASSERT_TRUE(backends.laser->open(&error));
+  ASSERT_TRUE(backends.camera->open(&error));
+  lcm::LCM lcm(config.lcm_url);
+  ASSERT_TRUE(lcm.good());
+  FramePath path(config, *backends.camera, *backends.laser, *backends.detector, lcm);
+  std::vector<Command> commands;
+  for (auto [name, value] : {std::pair{"exposure_us", "2500"}, std::pair{"gain_db", "6"},
+                             std::pair{"laser.mode", "alternate"}, std::pair{"get", ""}}) {
+    laserline::command_t message;
+    message.id = static_cast<std::int64_t>(commands.size()) + 1;
+    message.name = name;
+    message.value = value;
+    Command command;
+    pipeline::DetectorOptions options;
+    ASSERT_TRUE(parse_command(message, config, *backends.camera, config.detector_options, &command,
+                              &options, &error))
+        << error;
+    commands.push_back(command);
+  }
+  Command done;
+  ASSERT_TRUE(testing::allocation_counter_works()) << "allocation counting does not work";
+  ASSERT_TRUE(path.start(&error)) << error;
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // warm-up: first status
+  testing::start_counting_allocations();
+  std::vector<Command>::size_type answered = 0;
+  for (const Command& command : commands) {
+    ASSERT_TRUE(path.submit_command(command));
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+    while (!path.take_command_result(&done) && std::chrono::steady_clock::now() < deadline) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    if (done.id != command.id) break;
+    ++answered;
+    EXPECT_TRUE(done.result.accepted) << command.setting.name << ": " << done.result.reason;
+  }
+  const testing::Allocations counted = testing::stop_counting_allocations();
+  path.stop();
+  EXPECT_EQ(answered, commands.size());
+  EXPECT_STREQ(done.result.in_force,
+               "exposure_us=2500 gain_db=6 frame_rate_hz=100 laser.mode=alternate");
+  EXPECT_EQ(counted.count, 0) << counted.bytes << " bytes allocated";
 }
 
 TEST(FramePath, LaserGoesOffWhenFramesStopAndBackOnWhenTheyReturn) {

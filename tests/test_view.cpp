@@ -404,6 +404,68 @@ TEST_F(LiveView, ChromiumShowsTheLiveViewWithoutErrors) {
   EXPECT_GT(cv::mean(a(frame))[0], 20.0);
 }
 
+// Controls only behind --allow-control and its token: the plain view has none; with them, a
+// command without the token is refused by the view; typed into the page in Chromium with the
+// token, the exposure changes in the daemon and the daemon's answer appears on the page.
+TEST_F(LiveView, ControlsChangeTheExposureOnlyWithTheToken) {
+  httplib::Client plain(kHost, kPort);
+  const auto not_allowed = plain.Get("/control");
+  ASSERT_TRUE(not_allowed) << logs();
+  EXPECT_EQ(not_allowed->body, "{\"allowed\": false}");
+  const auto no_route =
+      plain.Post("/command", "name=exposure_us&value=1500", "application/x-www-form-urlencoded");
+  ASSERT_TRUE(no_route);
+  EXPECT_EQ(no_route->status, 404);
+
+  constexpr int kControlPort = kPort + 1;
+  const pid_t view = laserline::test_support::spawn_tied_child(
+      {LASERLINE_VIEW_PATH, "--url", kUrl, "--listen",
+       std::string(kHost) + ":" + std::to_string(kControlPort), "--allow-control", "--token",
+       "t0ken"},
+      (dir_ / "view-control.log").string());
+  httplib::Client client(kHost, kControlPort);
+  std::string allowed;
+  for (int i = 0; i < 100 && allowed.empty(); ++i) {
+    if (const auto r = client.Get("/control"); r && r->status == 200) {
+      allowed = r->body;
+    } else {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+  }
+  EXPECT_EQ(allowed, "{\"allowed\": true}") << read_file(dir_ / "view-control.log");
+  const auto no_token =
+      client.Post("/command", "name=laser.mode&value=off", "application/x-www-form-urlencoded");
+  ASSERT_TRUE(no_token);
+  EXPECT_EQ(no_token->status, 403);
+  EXPECT_EQ(json_value(no_token->body, "reason"),
+            "token: not the one laserline-view was started with");
+
+  const std::string out_dir = VIEW_SCREENSHOT_DIR;
+  std::filesystem::create_directories(out_dir);
+  const auto r = laserline::test_support::run_command(
+      std::string("/usr/bin/python3 ") + VIEW_BROWSER_SCRIPT + " http://" + kHost + ":" +
+      std::to_string(kControlPort) + "/ " + out_dir + " 1 --control t0ken 1700");
+  // Back as it was for the rest of the suite, and the view stopped.
+  const auto restore = client.Post("/command", "name=exposure_us&value=1000&token=t0ken",
+                                   "application/x-www-form-urlencoded");
+  kill(view, SIGTERM);
+  waitpid(view, nullptr, 0);
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const std::string skip = json_value(r.out, "skip");
+  if (!skip.empty()) GTEST_SKIP() << skip;
+  std::printf("%s\n", r.out.c_str());
+  EXPECT_NE(r.out.find("\"problems\": []"), std::string::npos) << r.out;
+  const std::size_t control = r.out.find("\"control\":");
+  ASSERT_NE(control, std::string::npos) << r.out;
+  EXPECT_EQ(json_value(r.out, "shown", control), "true") << r.out;
+  EXPECT_EQ(json_value(r.out, "acks", control), "1") << r.out;
+  EXPECT_EQ(json_value(r.out, "class", control), "ok") << r.out;
+  EXPECT_EQ(json_value(r.out, "text", control).rfind("exposure_us = 1700 (was ", 0), 0u) << r.out;
+  ASSERT_TRUE(restore);
+  EXPECT_EQ(json_value(restore->body, "value"), "1000") << restore->body;
+  EXPECT_EQ(json_value(restore->body, "old_value"), "1700") << restore->body;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {

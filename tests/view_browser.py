@@ -5,7 +5,11 @@ messages and exceptions at warning level or worse (the browser's own log too: bl
 failed requests), the page's state (body data attributes, the frame canvas's place), the load
 time, and two screenshots some seconds apart (PNG files in OUT_DIR).
 
-usage: view_browser.py URL OUT_DIR [SECONDS_BETWEEN_SCREENSHOTS]
+With --control TOKEN EXPOSURE_US (laserline-view --allow-control): types the token and the
+exposure into the page's controls, presses "set", waits for the daemon's answer to appear and
+reports it ("control": its text and class) with a screenshot of the page then (controls.png).
+
+usage: view_browser.py URL OUT_DIR [SECONDS_BETWEEN_SCREENSHOTS] [--control TOKEN EXPOSURE_US]
 """
 import base64
 import json
@@ -123,8 +127,14 @@ def problems(events):
 
 
 def main():
-    url, out_dir = sys.argv[1], sys.argv[2]
-    between_s = float(sys.argv[3]) if len(sys.argv) > 3 else 3.0
+    args = sys.argv[1:]
+    control = None
+    if "--control" in args:
+        at = args.index("--control")
+        control = args[at + 1:at + 3]
+        del args[at:at + 3]
+    url, out_dir = args[0], args[1]
+    between_s = float(args[2]) if len(args) > 2 else 3.0
     chromium = shutil.which("chromium")
     if chromium is None:
         print(json.dumps({"skip": "chromium is not installed (scripts/install-deps.sh installs it)"}))
@@ -179,8 +189,34 @@ def main():
                 f.write(base64.b64decode(data))
             shots.append(path)
         second = json.loads(page.call("Runtime.evaluate", expression=state_js)["result"]["value"])
-        print(json.dumps({"load_s": load_s, "first": first, "second": second, "screenshots": shots,
-                          "problems": problems(page.events)}))
+        report = {"load_s": load_s, "first": first, "second": second, "screenshots": shots}
+        if control is not None:
+            token, exposure = control
+            page.call("Runtime.evaluate", expression=(
+                f"document.getElementById('token').value = {json.dumps(token)};"
+                f"document.getElementById('exposure').value = {json.dumps(exposure)};"
+                "document.getElementById('set-exposure').click();"))
+            ack_js = "JSON.stringify({acks: document.body.dataset.acks, " \
+                     "shown: !document.getElementById('controls').hidden, " \
+                     "text: document.getElementById('ack').textContent, " \
+                     "class: document.getElementById('ack').className})"
+            answer = {}
+            deadline = time.monotonic() + 10
+            while time.monotonic() < deadline:
+                page.wait(0.2)
+                answer = json.loads(
+                    page.call("Runtime.evaluate", expression=ack_js)["result"]["value"])
+                if answer.get("acks") not in (None, "0"):
+                    break
+            page.wait(1.5)  # a frame or two taken at the new exposure
+            data = page.call("Page.captureScreenshot", format="png")["data"]
+            path = os.path.join(out_dir, "controls.png")
+            with open(path, "wb") as f:
+                f.write(base64.b64decode(data))
+            answer["screenshot"] = path
+            report["control"] = answer
+        report["problems"] = problems(page.events)
+        print(json.dumps(report))
         return 0
     finally:
         browser.terminate()

@@ -4,11 +4,17 @@
 //
 // Threads: the LCM thread decodes each message (checked) and stores the latest under one mutex;
 // the HTTP threads take copies. Malformed messages are counted, shown, and skipped.
+//
+// Controls (--allow-control, with a --token the page must give): the page posts a setting to
+// /command; the view checks the token, sends a laserline.command_t carrying it to the daemon and
+// answers with the daemon's command_ack_t.
 #include <httplib.h>
 #include <netdb.h>
 #include <signal.h>
 #include <sys/socket.h>
 #include <unistd.h>
+#include <laserline/command_ack_t.hpp>
+#include <laserline/command_t.hpp>
 #include <laserline/image_t.hpp>
 #include <laserline/profile_t.hpp>
 #include <laserline/status_t.hpp>
@@ -24,9 +30,12 @@
 #include <cstdlib>
 #include <cstring>
 #include <deque>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <opencv2/imgcodecs.hpp>
+#include <optional>
+#include <random>
 #include <string>
 #include <thread>
 #include <vector>
@@ -41,13 +50,23 @@ constexpr const char* kUsage =
     "usage: laserline-view [--listen ADDR:PORT] [--url URL] [--profile-channel C]\n"
     "                      [--image-channel C] [--status-channel C] [--history S]\n"
     "                      [--frame-rate HZ] [--profile-rate HZ]\n"
+    "                      [--allow-control --token TEXT [--command-channel C]]\n"
     "  --listen ADDR:PORT  where the page is served (default 127.0.0.1:8090, this computer only;\n"
     "                      0.0.0.0:8090 for every network; port 0: any free port)\n"
     "  --url URL           LCM URL (default: LCM_DEFAULT_URL or udpm://239.255.76.67:7667?ttl=0)\n"
     "  --history S         seconds of points in the 3-D view (default 5)\n"
     "  --frame-rate HZ     raw frames sent to each browser at most this often (default 5)\n"
     "  --profile-rate HZ   profiles sent to each browser at most this often (default 10)\n"
+    "  --allow-control     controls on the page: exposure, gain, the laser's mode; each use\n"
+    "                      needs the --token typed into the page (the laser is a Class 3B hazard)\n"
+    "  --token TEXT        that token, also sent with each command: the daemon's\n"
+    "                      lcm.command_token when it has one\n"
+    "  --command-channel C the daemon's lcm.command_channel (default LASERLINE_COMMAND; answers\n"
+    "                      on C_ACK)\n"
     "Open the address it prints in a browser. Everything the page needs is in this program.\n";
+
+// How long /command waits for the daemon's answer.
+constexpr std::chrono::seconds kCommandTimeout{3};
 
 using Clock = std::chrono::steady_clock;
 
@@ -640,6 +659,75 @@ std::string content_type(std::string_view path) {
   return "application/octet-stream";
 }
 
+// Sends the page's commands to the daemon and waits for their answers. Thread context: send()
+// from the HTTP threads, on_ack() from the LCM thread.
+class CommandRelay {
+ public:
+  CommandRelay(lcm::LCM& lcm, std::string channel, std::string token)
+      : lcm_(lcm), channel_(std::move(channel)), token_(std::move(token)) {}
+
+  // The daemon's answer, or none within kCommandTimeout.
+  std::optional<laserline::command_ack_t> send(const std::string& name, const std::string& value) {
+    laserline::command_t command;
+    command.utime = std::chrono::duration_cast<std::chrono::microseconds>(
+                        std::chrono::system_clock::now().time_since_epoch())
+                        .count();
+    command.sender = "laserline-view";
+    command.name = name;
+    command.value = value;
+    command.token = token_;
+    std::unique_lock lock(mutex_);
+    command.id = static_cast<std::int64_t>(random_() >> 1);
+    waiting_[command.id];
+    lock.unlock();
+    lcm_.publish(channel_, &command);
+    lock.lock();
+    const bool answered = answered_.wait_for(
+        lock, kCommandTimeout, [&] { return waiting_[command.id].has_value() || stopping_; });
+    std::optional<laserline::command_ack_t> ack = std::move(waiting_[command.id]);
+    waiting_.erase(command.id);
+    if (!answered) ack.reset();
+    return ack;
+  }
+
+  void on_ack(const lcm::ReceiveBuffer* rbuf) {
+    laserline::command_ack_t ack;
+    std::string problem;
+    if (!laserline::messages::decode(rbuf->data, rbuf->data_size, &ack, {}, &problem)) return;
+    {
+      std::lock_guard lock(mutex_);
+      const auto waiting = waiting_.find(ack.id);
+      if (waiting == waiting_.end()) return;  // another sender's
+      waiting->second = std::move(ack);
+    }
+    answered_.notify_all();
+  }
+
+  void stop() {
+    {
+      std::lock_guard lock(mutex_);
+      stopping_ = true;
+    }
+    answered_.notify_all();
+  }
+
+  bool token_is(const std::string& token) const { return token == token_; }
+
+ private:
+  lcm::LCM& lcm_;
+  std::string channel_;
+  std::string token_;
+  std::mutex mutex_;
+  std::condition_variable answered_;
+  std::map<std::int64_t, std::optional<laserline::command_ack_t>> waiting_;
+  std::mt19937_64 random_{std::random_device{}()};
+  bool stopping_ = false;
+};
+
+void on_command_ack(const lcm::ReceiveBuffer* rbuf, const std::string&, CommandRelay* relay) {
+  relay->on_ack(rbuf);
+}
+
 void on_lcm_message(const lcm::ReceiveBuffer* rbuf, const std::string& channel, LiveState* state) {
   state->on_message(rbuf, channel);
 }
@@ -654,6 +742,8 @@ int main(int argc, char** argv) {
   ListenAddress listen_at{"127.0.0.1", 8090};
   std::string listen_text = "127.0.0.1:8090";
   double history_s = 5, frame_rate_hz = 5, profile_rate_hz = 10;
+  bool allow_control = false;
+  std::string token, command_channel = "LASERLINE_COMMAND";
   laserline::cli::Arguments args(argc, argv, "laserline-view", kUsage,
                                  {{"listen", true},
                                   {"url", true},
@@ -662,7 +752,10 @@ int main(int argc, char** argv) {
                                   {"status-channel", true},
                                   {"history", true},
                                   {"frame-rate", true},
-                                  {"profile-rate", true}});
+                                  {"profile-rate", true},
+                                  {"allow-control", false},
+                                  {"token", true},
+                                  {"command-channel", true}});
   while (args.next()) {
     const std::string& arg = args.name();
     if (arg == "--listen") {
@@ -684,10 +777,21 @@ int main(int argc, char** argv) {
       frame_rate_hz = positive_number(args, "frames per second");
     } else if (arg == "--profile-rate") {
       profile_rate_hz = positive_number(args, "profiles per second");
+    } else if (arg == "--allow-control") {
+      allow_control = true;
+    } else if (arg == "--token") {
+      token = args.value();
+      if (token.empty() || token.size() > 255) args.fail("--token: 1 to 255 characters");
+    } else if (arg == "--command-channel") {
+      command_channel = args.value();
     } else {
       args.fail("unexpected argument '" + args.value() + "'");
     }
   }
+  if (allow_control && token.empty()) {
+    args.fail("--allow-control needs --token: nobody switches the laser without it");
+  }
+  if (!allow_control && !token.empty()) args.fail("--token goes with --allow-control");
   if (url.rfind("file://", 0) == 0) {
     args.fail("--url: a log is not live; replay it with lcm-logplayer and view that");
   }
@@ -709,6 +813,8 @@ int main(int argc, char** argv) {
   for (const std::string& channel : {profile_channel, image_channel, status_channel}) {
     lcm.subscribeFunction(channel, &on_lcm_message, &state);
   }
+  CommandRelay relay(lcm, command_channel, token);
+  if (allow_control) lcm.subscribeFunction(command_channel + "_ACK", &on_command_ack, &relay);
 
   httplib::Server server;
   server.new_task_queue = [] { return new httplib::ThreadPool(kHttpThreads); };
@@ -731,8 +837,49 @@ int main(int argc, char** argv) {
     server.Get(std::string(asset.path), serve);
     if (asset.path == "/index.html") server.Get("/", serve);
   }
-  // GET only: the view watches. Commands to the daemon, when there are any, belong on a POST route
-  // registered only when asked for on the command line, behind a token given there.
+  // Whether the page shows its controls.
+  server.Get("/control", [allow_control](const httplib::Request&, httplib::Response& res) {
+    res.set_header("Cache-Control", "no-store");
+    res.set_content(allow_control ? "{\"allowed\": true}" : "{\"allowed\": false}",
+                    "application/json");
+  });
+  // Commands only with --allow-control, each with the token given there.
+  if (allow_control) {
+    server.Post("/command", [&relay](const httplib::Request& req, httplib::Response& res) {
+      auto reply = [&res](int status, bool accepted, const std::string& name,
+                          const std::string& value, const std::string& old_value,
+                          const std::string& reason) {
+        std::string json = "{\"accepted\": ";
+        json += accepted ? "true" : "false";
+        for (const auto& [key, text] :
+             {std::pair{"name", &name}, std::pair{"value", &value},
+              std::pair{"old_value", &old_value}, std::pair{"reason", &reason}}) {
+          json += std::string(", \"") + key + "\": ";
+          append_string(json, *text);
+        }
+        json += "}";
+        res.status = status;
+        res.set_header("Cache-Control", "no-store");
+        res.set_content(json, "application/json");
+      };
+      const std::string name = req.get_param_value("name");
+      if (!relay.token_is(req.get_param_value("token"))) {
+        reply(403, false, name, "", "", "token: not the one laserline-view was started with");
+        return;
+      }
+      if (name.empty() || name.size() > 255 || req.get_param_value("value").size() > 255) {
+        reply(400, false, name, "", "", "name: 1 to 255 characters, value: at most 255");
+        return;
+      }
+      const auto ack = relay.send(name, req.get_param_value("value"));
+      if (!ack) {
+        reply(504, false, name, "", "", "no answer from the daemon within 3 s");
+        return;
+      }
+      reply(200, ack->accepted, ack->name, ack->value, ack->old_value, ack->reason);
+    });
+  }
+  // Everything else is GET only: the view watches.
   server.Get("/frame.jpg", [&state](const httplib::Request&, httplib::Response& res) {
     std::string problem;
     const auto frame = state.frame_jpeg(&problem);
@@ -780,9 +927,10 @@ int main(int argc, char** argv) {
     return 1;
   }
   const bool v6 = listen_at.host.find(':') != std::string::npos;
-  std::printf("laserline-view: http://%s%s%s:%d/ (LCM %s; %s, %s, %s)\n", v6 ? "[" : "",
+  std::printf("laserline-view: http://%s%s%s:%d/ (LCM %s; %s, %s, %s)%s\n", v6 ? "[" : "",
               listen_at.host.c_str(), v6 ? "]" : "", port, url.c_str(), profile_channel.c_str(),
-              image_channel.c_str(), status_channel.c_str());
+              image_channel.c_str(), status_channel.c_str(),
+              allow_control ? "; controls on, with the token" : "");
   std::fflush(stdout);
 
   std::atomic<bool> stopping{false}, lcm_failed{false};
@@ -802,6 +950,7 @@ int main(int argc, char** argv) {
       if (sigtimedwait(&stop_signals, nullptr, &poll) > 0) stopping = true;
     }
     state.stop();
+    relay.stop();
     server.stop();
   });
   const bool served = server.listen_after_bind();

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include "hal/clock.hpp"
 
@@ -13,12 +14,68 @@ SimCamera::SimCamera(const SimSceneOptions& options, const Laser* laser, SimCame
       laser_(laser),
       stall_(stall),
       exposure_(exposure),
+      configured_exposure_(exposure),
       period_ns_(static_cast<std::int64_t>(std::llround(1e9 / options.frame_rate_hz))) {
   if (options.colour != SimColour::kMono) {
     const FrameFormat f = scene_.format();
     converter_ = PixelConverter(scene_.raw_format(), f.width, f.height, channel);
     raw_.assign(scene_.raw_bytes(), 0);
   }
+  update_brightness();
+}
+
+void SimCamera::update_brightness() {
+  const double factor = exposure_.exposure_us / configured_exposure_.exposure_us *
+                        std::pow(10.0, (exposure_.gain_db - configured_exposure_.gain_db) / 20.0);
+  scaled_ = factor != 1.0;
+  for (int level = 0; level < 256; ++level) {
+    brightness_[static_cast<std::size_t>(level)] =
+        static_cast<std::uint8_t>(std::min(255.0, std::round(level * factor)));
+  }
+}
+
+std::string SimCamera::check_setting(const CameraSetting& setting) const {
+  const std::string name = setting.name;
+  if (name == "exposure_us") {
+    return range_problem(setting.name, setting.value, setting.number, kSimExposureRange);
+  }
+  if (name == "gain_db") {
+    return range_problem(setting.name, setting.value, setting.number, kSimGainRange);
+  }
+  if (name == "frame_rate_hz") {
+    return "frame_rate_hz: the simulated camera's frame rate is its scene's time base, fixed at "
+           "start (camera.frame_rate_hz)";
+  }
+  return name + ": not a setting of the simulated camera (exposure_us, gain_db)";
+}
+
+void SimCamera::apply_setting(const CameraSetting& setting, SettingResult& result) {
+  double* value = std::strcmp(setting.name, "exposure_us") == 0 ? &exposure_.exposure_us
+                  : std::strcmp(setting.name, "gain_db") == 0   ? &exposure_.gain_db
+                                                                : nullptr;
+  if (value == nullptr) {
+    result.accepted = false;
+    write_setting_text(result.reason, "not a setting of the simulated camera");
+    return;
+  }
+  write_setting_value(result.old_value, *value);
+  *value = setting.number;
+  update_brightness();
+  write_setting_value(result.in_force, *value);
+  result.accepted = true;
+}
+
+bool SimCamera::read_setting(const char* name, std::span<char> value) {
+  if (std::strcmp(name, "exposure_us") == 0) {
+    write_setting_value(value, exposure_.exposure_us);
+  } else if (std::strcmp(name, "gain_db") == 0) {
+    write_setting_value(value, exposure_.gain_db);
+  } else if (std::strcmp(name, "frame_rate_hz") == 0) {
+    write_setting_value(value, 1e9 / static_cast<double>(period_ns_));
+  } else {
+    return false;
+  }
+  return true;
 }
 
 bool SimCamera::open(std::string* /*error*/) {
@@ -78,6 +135,10 @@ void SimCamera::render_frame(std::uint64_t sequence, bool laser_on, std::span<st
     const FrameFormat f = scene_.format();
     converter_.convert(raw_.data(), raw_.size() / static_cast<std::size_t>(f.height), dst.data(),
                        static_cast<std::size_t>(f.stride));
+  }
+  if (scaled_) {
+    for (std::uint8_t& pixel : dst.first(scene_.format().bytes()))
+      pixel = brightness_[pixel];
   }
   info.sequence = sequence;
   info.laser_on = laser_on;

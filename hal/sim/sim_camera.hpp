@@ -1,5 +1,6 @@
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <vector>
@@ -22,11 +23,15 @@ struct SimCameraStall {
 
 // What the simulated camera reports as each frame's exposure and gain (camera.sim.exposure_us,
 // gain_db), as a real camera reports its settings; the rendered scene's brightness is the scene's
-// own (laser_peak, ambient) and does not follow them.
+// own (laser_peak, ambient) at these. Changed while streaming (apply_setting), they scale the
+// frame's grey levels as a sensor's would: by the ratio of exposures times the gain's ratio in
+// amplitude, clipped at 255.
 struct SimCameraExposure {
   double exposure_us = 1000;
   double gain_db = 0;
 };
+inline constexpr NumberRange kSimExposureRange{1.0, 1e7};  // camera.sim.exposure_us
+inline constexpr NumberRange kSimGainRange{-20.0, 60.0};   // camera.sim.gain_db
 
 class SimCamera final : public Camera {
  public:
@@ -40,6 +45,10 @@ class SimCamera final : public Camera {
   GrabStatus grab(std::span<std::uint8_t> dst, FrameInfo& info,
                   std::chrono::milliseconds timeout) override;
   void stop() override;
+  // exposure_us and gain_db; the frame rate is the scene's time base and stays as configured.
+  std::string check_setting(const CameraSetting& setting) const override;
+  void apply_setting(const CameraSetting& setting, SettingResult& result) override;
+  bool read_setting(const char* name, std::span<char> value) override;
 
   // Writes frame `sequence` as grab() delivers it (pixels; the info's laser state, exposure and
   // gain) without waiting for its time and without open(): for sources that render ahead (the
@@ -48,12 +57,17 @@ class SimCamera final : public Camera {
                     FrameInfo& info);
 
  private:
+  void update_brightness();
+
   SimScene scene_;
   PixelConverter converter_;       // colour scenes: raw_ -> the frame
   std::vector<std::uint8_t> raw_;  // colour scenes: the frame as rendered
   const Laser* laser_;
   SimCameraStall stall_;
   SimCameraExposure exposure_;
+  const SimCameraExposure configured_exposure_;
+  std::array<std::uint8_t, 256> brightness_{};  // grey level -> grey level at exposure_
+  bool scaled_ = false;                         // brightness_ is not the identity
   std::int64_t period_ns_;
   std::int64_t start_mono_ns_ = 0;
   std::uint64_t next_sequence_ = 0;

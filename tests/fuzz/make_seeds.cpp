@@ -192,6 +192,17 @@ int main(int argc, char** argv) {
   write(dir / "profile/full", profile_full);
   write(dir / "profile/empty", profile_empty);
   write(dir / "status/status", status_bytes);
+  for (auto [name, value] : {std::pair{"exposure_us", "1500"}, std::pair{"laser.mode", "off"},
+                             std::pair{"genicam:ExposureTime", "800"}, std::pair{"get", ""}}) {
+    laserline::command_t command;
+    command.utime = 1'700'000'000'000'000;
+    command.id = 7;
+    command.sender = "laserline-ctl@rov[42]";
+    command.name = name;
+    command.value = value;
+    command.token = "s3cret";
+    write(dir / "command" / (std::string(name) + ".cmd"), encode(command));
+  }
   write(dir / "point/point", encode(profile(1).points[0]));
   const Bytes calibration_bytes = encode(calibration());
   write(dir / "calibration_message/calibration", calibration_bytes);

@@ -1,9 +1,11 @@
 // A stand-in V4L2 capture device for tests: a FUSE file (libfuse3) that answers the V4L2 ioctls
 // a capture client uses and serves frames through mmap, so that a V4L2 client runs its real code
 // path (open, QUERYCAP, S_FMT, S_PARM, REQBUFS, QUERYBUF, mmap, QBUF, STREAMON, poll, DQBUF) on
-// this machine, which has no video device. The kernel passes a FUSE file's ioctls on when their
-// argument size is encoded in the command number, which holds for every V4L2 ioctl used here.
-// Test-only: never installed.
+// this machine, which has no video device. Two integer controls, "Exposure Time, Absolute" and
+// "Gain", answer QUERYCTRL, G_CTRL and S_CTRL (the extended-control ioctls carry a pointer to
+// their array, which a FUSE file's ioctl cannot follow). The kernel passes a FUSE file's ioctls on
+// when their argument size is encoded in the command number, which holds for every V4L2 ioctl used
+// here. Test-only: never installed.
 //
 //   v4l2_fuse_device MOUNTPOINT [--format NAME] [--width W] [--height H] [--fps F]
 //                    [--padding BYTES] [--yuv 601-limited|709-full]
@@ -60,6 +62,16 @@ struct Buffer {
   v4l2_buffer info{};
 };
 
+// The controls it has (VIDIOC_QUERYCTRL, G_CTRL, S_CTRL; integers), named as drivers name them.
+struct Control {
+  std::uint32_t id;
+  const char* name;
+  std::int32_t minimum;
+  std::int32_t maximum;
+  std::int32_t default_value;
+  std::int32_t value;
+};
+
 struct Device {
   std::mutex mutex;
   std::uint32_t fourcc = V4L2_PIX_FMT_GREY;
@@ -77,6 +89,9 @@ struct Device {
   fuse_pollhandle* poll_handle = nullptr;
   fuse* fs = nullptr;
   std::atomic<bool> running{true};
+  Control controls[2] = {
+      {V4L2_CID_EXPOSURE_ABSOLUTE, "Exposure Time, Absolute", 1, 10000, 100, 100},
+      {V4L2_CID_GAIN, "Gain", 0, 255, 32, 32}};
 
   std::uint32_t bytes_per_line() const {
     return width * laserline::test::pattern_bytes_per_pixel(fourcc) + padding;
@@ -111,6 +126,17 @@ void fill_format(v4l2_format* f) {
   } else if (g_device.fourcc == V4L2_PIX_FMT_YUYV) {
     f->fmt.pix.colorspace = V4L2_COLORSPACE_SMPTE170M;
   }
+}
+
+// The control with this id, or with V4L2_CTRL_FLAG_NEXT_CTRL the first one after it.
+const Control* find_control(std::uint32_t id) {
+  const bool next = (id & V4L2_CTRL_FLAG_NEXT_CTRL) != 0;
+  id &= ~V4L2_CTRL_FLAG_NEXT_CTRL;
+  const Control* best = nullptr;
+  for (const Control& c : g_device.controls) {
+    if (next ? c.id > id && (best == nullptr || c.id < best->id) : c.id == id) best = &c;
+  }
+  return best;
 }
 
 int do_ioctl(const char* path, unsigned int cmd, void* /*arg*/, fuse_file_info* fi,
@@ -227,6 +253,34 @@ int do_ioctl(const char* path, unsigned int cmd, void* /*arg*/, fuse_file_info* 
         for (Buffer& b : d.buffers)
           b.state = State::kIdle;
       }
+      return 0;
+    }
+    case VIDIOC_QUERYCTRL: {
+      auto* q = static_cast<v4l2_queryctrl*>(data);
+      const Control* c = find_control(q->id);
+      if (c == nullptr) return -EINVAL;
+      std::memset(q, 0, sizeof(*q));
+      q->id = c->id;
+      q->type = V4L2_CTRL_TYPE_INTEGER;
+      std::snprintf(reinterpret_cast<char*>(q->name), sizeof(q->name), "%s", c->name);
+      q->minimum = c->minimum;
+      q->maximum = c->maximum;
+      q->step = 1;
+      q->default_value = c->default_value;
+      return 0;
+    }
+    case VIDIOC_G_CTRL:
+    case VIDIOC_S_CTRL: {
+      auto* v = static_cast<v4l2_control*>(data);
+      Control* c = nullptr;
+      for (Control& control : d.controls)
+        if (control.id == v->id) c = &control;
+      if (c == nullptr) return -EINVAL;
+      if (cmd == VIDIOC_S_CTRL) {
+        if (v->value < c->minimum || v->value > c->maximum) return -ERANGE;
+        c->value = v->value;
+      }
+      v->value = c->value;
       return 0;
     }
     default:

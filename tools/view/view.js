@@ -320,6 +320,33 @@ function listen() {
 listen();
 $('source').textContent = location.host;
 
+// --- controls: shown when laserline-view runs with --allow-control ---------------------------
+function sendCommand(name, value) {
+  const ack = $('ack');
+  ack.textContent = name + ' ' + value + ' …';
+  ack.className = 'info';
+  const body = new URLSearchParams({name: name, value: value, token: $('token').value});
+  fetch('command', {method: 'POST', body: body})
+    .then((response) => response.json())
+    .then((a) => {
+      ack.textContent = a.accepted ? a.name + ' = ' + a.value + ' (was ' + a.old_value + ')'
+                                   : 'refused: ' + a.reason;
+      ack.className = a.accepted ? 'ok' : 'bad';
+      document.body.dataset.acks = String(Number(document.body.dataset.acks) + 1);
+    })
+    .catch((error) => noteError('command: ' + error));
+}
+fetch('control')
+  .then((response) => response.json())
+  .then((control) => {
+    if (!control.allowed) return;
+    $('controls').hidden = false;
+    $('set-exposure').addEventListener('click', () => sendCommand('exposure_us', $('exposure').value));
+    $('set-gain').addEventListener('click', () => sendCommand('gain_db', $('gain').value));
+    $('set-laser').addEventListener('click', () => sendCommand('laser.mode', $('laser-mode').value));
+  })
+  .catch((error) => noteError('control: ' + error));
+
 // Where the frame is, for the browser test's screenshots.
 const rect = frameCanvas.getBoundingClientRect();
 frameCanvas.dataset.rect = [rect.left, rect.top, rect.width, rect.height].map(Math.round).join(',');
