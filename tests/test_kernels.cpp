@@ -268,5 +268,51 @@ TEST(Kernels, RefineColumnsMatchTheReference) {
   });
 }
 
+// Columns [begin, end) of images with plateaus of their largest value (first and last row
+// differ), columns of zeros, of 255 and random ones; heights past a flush of the 16-bit sums.
+TEST(Kernels, ColumnMaximaMatchTheReference) {
+  for_each_target([] {
+    std::mt19937 random(7);
+    for (const int height : {1, 2, 255, 256, 257, 700}) {
+      for (const int width : {1, 15, 16, 33, 100, 301}) {
+        const int stride = width + 5;
+        auto image =
+            random_values<std::uint8_t>(random, static_cast<std::size_t>(stride) * height, 0, 255);
+        for (int v = 0; v < height; ++v) {
+          for (int u = 0; u < width; u += 7)
+            image[v * stride + u] = u % 2 == 0 ? 0 : 255;
+          if (v % 3 == 0 && width > 3) image[v * stride + 3] = 200;  // a plateau in column 3
+        }
+        for (const auto& [begin, end] : {std::pair{0, width}, std::pair{width / 3, width}}) {
+          std::vector<std::uint8_t> max(width, 9), max_expected(width, 9);
+          std::vector<std::uint16_t> first(width, 9), first_expected(width, 9);
+          std::vector<std::uint16_t> last(width, 9), last_expected(width, 9);
+          std::vector<std::uint32_t> sum(width, 9), sum_expected(width, 9);
+          column_maxima(image.data(), stride, begin, end, height, max.data(), first.data(),
+                        last.data(), sum.data());
+          reference::column_maxima(image.data(), stride, begin, end, height, max_expected.data(),
+                                   first_expected.data(), last_expected.data(),
+                                   sum_expected.data());
+          ASSERT_EQ(max, max_expected) << height << " x " << width << " from " << begin;
+          ASSERT_EQ(first, first_expected) << height << " x " << width << " from " << begin;
+          ASSERT_EQ(last, last_expected) << height << " x " << width << " from " << begin;
+          ASSERT_EQ(sum, sum_expected) << height << " x " << width << " from " << begin;
+        }
+      }
+    }
+  });
+}
+
+TEST(Kernels, Transpose16MatchesTheReference) {
+  for_each_target([] {
+    std::mt19937 random(8);
+    const auto source = random_values<std::uint8_t>(random, 16 * 21, 0, 255);
+    std::vector<std::uint8_t> got(16 * 19, 3), expected(16 * 19, 3);
+    transpose16(source.data(), 21, got.data(), 19);
+    reference::transpose16(source.data(), 21, expected.data(), 19);
+    ASSERT_EQ(got, expected);
+  });
+}
+
 }  // namespace
 }  // namespace laserline::pipeline::kernels

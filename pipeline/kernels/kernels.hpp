@@ -115,7 +115,25 @@ struct RefineColumns {
 };
 void refine_columns(const RefineColumns& columns, int n, float* rows);
 
+// ---------------------------------------------------------------------------------------------
+// Whole images (pipeline/kernels/image_kernels.cpp).
+
+// Per column u in [begin, end) of an image `height` rows high (at most 65535): its largest value,
+// the first and the last row where it is reached, and the sum of its values.
+void column_maxima(const std::uint8_t* image, std::ptrdiff_t stride, int begin, int end, int height,
+                   std::uint8_t* max, std::uint16_t* first, std::uint16_t* last,
+                   std::uint32_t* sum);
+
+// dst (rows = src columns) = the transpose of the 16 x 16 block at src.
+void transpose16(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
+                 std::ptrdiff_t dst_stride);
+
 namespace reference {
+void column_maxima(const std::uint8_t* image, std::ptrdiff_t stride, int begin, int end, int height,
+                   std::uint8_t* max, std::uint16_t* first, std::uint16_t* last,
+                   std::uint32_t* sum);
+void transpose16(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
+                 std::ptrdiff_t dst_stride);
 void refine_columns(const RefineColumns& columns, int n, float* rows);
 void interpolate_row(const std::uint8_t* a, const std::uint8_t* b, std::uint16_t fb, int shift,
                      int count, std::uint16_t* out);
