@@ -190,7 +190,8 @@ void Frontend::reset(int width, int height) {
   band_most_.assign(static_cast<std::size_t>(strips * (band_ring_rows_ + 1)), 0);
   // Each strip's rings end with a row of zeros (the rows beyond the ends); the last, with a
   // register's lanes more for the noise sums to read past it.
-  const auto band_ring = static_cast<std::size_t>(strips * (band_ring_rows_ + 1)) * ring + kBlock;
+  const auto band_ring =
+      static_cast<std::size_t>(strips * (band_ring_rows_ + 1)) * ring + kernels::kWindowLanes;
   narrow_.assign(narrow_band_ ? band_ring : 0, narrow_band_ ? strips * ring : 0);
   wide_.assign(narrow_band_ ? 0 : band_ring, narrow_band_ ? 0 : strips * ring);
   band_rows_.assign(static_cast<std::size_t>(kRowBlock + 2 * look), 0);
@@ -282,58 +283,21 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
   const auto wn0 = static_cast<float>(g[7] * v + g[8]), wnu = static_cast<float>(g[6]);
   const int blocks = (width_ + kWarpBlock - 1) / kWarpBlock;
   const int width = width_, stride = background.stride, last_column = background.width - 1;
-  // Where each block's centre was in the background, for all blocks of the row at once,
-  // branch-free so that it vectorises: the block's first pixel's position there (the block moves
-  // as a whole), its integer part and the four bilinear weights. Positions are held within two
-  // background sizes (a NaN goes to the far left), so that they convert to int.
-  std::int32_t* __restrict left = warp_left_.data();
-  std::int32_t* __restrict top = warp_top_.data();
-  // The weights (32-bit, as wide as the positions, so that the loop vectorises).
-  std::int32_t* __restrict w00 = warp_weights_[0].data();
-  std::int32_t* __restrict w01 = warp_weights_[1].data();
-  std::int32_t* __restrict w10 = warp_weights_[2].data();
-  std::int32_t* __restrict w11 = warp_weights_[3].data();
-  std::int32_t* __restrict offset = warp_offset_.data();
-  std::int32_t* __restrict whole = warp_whole_.data();
   const int last_row = background.height - 1;
+  // Where each block was in the background, for all blocks of the row at once (positions held
+  // within two background sizes).
+  std::int32_t* left = warp_left_.data();
+  std::int32_t* top = warp_top_.data();
+  std::int32_t* whole = warp_whole_.data();
+  std::int32_t* offset = warp_offset_.data();
+  std::int32_t* w00 = warp_weights_[0].data();
+  std::int32_t* w01 = warp_weights_[1].data();
+  std::int32_t* w10 = warp_weights_[2].data();
+  std::int32_t* w11 = warp_weights_[3].data();
   const float far = 2.0f * std::max(bg_width, bg_height);
-  int partial = 0;  // blocks not whole
-  for (int j = 0; j < blocks; ++j) {
-    const int u0 = j * kWarpBlock;
-    const int count = std::min(kWarpBlock, width - u0);
-    const float centre = static_cast<float>(u0) + 0.5f * static_cast<float>(count - 1);
-    const float inv = 1.0f / (wn0 + wnu * centre);
-    const float y = (yn0 + ynu * centre) * inv;
-    const float x = (xn0 + xnu * centre) * inv - (centre - static_cast<float>(u0));
-    const float xs = x > -far ? (x < far ? x : far) : -far;
-    const float ys = y > -far ? (y < far ? y : far) : -far;
-    const float fx = std::floor(xs), fy = std::floor(ys);
-    const auto ix = static_cast<std::int32_t>(fx), iy = static_cast<std::int32_t>(fy);
-    left[j] = ix;
-    top[j] = iy;
-    // (Where whole, it fits: unsigned, so that elsewhere it may wrap.)
-    offset[j] = static_cast<std::int32_t>(static_cast<std::uint32_t>(iy) *
-                                              static_cast<std::uint32_t>(stride) +
-                                          static_cast<std::uint32_t>(ix));
-    // Whole: all its pixels' four neighbours lie inside the background (nearly every block).
-    whole[j] = (count == kWarpBlock) & (ix >= 0) & (ix + kWarpBlock <= last_column) & (iy >= 0) &
-               (iy < last_row);
-    partial += 1 - whole[j];
-    const float tx = xs - fx, ty = ys - fy;
-    const float one = kFixedOne;
-    // The four sum to 128 (else the background is scaled) by construction: the rows' shares
-    // rounded, then each row's share split between its two pixels.
-    const auto top_share = static_cast<std::int32_t>((1.0f - ty) * one + 0.5f);
-    const std::int32_t bottom_share = kFixedOne - top_share;
-    const auto top_left =
-        static_cast<std::int32_t>((1.0f - tx) * static_cast<float>(top_share) + 0.5f);
-    const auto bottom_left =
-        static_cast<std::int32_t>((1.0f - tx) * static_cast<float>(bottom_share) + 0.5f);
-    w00[j] = top_left;
-    w01[j] = top_share - top_left;
-    w10[j] = bottom_left;
-    w11[j] = bottom_share - bottom_left;
-  }
+  const int partial = kernels::warp_blocks(
+      {xn0, xnu, yn0, ynu, wn0, wnu, far, width, stride, last_column, last_row}, 0, blocks,
+      {left, top, whole, offset, w00, w01, w10, w11});
   kernels::difference_row({row.a,    row.b,
                            row.fb,   normalised_shift_,
                            out,      background.data,

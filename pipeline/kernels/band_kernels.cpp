@@ -47,7 +47,8 @@ template <class Sum, class Lane>
 int BandPass(Sum* inner, const std::uint16_t* inner_in, const std::uint16_t* inner_out, Sum* outer,
              const std::uint16_t* outer_in, const std::uint16_t* outer_out, Sum a, Sum b, int count,
              Lane* out) {
-  const hn::ScalableTag<Sum> d;
+  // At most 256 bits: the strips' rows are a multiple of 16 columns, so no scalar tail.
+  const hn::CappedTag<Sum, 32 / sizeof(Sum)> d;
   const hn::RebindToSigned<decltype(d)> ds;
   const hn::Rebind<std::uint16_t, decltype(d)> d16;
   const int n = static_cast<int>(hn::Lanes(d));
@@ -95,8 +96,9 @@ int BandPass32(std::uint32_t* inner, const std::uint16_t* inner_in, const std::u
 template <class Lane>
 void PeakBits(const Lane* ring, const std::size_t* slot, int reach, Lane threshold, int count,
               std::uint64_t* bits) {
-  // At most 64 lanes: a vector's mask bits fall within one word.
-  const hn::CappedTag<Lane, 64> d;
+  // At most 256 bits: the strips' rows are a multiple of 16 columns, so no scalar tail (and a
+  // vector's mask bits fall within one word).
+  const hn::CappedTag<Lane, 32 / sizeof(Lane)> d;
   const int n = static_cast<int>(hn::Lanes(d));
   for (int w = 0; w * 64 < count; ++w)
     bits[w] = 0;
@@ -134,39 +136,77 @@ void PeakBits32(const std::int32_t* ring, const std::size_t* slot, int reach,
   PeakBits(ring, slot, reach, threshold, count, bits);
 }
 
-// |x| of each lane widened (to 32 bits for 16-bit lanes: exact for a window of at most 1000 rows
-// of 32768; to 64 for 32-bit lanes), summed over the rows per vector of columns, then reduced.
+#if HWY_TARGET == HWY_SCALAR
 template <class Lane, class Wide>
 std::uint64_t WindowSum(const Lane* ring, const std::size_t* above, const std::size_t* below,
                         int rows, int first, int count) {
-  const hn::ScalableTag<Wide> d;
-  const hn::Rebind<Lane, decltype(d)> dn;
+  return reference::window_sum(ring, above, below, rows, first, count);
+}
+#else
+// |x| of a vector of columns (those past `count` masked to 0), taken as unsigned (exact for the
+// most negative value too), its pairs of lanes summed into lanes twice as wide; summed over the
+// rows, then reduced. (16-bit lanes: a window of up to 2 x 1000 rows of 2 x 32768 fits 32 bits.)
+template <class Lane, class Wide>
+std::uint64_t WindowSum(const Lane* ring, const std::size_t* above, const std::size_t* below,
+                        int rows, int first, int count) {
+  const hn::CappedTag<Lane, 64 / sizeof(Lane)> d;  // at most 512 bits: kWindowLanes or fewer
+  const hn::RebindToUnsigned<decltype(d)> du;
+  const hn::Repartition<Wide, decltype(d)> dw;
   const int n = static_cast<int>(hn::Lanes(d));
   const Lane* columns = ring + first;
-  auto magnitude = [&](const Lane* x)
-                       HWY_ATTR { return hn::Abs(hn::PromoteTo(d, hn::LoadU(dn, x))); };
+  const auto low_half = hn::Set(dw, static_cast<Wide>((Wide{1} << (8 * sizeof(Lane))) - 1));
   std::uint64_t sum = 0;
-  int c = 0;
-  for (; c + n <= count; c += n) {
-    auto up = hn::Zero(d), down = hn::Zero(d);
+  for (int c = 0; c < count; c += n) {
+    const auto wanted = hn::FirstN(d, static_cast<std::size_t>(count - c));
+    auto pairs = [&](const Lane* x) HWY_ATTR {
+      const auto magnitude =
+          hn::BitCast(dw, hn::BitCast(du, hn::Abs(hn::IfThenElseZero(wanted, hn::LoadU(d, x)))));
+      return hn::Add(hn::And(magnitude, low_half), hn::ShiftRight<8 * sizeof(Lane)>(magnitude));
+    };
+    auto up = hn::Zero(dw), down = hn::Zero(dw);
     for (int j = 0; j < rows; ++j) {
-      up = hn::Add(up, magnitude(columns + above[j] + c));
-      down = hn::Add(down, magnitude(columns + below[j] + c));
+      up = hn::Add(up, pairs(columns + above[j] + c));
+      down = hn::Add(down, pairs(columns + below[j] + c));
     }
-    sum += static_cast<std::uint64_t>(hn::GetLane(hn::SumOfLanes(d, hn::Add(up, down))));
+    sum += static_cast<std::uint64_t>(hn::GetLane(hn::SumOfLanes(dw, hn::Add(up, down))));
   }
-  if (c < count) sum += reference::window_sum(ring, above, below, rows, first + c, count - c);
   return sum;
 }
+#endif
 
 std::uint64_t WindowSum16(const std::int16_t* ring, const std::size_t* above,
                           const std::size_t* below, int rows, int first, int count) {
-  return WindowSum<std::int16_t, std::int32_t>(ring, above, below, rows, first, count);
+#if HWY_TARGET == HWY_SCALAR
+  return WindowSum<std::int16_t, std::uint32_t>(ring, above, below, rows, first, count);
+#else
+  // |x| (x > -32768: the band-pass's range) summed in pairs into 32-bit lanes, weighted 1 for
+  // the window's columns and 0 past them: a multiply-add of pairs where the CPU has one (AVX2's,
+  // NEON's). Exact: 2 x 1000 rows of 2 x 32767 fit, and so does the whole window's sum.
+  const hn::CappedTag<std::int16_t, 32> d;
+  const hn::Repartition<std::int32_t, decltype(d)> d32;
+  const int n = static_cast<int>(hn::Lanes(d));
+  const std::int16_t* columns = ring + first;
+  std::uint64_t sum = 0;
+  for (int c = 0; c < count; c += n) {
+    const auto ones =
+        hn::IfThenElseZero(hn::FirstN(d, static_cast<std::size_t>(count - c)), hn::Set(d, 1));
+    auto up = hn::Zero(d32), up_odd = up, down = up, down_odd = up;
+    for (int j = 0; j < rows; ++j) {
+      up = hn::ReorderWidenMulAccumulate(d32, hn::Abs(hn::LoadU(d, columns + above[j] + c)), ones,
+                                         up, up_odd);
+      down = hn::ReorderWidenMulAccumulate(d32, hn::Abs(hn::LoadU(d, columns + below[j] + c)), ones,
+                                           down, down_odd);
+    }
+    const auto both = hn::Add(hn::Add(up, up_odd), hn::Add(down, down_odd));
+    sum += static_cast<std::uint32_t>(hn::GetLane(hn::SumOfLanes(d32, both)));
+  }
+  return sum;
+#endif
 }
 
 std::uint64_t WindowSum32(const std::int32_t* ring, const std::size_t* above,
                           const std::size_t* below, int rows, int first, int count) {
-  return WindowSum<std::int32_t, std::int64_t>(ring, above, below, rows, first, count);
+  return WindowSum<std::int32_t, std::uint64_t>(ring, above, below, rows, first, count);
 }
 
 }  // namespace HWY_NAMESPACE

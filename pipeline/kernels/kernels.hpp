@@ -52,6 +52,31 @@ struct WarpRow {
 };
 void difference_row(const WarpRow& row);
 
+// Where the warp blocks [first, end) of a row lie in the background: along the row the background
+// position is a ratio of linear functions of the column u, (xn0 + xnu u, yn0 + ynu u) /
+// (wn0 + wnu u), evaluated at each block's centre and moved to its first pixel (the block moves
+// as a whole); held within `far` of 0 (a NaN to -far) so that it converts to int. Into `out`:
+// WarpRow's per-block arrays (the weights the bilinear ones in 1/128, rounded so that they sum to
+// 128). Returns how many of the blocks are not whole.
+struct WarpLine {
+  float xn0, xnu, yn0, ynu, wn0, wnu;
+  float far;
+  int width;
+  std::ptrdiff_t stride;  // the background's
+  int last_column, last_row;
+};
+struct WarpBlocks {
+  std::int32_t* left;
+  std::int32_t* top;
+  std::int32_t* whole;
+  std::int32_t* offset;
+  std::int32_t* w00;
+  std::int32_t* w01;
+  std::int32_t* w10;
+  std::int32_t* w11;
+};
+int warp_blocks(const WarpLine& line, int first, int end, const WarpBlocks& out);
+
 // ---------------------------------------------------------------------------------------------
 // III-C to E: band-pass, noise and peaks of a strip (pipeline/kernels/band_kernels.cpp), in 16- or
 // 32-bit lanes.
@@ -76,7 +101,10 @@ void peak_bits(const std::int32_t* ring, const std::size_t* slot, int reach, std
                int count, std::uint64_t* bits);
 
 // The sum of |x| over columns [first, first + count) of the `rows` rows ring + above[j] and
-// ring + below[j] (a noise window less its guard band). Exact.
+// ring + below[j] (a noise window less its guard band; at most 1000 rows each). Exact for
+// |x| < 2^15 (16-bit lanes) or 2^31 (32-bit lanes): the band-pass's range. Reads, and does not use, up to kWindowLanes - 1 lanes past each row's last
+// column: the ring must hold them.
+constexpr int kWindowLanes = 32;
 std::uint64_t window_sum(const std::int16_t* ring, const std::size_t* above,
                          const std::size_t* below, int rows, int first, int count);
 std::uint64_t window_sum(const std::int32_t* ring, const std::size_t* above,
@@ -138,6 +166,7 @@ void refine_columns(const RefineColumns& columns, int n, float* rows);
 void interpolate_row(const std::uint8_t* a, const std::uint8_t* b, std::uint16_t fb, int shift,
                      int count, std::uint16_t* out);
 void difference_row(const WarpRow& row);
+int warp_blocks(const WarpLine& line, int first, int end, const WarpBlocks& out);
 // Pixels [u, u + count) of a row against background rows p (under pixel u) and p + stride.
 void difference_pixels(const WarpRow& row, int u, const std::uint8_t* p, int block, int count);
 int band_pass_row(std::uint16_t* inner, const std::uint16_t* inner_in,
