@@ -102,8 +102,8 @@ void peak_bits(const std::int32_t* ring, const std::size_t* slot, int reach, std
 
 // The sum of |x| over columns [first, first + count) of the `rows` rows ring + above[j] and
 // ring + below[j] (a noise window less its guard band; at most 1000 rows each). Exact for
-// |x| < 2^15 (16-bit lanes) or 2^31 (32-bit lanes): the band-pass's range. Reads, and does not use, up to kWindowLanes - 1 lanes past each row's last
-// column: the ring must hold them.
+// |x| < 2^15 (16-bit lanes) or 2^31 (32-bit lanes): the band-pass's range. Reads, and does not use,
+// up to kWindowLanes - 1 lanes past each row's last column: the ring must hold them.
 constexpr int kWindowLanes = 32;
 std::uint64_t window_sum(const std::int16_t* ring, const std::size_t* above,
                          const std::size_t* below, int rows, int first, int count);
