@@ -6,16 +6,21 @@
 // Run: build/default/bench/laserline_bench [--benchmark_filter=...] [--benchmark_format=json]
 #include <benchmark/benchmark.h>
 
+#include <hwy/targets.h>
 #include <atomic>
 #include <cmath>
+#include <cstdint>
+#include <cstdio>
 #include <deque>
 #include <mutex>
 #include <opencv2/core.hpp>
+#include <string>
 #include <thread>
 
 #include "bench_scenes.hpp"
 #include "daemon/spsc_ring.hpp"
 #include "hal/sim/sim_scene.hpp"
+#include "pipeline/kernels/kernels.hpp"
 #include "pipeline/maxvalue_detector.hpp"
 #include "pipeline/subpixel.hpp"
 
@@ -160,4 +165,37 @@ BENCHMARK(BM_sim_render)->Args({1280, 1024})->Args({2048, 1536})->Unit(benchmark
 
 }  // namespace
 
-BENCHMARK_MAIN();
+// --kernel_target=NAME (e.g. AVX2, SSE4, SCALAR): the vector kernels of pipeline/kernels/ run on
+// that target instead of the best the CPU has, to compare them in the same conditions. The
+// target is in the output's context ("kernels").
+int main(int argc, char** argv) {
+  const std::string flag = "--kernel_target=";
+  int kept = 1;
+  for (int i = 1; i < argc; ++i) {
+    const std::string argument = argv[i];
+    if (argument.rfind(flag, 0) != 0) {
+      argv[kept++] = argv[i];
+      continue;
+    }
+    const std::string wanted = argument.substr(flag.size());
+    std::int64_t chosen = 0;
+    std::string known;
+    for (const std::int64_t target : hwy::SupportedAndGeneratedTargets()) {
+      if (wanted == hwy::TargetName(target)) chosen = target;
+      known += std::string(" ") + hwy::TargetName(target);
+    }
+    if (chosen == 0) {
+      std::fprintf(stderr, "laserline_bench: --kernel_target=%s: not one of%s\n", wanted.c_str(),
+                   known.c_str());
+      return 2;
+    }
+    hwy::SetSupportedTargetsForTest(chosen);
+  }
+  argc = kept;
+  benchmark::AddCustomContext("kernels", laserline::pipeline::kernels::target_name());
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

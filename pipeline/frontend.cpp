@@ -1,9 +1,8 @@
 // The front end (paper Section III): its sizes from the options and the geometry, the row
 // normalisation (III-B: the background warped and subtracted, rows resampled to a constant line
-// width) with its row kernels, and the choice of the line among the candidates. The pass down the
-// rows is in frontend_roll.cpp, the sub-pixel refinement in frontend_refine.cpp. Over 600 lines:
-// the normalisation's kernels must be in the file of the function compiled per target
-// (target_clones) that inlines them.
+// width; its vector kernels in pipeline/kernels/), and the choice of the line among the
+// candidates. The pass down the rows is in frontend_roll.cpp, the sub-pixel refinement in
+// frontend_refine.cpp.
 #include "pipeline/frontend.hpp"
 
 #include <algorithm>
@@ -18,6 +17,7 @@
 #include <type_traits>
 
 #include "pipeline/frontend_common.hpp"
+#include "pipeline/kernels/kernels.hpp"
 #include "pipeline/subpixel.hpp"
 
 namespace laserline::pipeline {
@@ -110,7 +110,6 @@ float RowNormalisation::to_source_single(float r) const {
 Frontend::Frontend(const ScannerGeometry& geometry, const FrontendOptions& options)
     : geometry_(geometry), options_(options), selector_(options.selection) {
   options.validate();
-  use_intrinsics(true);
   inner_ = odd_at_least_one(options.normalised_width_px);
   outer_ = odd_at_least_one(options.normalised_width_px * options.passband_ratio);
   if (outer_ <= inner_) outer_ = inner_ + 2;
@@ -191,7 +190,8 @@ void Frontend::reset(int width, int height) {
   band_most_.assign(static_cast<std::size_t>(strips * (band_ring_rows_ + 1)), 0);
   // Each strip's rings end with a row of zeros (the rows beyond the ends); the last, with a
   // register's lanes more for the noise sums to read past it.
-  const auto band_ring = static_cast<std::size_t>(strips * (band_ring_rows_ + 1)) * ring + kBlock;
+  const auto band_ring =
+      static_cast<std::size_t>(strips * (band_ring_rows_ + 1)) * ring + kernels::kWindowLanes;
   narrow_.assign(narrow_band_ ? band_ring : 0, narrow_band_ ? strips * ring : 0);
   wide_.assign(narrow_band_ ? 0 : band_ring, narrow_band_ ? 0 : strips * ring);
   band_rows_.assign(static_cast<std::size_t>(kRowBlock + 2 * look), 0);
@@ -202,9 +202,9 @@ void Frontend::reset(int width, int height) {
   warp_top_.assign(blocks, 0);
   warp_whole_.assign(blocks, 0);
   warp_offset_.assign(blocks, 0);
-  warp_pairs_.assign(2 * blocks, 0);
+  for (std::vector<std::int32_t>& weights : warp_weights_)
+    weights.assign(blocks, 0);
   zero_normalised_.assign(s, 0);
-  peak_flags_.assign(ring + 8, 0u);
   peak_bits_.assign((ring + 63) / 64, 0u);
   column_best_.assign(static_cast<std::size_t>(width) * options_.max_candidates_per_column, {});
   column_count_.assign(static_cast<std::size_t>(width), 0);
@@ -218,262 +218,22 @@ void Frontend::reset(int width, int height) {
   refine_columns_.assign(static_cast<std::size_t>(width), 0);
   refine_guesses_.assign(static_cast<std::size_t>(width), 0.0f);
   refine_points_.assign(static_cast<std::size_t>(width), 0);
+  RefineLanes& lanes = refine_lanes_;
+  for (std::vector<std::int32_t>* field :
+       {&lanes.u, &lanes.centre, &lanes.lo, &lanes.count, &lanes.spacing, &lanes.edge})
+    field->assign(static_cast<std::size_t>(width), 0);
+  for (std::vector<float>* field : {&lanes.x0, &lanes.y0, &lanes.dx, &lanes.dy, &lanes.rows})
+    field->assign(static_cast<std::size_t>(width), 0.0f);
+  lanes.point.assign(static_cast<std::size_t>(width), 0);
 }
 
 namespace {
 
-// Interpolation is done in fixed point, 1/128 grey level: weights of 7 bits (summing to 128),
-// so that a pixel's weighted sum fits 16 signed bits, as AVX2's multiply-add of bytes wants.
-// (The warp is a translation per block, off by up to 0.05 pixel: at an edge of 255 grey levels,
-// 13 of them, against at most 1 for weights rounded to 1/256 instead of 1/128.) Clipped at 0.
-// The normalised rows keep 7 - shift fractional bits of it, rounded (fewer where the band-pass
-// is to fit 16-bit lanes: see the constructor).
-
-LASERLINE_ROW_KERNEL std::uint16_t to_precision(unsigned value, int shift) {
-  return static_cast<std::uint16_t>((value + ((1u << shift) >> 1)) >> shift);
-}
-
-// Two weights as the byte pair AVX2's multiply-add of bytes takes (the first in the low byte of a
-// 16-bit word), negated: -128 fits a signed byte, +128 does not.
-LASERLINE_ROW_KERNEL std::int32_t negated_pair(std::int32_t first, std::int32_t second) {
-  return (-first & 0xff) | ((-second & 0xff) << 8);
-}
+static_assert(Frontend::kWarpBlock == kernels::WarpRow::kWarpBlock);
 
 inline std::uint16_t fixed_weight(float t) {
   return static_cast<std::uint16_t>(std::clamp(t, 0.0f, 1.0f) * kFixedOne + 0.5f);
 }
-
-// Row kernels. Each runs over whole rows with __restrict pointers so that GCC vectorises it.
-
-// A normalised row: the current frame interpolated between rows a and b (weight fb of b).
-LASERLINE_ROW_KERNEL void interpolate_row(const std::uint8_t* __restrict a,
-                                          const std::uint8_t* __restrict b, std::uint16_t fb,
-                                          int shift, int count, std::uint16_t* __restrict out) {
-  const auto fa = static_cast<std::uint16_t>(kFixedOne - fb);
-  for (int u = 0; u < count; ++u)
-    out[u] = to_precision(static_cast<std::uint16_t>(a[u] * fa + b[u] * fb), shift);
-}
-
-// The four bilinear weights of a warp block (summing to 128).
-struct BlockWeights {
-  std::uint16_t w00, w01, w10, w11;
-};
-
-// `count` pixels of one warp block, minus the background sampled bilinearly at a constant
-// sub-pixel shift (rows p and q of the background), clipped at 0.
-LASERLINE_ROW_KERNEL void difference_block(const std::uint8_t* __restrict a,
-                                           const std::uint8_t* __restrict b, std::uint16_t fb,
-                                           const std::uint8_t* __restrict p,
-                                           const std::uint8_t* __restrict q, BlockWeights w,
-                                           int shift, int count, std::uint16_t* __restrict out) {
-  const auto fa = static_cast<std::uint16_t>(kFixedOne - fb);
-  for (int k = 0; k < count; ++k) {
-    const auto current = static_cast<std::uint16_t>(a[k] * fa + b[k] * fb);
-    const auto warped = static_cast<std::uint16_t>(p[k] * w.w00 + p[k + 1] * w.w01 + q[k] * w.w10 +
-                                                   q[k + 1] * w.w11);
-    out[k] = to_precision(current > warped ? current - warped : 0u, shift);
-  }
-}
-
-// A normalised row being made: rows a and b of the current frame (weight fb of b), background
-// rows `stride` apart, the output row (`shift` bits of the fixed point dropped).
-struct RowDifference {
-  const std::uint8_t* a;
-  const std::uint8_t* b;
-  std::uint16_t fb;
-  std::ptrdiff_t stride;
-  int shift;
-  std::uint16_t* out;
-};
-
-// difference_block() as the functor difference_blocks() takes.
-struct DifferenceGeneric : RowDifference {
-  LASERLINE_ROW_KERNEL void operator()(int u, const std::uint8_t* p, BlockWeights w, int count) {
-    difference_block(a + u, b + u, fb, p, p + stride, w, shift, count, out + u);
-  }
-};
-
-// The warp blocks of a normalised row (see Frontend::normalise_row()).
-struct WarpBlocks {
-  const std::int32_t* left;
-  const std::int32_t* top;
-  const std::int32_t* whole;
-  const std::int32_t* offset;  // of the first pixel's background pixel, where whole
-  const std::int32_t* pairs;   // negated_pair(w00, w01), negated_pair(w10, w11) of each block
-  const std::uint8_t* background;
-  std::ptrdiff_t stride;
-  int blocks, width, last_column, last_row;
-  int partial;  // blocks not whole
-
-  BlockWeights weights_of(int j) const {
-    return {weight(pairs[2 * j], 0), weight(pairs[2 * j], 8), weight(pairs[2 * j + 1], 0),
-            weight(pairs[2 * j + 1], 8)};
-  }
-  static std::uint16_t weight(std::int32_t pair, int at) {
-    return static_cast<std::uint16_t>(-static_cast<std::int8_t>((pair >> at) & 0xff));
-  }
-};
-
-// The blocks partly or wholly outside the background, through `difference`: pixels [f, e) have
-// their four neighbours inside it; elsewhere there is nothing to compare with, so no signal.
-// (Few or none: the scan stops after the last.)
-template <class Difference>
-LASERLINE_ROW_KERNEL void difference_partial_blocks(const WarpBlocks& w, Difference& difference,
-                                                    std::uint16_t* out) {
-  constexpr int kWarp = Frontend::kWarpBlock;
-  for (int j = 0, partial = w.partial; partial > 0; ++j) {
-    if (w.whole[j]) continue;
-    --partial;
-    const int u0 = j * kWarp;
-    const int count = std::min(kWarp, w.width - u0);
-    const int ix = w.left[j], iy = w.top[j];
-    const bool rows_inside = iy >= 0 && iy < w.last_row;
-    const int f = rows_inside ? std::clamp(-ix, 0, count) : count;
-    const int e = rows_inside ? std::clamp(w.last_column - ix, f, count) : count;
-    std::fill(out + u0, out + u0 + f, std::uint16_t{0});
-    std::fill(out + u0 + e, out + u0 + count, std::uint16_t{0});
-    if (f < e) {
-      difference(u0 + f, w.background + static_cast<std::ptrdiff_t>(iy) * w.stride + ix + f,
-                 w.weights_of(j), e - f);
-    }
-  }
-}
-
-// The row, block by block, through DifferenceGeneric.
-template <class Difference>
-LASERLINE_ROW_KERNEL void difference_blocks(const WarpBlocks& w, Difference& difference,
-                                            std::uint16_t* out) {
-  constexpr int kWarp = Frontend::kWarpBlock;
-  for (int j = 0; j < w.blocks; ++j) {
-    if (w.whole[j]) difference(j * kWarp, w.background + w.offset[j], w.weights_of(j), kWarp);
-  }
-  difference_partial_blocks(w, difference, out);
-}
-
-#if LASERLINE_AVX2_KERNELS
-// Sixteen bytes widened to 16-bit lanes.
-__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i widen(const std::uint8_t* x) {
-  return _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(x)));
-}
-
-// difference_blocks()'s functor in AVX2: a whole block, 32 pixels, with multiply-adds of byte
-// pairs (a pixel and its right neighbour, or the pixel in rows a and b); the rest sixteen pixels
-// to a register (GCC's own vectorisation of this register-hungry loop widens each load in three
-// steps and spills).
-struct DifferenceAvx2 : RowDifference {
-  __m256i weight_a, weight_b, half, w00, w01, w10, w11, rows_pair;
-  __m128i bits;
-
-  __attribute__((target("avx2"))) explicit DifferenceAvx2(const RowDifference& row)
-      : RowDifference(row),
-        weight_a(_mm256_set1_epi16(static_cast<short>(kFixedOne - row.fb))),
-        weight_b(_mm256_set1_epi16(static_cast<short>(row.fb))),
-        half(_mm256_set1_epi16(static_cast<short>((1 << row.shift) >> 1))),
-        rows_pair(_mm256_set1_epi16(static_cast<short>(negated_pair(kFixedOne - row.fb, row.fb)))),
-        bits(_mm_cvtsi32_si128(row.shift)) {}
-
-  // Thirty-two pixels from column u (p the background pixel under it), weights w, into the row.
-  // Loaded as 16-bit words, the bytes of a row pair up: word i holds pixels 2i and 2i + 1, which
-  // the multiply-add weights as pixel 2i and its right neighbour; loaded a pixel on, the same for
-  // pixel 2i + 1. The current frame's rows a and b pair up as (a, b) by masks and shifts. So the
-  // even pixels and the odd ones come out in two registers, interleaved back at the end.
-  __attribute__((target("avx2"))) LASERLINE_ROW_KERNEL void thirty_two(
-      int u, const std::uint8_t* p, std::int32_t top_pair, std::int32_t bottom_pair) const {
-    const __m256i low_bytes = _mm256_set1_epi16(0x00ff);
-    const __m256i x = load(a + u), y = load(b + u);
-    const __m256i even_rows =
-        _mm256_or_si256(_mm256_and_si256(x, low_bytes), _mm256_slli_epi16(y, 8));
-    const __m256i odd_rows =
-        _mm256_or_si256(_mm256_srli_epi16(x, 8), _mm256_andnot_si256(low_bytes, y));
-    const __m256i top = _mm256_set1_epi16(static_cast<short>(top_pair));
-    const __m256i bottom = _mm256_set1_epi16(static_cast<short>(bottom_pair));
-    const std::uint8_t* q = p + stride;
-    // Each -(weighted sum): at least -255 x 128, within 16 signed bits.
-    const __m256i even = difference_of(_mm256_maddubs_epi16(even_rows, rows_pair),
-                                       _mm256_add_epi16(_mm256_maddubs_epi16(load(p), top),
-                                                        _mm256_maddubs_epi16(load(q), bottom)));
-    const __m256i odd = difference_of(_mm256_maddubs_epi16(odd_rows, rows_pair),
-                                      _mm256_add_epi16(_mm256_maddubs_epi16(load(p + 1), top),
-                                                       _mm256_maddubs_epi16(load(q + 1), bottom)));
-    // Interleaved within 128-bit halves: pixels 0-7 and 16-23, then 8-15 and 24-31.
-    const __m256i low = _mm256_unpacklo_epi16(even, odd), high = _mm256_unpackhi_epi16(even, odd);
-    std::uint16_t* result = out + u;
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(result),
-                        _mm256_permute2x128_si256(low, high, 0x20));
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(result + 16),
-                        _mm256_permute2x128_si256(low, high, 0x31));
-  }
-
-  __attribute__((target("avx2"))) static LASERLINE_ROW_KERNEL __m256i load(const std::uint8_t* x) {
-    return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(x));
-  }
-
-  // current - warped from their negations, clipped at 0 and rounded to the row's precision.
-  __attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i
-  difference_of(__m256i negated_current, __m256i negated_warped) const {
-    const __m256i difference =
-        _mm256_max_epi16(_mm256_sub_epi16(negated_warped, negated_current), _mm256_setzero_si256());
-    return _mm256_srl_epi16(_mm256_add_epi16(difference, half), bits);
-  }
-
-  __attribute__((target("avx2"))) void set_weights(BlockWeights w) {
-    w00 = _mm256_set1_epi16(static_cast<short>(w.w00));
-    w01 = _mm256_set1_epi16(static_cast<short>(w.w01));
-    w10 = _mm256_set1_epi16(static_cast<short>(w.w10));
-    w11 = _mm256_set1_epi16(static_cast<short>(w.w11));
-  }
-
-  // Sixteen pixels: of the current rows x and y, the background rows p and q, into result.
-  __attribute__((target("avx2"))) LASERLINE_ROW_KERNEL void sixteen(const std::uint8_t* x,
-                                                                    const std::uint8_t* y,
-                                                                    const std::uint8_t* p,
-                                                                    const std::uint8_t* q,
-                                                                    std::uint16_t* result) const {
-    const __m256i current = _mm256_add_epi16(_mm256_mullo_epi16(widen(x), weight_a),
-                                             _mm256_mullo_epi16(widen(y), weight_b));
-    const __m256i warped = _mm256_add_epi16(
-        _mm256_add_epi16(_mm256_mullo_epi16(widen(p), w00), _mm256_mullo_epi16(widen(p + 1), w01)),
-        _mm256_add_epi16(_mm256_mullo_epi16(widen(q), w10), _mm256_mullo_epi16(widen(q + 1), w11)));
-    // The laser only adds light: clipped at 0 (a saturating subtraction).
-    const __m256i difference = _mm256_subs_epu16(current, warped);
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(result),
-                        _mm256_srl_epi16(_mm256_add_epi16(difference, half), bits));
-  }
-
-  // Pixels [u, u + count) of the row as difference_block(), p the background pixel under pixel
-  // u: sixteen at a time, the last sixteen overlapping the ones before (they read no further
-  // than difference_block would); fewer than sixteen one by one. (Inlined where
-  // difference_blocks() is: in an AVX2 function.)
-  __attribute__((target("avx2"))) void operator()(int u, const std::uint8_t* p, BlockWeights w,
-                                                  int count) {
-    if (count < 16) {
-      difference_block(a + u, b + u, fb, p, p + stride, w, shift, count, out + u);
-      return;
-    }
-    set_weights(w);
-    for (int k = 0;; k += 16) {
-      const int i = u + std::min(k, count - 16);
-      sixteen(a + i, b + i, p + (i - u), p + (i - u) + stride, out + i);
-      if (i == u + count - 16) break;
-    }
-  }
-};
-
-// A normalised row's warp blocks in AVX2. (Not forced inline: the function it is called from is
-// also compiled for the baseline.)
-__attribute__((target("avx2"))) inline void difference_blocks_avx2(const WarpBlocks& w,
-                                                                   const RowDifference& row) {
-  DifferenceAvx2 difference(row);
-  constexpr int kWarp = Frontend::kWarpBlock;
-  for (int j = 0; j < w.blocks; ++j) {
-    if (w.whole[j]) {
-      difference.thirty_two(j * kWarp, w.background + w.offset[j], w.pairs[2 * j],
-                            w.pairs[2 * j + 1]);
-    }
-  }
-  difference_partial_blocks(w, difference, row.out);
-}
-#endif
 
 // The two rows of the frame a normalised row is interpolated from, and the weight of the lower.
 struct SourceRow {
@@ -491,14 +251,6 @@ struct SourceRow {
 
 }  // namespace
 
-void Frontend::use_intrinsics(bool use) {
-#if LASERLINE_AVX2_KERNELS
-  avx2_ = use && __builtin_cpu_supports("avx2");
-#else
-  (void)use;
-#endif
-}
-
 void Frontend::set_frame(const ImageView& current) {
   current_ = current;
   subtracting_ = false;
@@ -512,12 +264,11 @@ void Frontend::set_frame_minus_background(const ImageView& current, const ImageV
   subtracting_ = true;
 }
 
-LASERLINE_DENSE_KERNEL
 void Frontend::normalise_row(int r, std::uint16_t* out) {
   const float v = rows_.source_row(r);
   const SourceRow row(current_, v);
   if (!subtracting_) {
-    interpolate_row(row.a, row.b, row.fb, normalised_shift_, width_, out);
+    kernels::interpolate_row(row.a, row.b, row.fb, normalised_shift_, width_, out);
     return;
   }
   // The background may be a band of rows of the frame (its own size; the homography says where).
@@ -532,68 +283,31 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
   const auto wn0 = static_cast<float>(g[7] * v + g[8]), wnu = static_cast<float>(g[6]);
   const int blocks = (width_ + kWarpBlock - 1) / kWarpBlock;
   const int width = width_, stride = background.stride, last_column = background.width - 1;
-  // Where each block's centre was in the background, for all blocks of the row at once,
-  // branch-free so that it vectorises: the block's first pixel's position there (the block moves
-  // as a whole), its integer part and the four bilinear weights. Positions are held within two
-  // background sizes (a NaN goes to the far left), so that they convert to int.
-  std::int32_t* __restrict left = warp_left_.data();
-  std::int32_t* __restrict top = warp_top_.data();
-  // The weights as negated_pair()s, a row's two in one (32-bit, as wide as the positions, so that
-  // the loop vectorises).
-  std::int32_t* __restrict pairs = warp_pairs_.data();
-  std::int32_t* __restrict offset = warp_offset_.data();
-  std::int32_t* __restrict whole = warp_whole_.data();
   const int last_row = background.height - 1;
+  // Where each block was in the background, for all blocks of the row at once (positions held
+  // within two background sizes).
+  std::int32_t* left = warp_left_.data();
+  std::int32_t* top = warp_top_.data();
+  std::int32_t* whole = warp_whole_.data();
+  std::int32_t* offset = warp_offset_.data();
+  std::int32_t* w00 = warp_weights_[0].data();
+  std::int32_t* w01 = warp_weights_[1].data();
+  std::int32_t* w10 = warp_weights_[2].data();
+  std::int32_t* w11 = warp_weights_[3].data();
   const float far = 2.0f * std::max(bg_width, bg_height);
-  int partial = 0;  // blocks not whole
-  for (int j = 0; j < blocks; ++j) {
-    const int u0 = j * kWarpBlock;
-    const int count = std::min(kWarpBlock, width - u0);
-    const float centre = static_cast<float>(u0) + 0.5f * static_cast<float>(count - 1);
-    const float inv = 1.0f / (wn0 + wnu * centre);
-    const float y = (yn0 + ynu * centre) * inv;
-    const float x = (xn0 + xnu * centre) * inv - (centre - static_cast<float>(u0));
-    const float xs = x > -far ? (x < far ? x : far) : -far;
-    const float ys = y > -far ? (y < far ? y : far) : -far;
-    const float fx = std::floor(xs), fy = std::floor(ys);
-    const auto ix = static_cast<std::int32_t>(fx), iy = static_cast<std::int32_t>(fy);
-    left[j] = ix;
-    top[j] = iy;
-    // (Where whole, it fits: unsigned, so that elsewhere it may wrap.)
-    offset[j] = static_cast<std::int32_t>(static_cast<std::uint32_t>(iy) *
-                                              static_cast<std::uint32_t>(stride) +
-                                          static_cast<std::uint32_t>(ix));
-    // Whole: all its pixels' four neighbours lie inside the background (nearly every block).
-    whole[j] = (count == kWarpBlock) & (ix >= 0) & (ix + kWarpBlock <= last_column) & (iy >= 0) &
-               (iy < last_row);
-    partial += 1 - whole[j];
-    const float tx = xs - fx, ty = ys - fy;
-    const float one = kFixedOne;
-    // The four sum to 128 (else the background is scaled) by construction: the rows' shares
-    // rounded, then each row's share split between its two pixels.
-    const auto top_share = static_cast<std::int32_t>((1.0f - ty) * one + 0.5f);
-    const std::int32_t bottom_share = kFixedOne - top_share;
-    const auto top_left =
-        static_cast<std::int32_t>((1.0f - tx) * static_cast<float>(top_share) + 0.5f);
-    const auto bottom_left =
-        static_cast<std::int32_t>((1.0f - tx) * static_cast<float>(bottom_share) + 0.5f);
-    const std::int32_t top_right = top_share - top_left;
-    const std::int32_t bottom_right = bottom_share - bottom_left;
-    pairs[2 * j] = negated_pair(top_left, top_right);
-    pairs[2 * j + 1] = negated_pair(bottom_left, bottom_right);
-  }
-  const WarpBlocks warp{left,   top,    whole, offset,      pairs,    background.data,
-                        stride, blocks, width, last_column, last_row, partial};
-  const RowDifference difference_row{row.a, row.b, row.fb, stride, normalised_shift_, out};
-#if LASERLINE_AVX2_KERNELS
-  // Inlined into the AVX2 version of this function, a call never made in the other.
-  if (avx2_) {
-    difference_blocks_avx2(warp, difference_row);
-    return;
-  }
-#endif
-  DifferenceGeneric difference{difference_row};
-  difference_blocks(warp, difference, out);
+  const int partial = kernels::warp_blocks(
+      {xn0, xnu, yn0, ynu, wn0, wnu, far, width, stride, last_column, last_row}, 0, blocks,
+      {left, top, whole, offset, w00, w01, w10, w11});
+  kernels::difference_row({row.a,    row.b,
+                           row.fb,   normalised_shift_,
+                           out,      background.data,
+                           stride,   left,
+                           top,      whole,
+                           offset,   w00,
+                           w01,      w10,
+                           w11,      blocks,
+                           width,    last_column,
+                           last_row, partial});
 }
 
 bool Frontend::water_glows(const ImageView& frame) const {

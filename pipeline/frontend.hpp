@@ -13,13 +13,6 @@
 #include "pipeline/motion.hpp"
 #include "pipeline/profile.hpp"
 
-// AVX2 versions of the kernels GCC does not vectorise well, chosen at run time on x86-64.
-#if defined(__x86_64__) && defined(__GNUC__)
-#define LASERLINE_AVX2_KERNELS 1
-#else
-#define LASERLINE_AVX2_KERNELS 0
-#endif
-
 namespace laserline::pipeline {
 
 // Paper III-B, in the OpenCV convention (v down). The projected sheet width is linear in the row,
@@ -142,10 +135,6 @@ class Frontend {
   int width() const { return width_; }
   int stride() const { return stride_; }
 
-  // Whether the kernels written in AVX2 intrinsics run (where the CPU has AVX2), or their
-  // portable versions: for tests, which check that both give the same results.
-  void use_intrinsics(bool use);
-
   // Pixels warped as one block. Within a block the warp is a translation: exact to
   // kWarpBlock / 2 * max(|d(x - u)/du|, |dy/du|), 0.05 px for a roll of 0.2 degrees between frames.
   static constexpr int kWarpBlock = 32;
@@ -195,7 +184,6 @@ class Frontend {
                       const StageImages* images);
   // Normalised row r into out[0, width).
   void normalise_row(int r, std::uint16_t* out);
-  bool avx2_ = false;  // the AVX2 kernels run: the CPU has AVX2, and use_intrinsics()
   // The noise window of a row less its guard band: `rows` rows from each of `above` and `below`
   // (offsets of the rows in a strip's band-pass ring).
  public:
@@ -216,10 +204,7 @@ class Frontend {
   float refine_row(int u, float v_guess) const;
   // refine_row() of the first `count` points waiting for it (refine_columns_, ...): into the
   // profile's points.
-  void refine(std::span<ProfilePoint> points, std::size_t count) const;
-#if LASERLINE_AVX2_KERNELS
-  void refine_avx2(std::span<ProfilePoint> points, std::size_t count) const;
-#endif
+  void refine(std::span<ProfilePoint> points, std::size_t count);
 
   ScannerGeometry geometry_;
   FrontendOptions options_;
@@ -254,9 +239,6 @@ class Frontend {
   // before the next, the normalised rows made strip by strip, was slower still.)
   static constexpr int kRowBlock = 8;
   static constexpr int kStripColumns = 256;
-  // The columns a strip's kernels run over when the noise window is at most 17 columns wide
-  // (the usual case: a constant trip count); wider windows take a generic path.
-  static constexpr int kRingColumns = 272;
   // Rings of rows, indexed by row % ring rows: the normalised rows (normalised_stride_ values per
   // row), and per strip the band-pass rows (ring_stride_ values per row, and after the last row a
   // row of zeros); the per-strip sums are as wide.
@@ -273,15 +255,15 @@ class Frontend {
   // ... and whether the block lies wholly inside it.
   std::vector<std::int32_t> warp_whole_;
   std::vector<std::int32_t> warp_offset_;  // of its first pixel's in the background, where whole
-  std::vector<std::int32_t> warp_pairs_;   // its weights: two pairs of bytes (see normalise_row())
+  // its four bilinear weights (top left, top right, bottom left, bottom right)
+  std::array<std::vector<std::int32_t>, 4> warp_weights_;
   std::vector<std::uint16_t> zero_normalised_;  // a row of zeros: the rows beyond the ends
   // Per block of rows: where each row it touches is (offsets into a strip's rings, pointers to
   // the normalised rows), from the first it touches on.
   std::vector<std::size_t> band_rows_;
   std::vector<int> band_slots_;  // the band-pass rows' slots (band_rows_ = slot * ring stride)
   std::vector<const std::uint16_t*> normalised_rows_;
-  // One row of a strip's candidates: flags (the portable kernel's), bits.
-  std::vector<std::uint8_t> peak_flags_;
+  // One row of a strip's candidates, as bits.
   std::vector<std::uint64_t> peak_bits_;
   struct Peak {
     float r = 0;     // normalised row of the band-pass peak (sub-row)
@@ -304,6 +286,14 @@ class Frontend {
   std::vector<int> refine_columns_;
   std::vector<float> refine_guesses_;
   std::vector<std::size_t> refine_points_;
+  // Those refined together (kernels::refine_columns()): their columns, starts and lines through
+  // the background (see refine()), results, and indices in the profile.
+  struct RefineLanes {
+    std::vector<std::int32_t> u, centre, lo, count, spacing, edge;
+    std::vector<float> x0, y0, dx, dy, rows;
+    std::vector<std::size_t> point;
+  };
+  RefineLanes refine_lanes_;
 };
 
 }  // namespace laserline::pipeline

@@ -1,38 +1,25 @@
-// What the front end's two files (frontend.cpp: the pass down the rows; frontend_refine.cpp: the
-// sub-pixel refinement) share: how their kernels are compiled, the fixed-point scale, and small
-// inline helpers. Private to them.
+// What the front end's files (frontend.cpp: sizes, row normalisation, line choice;
+// frontend_roll.cpp: the pass down the rows; frontend_refine.cpp: the sub-pixel refinement)
+// share: the fixed-point scale and small inline helpers. Private to them.
 #pragma once
 
 #include <cstdint>
 
 #include "pipeline/frontend.hpp"
 #include "pipeline/image_view.hpp"
+#include "pipeline/kernels/kernels.hpp"
 
-// The dense kernels are compiled twice on x86-64, for the baseline and for AVX2, and the loader
-// picks the one the CPU runs (GCC function multi-versioning): twice the lanes per instruction where
-// the machine has them, and the same binary still runs everywhere.
-// Not under ThreadSanitizer: the loader runs the version resolvers before its runtime is up.
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__SANITIZE_THREAD__)
-#define LASERLINE_DENSE_KERNEL __attribute__((target_clones("avx2", "default")))
-#else
-#define LASERLINE_DENSE_KERNEL
-#endif
-// Row kernels and the helpers of a dense kernel are inlined into it, so that they are compiled
-// for the target of each of its versions.
+// The stages of the pass down the rows are inlined into it (one loop nest the compiler sees
+// whole); the vector kernels they call are in pipeline/kernels/.
 #define LASERLINE_ROW_KERNEL __attribute__((always_inline)) inline
 #define LASERLINE_ROW_LAMBDA __attribute__((always_inline))
-// Where auto-vectorisation falls short, a kernel is written in AVX2 intrinsics, in functions
-// compiled for AVX2 and chosen at run time (the CPU is asked once, in the constructor).
-#if LASERLINE_AVX2_KERNELS
-#include <immintrin.h>
-#endif
 
 namespace laserline::pipeline::frontend_detail {
 
 constexpr double kSigmaPerFwhm = 1.0 / 2.3548200450309493;  // a Gaussian's sigma per FWHM
 // Interpolation is done in fixed point, 1/128 grey level (see the row kernels).
-constexpr int kFixedOne = 128;
-constexpr int kFixedBits = 7;
+using kernels::kFixedBits;
+using kernels::kFixedOne;
 // Row kernels run over blocks of this many pixels with a constant trip count: what GCC needs to
 // vectorise them. Float rows are padded to a multiple of it.
 constexpr int kBlock = 16;

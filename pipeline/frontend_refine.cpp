@@ -1,7 +1,7 @@
 // The front end's sub-pixel refinement (paper III-F): per chosen column, the peak near the
 // candidate's row in the source frame (the background subtracted along the column's line through
-// it), a Gaussian fit of three samples over a sloping baseline; eight columns at a time in AVX2
-// where the CPU has it.
+// it), a Gaussian fit of three samples over a sloping baseline; many columns at a time in
+// kernels::refine_columns() (pipeline/kernels/).
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -11,6 +11,7 @@
 
 #include "pipeline/frontend.hpp"
 #include "pipeline/frontend_common.hpp"
+#include "pipeline/kernels/kernels.hpp"
 #include "pipeline/subpixel.hpp"
 
 namespace laserline::pipeline {
@@ -66,9 +67,9 @@ class ColumnSampler {
     return first_largest(out, count);
   }
 
-  // Whether the AVX2 kernels can take the samples of rows [first, last] without a check each
-  // (there is a background): the run is a straight segment in the background, so where both its
-  // ends lie inside, all of it does; their gathers read four bytes, so the positions stay four
+  // Whether kernels::refine_columns() can take the samples of rows [first, last] without a check
+  // each (there is a background): the run is a straight segment in the background, so where both
+  // its ends lie inside, all of it does; its loads read four bytes, so the positions stay four
   // columns from the background's right side, and column u four from the frame's.
   bool gatherable(int first, int last) const {
     const auto k0 = static_cast<float>(first - v0_), k1 = static_cast<float>(last - v0_);
@@ -93,220 +94,6 @@ class ColumnSampler {
   int u_, v0_;
   float x0_ = 0, y0_ = 0, dx_ = 0, dy_ = 0, x_max_ = 0, y_max_ = 0;
 };
-
-#if LASERLINE_AVX2_KERNELS
-// Eight columns refined at once (refine_avx2()): per lane the column, the refinement's start
-// (see Frontend::RefineStart; count = hi - lo + 1 rows searched, at most 32) and the column's
-// line through the background (ColumnSampler::Line).
-struct RefineLanes {
-  alignas(32) std::array<std::int32_t, 8> u, centre, lo, count, spacing, edge;
-  alignas(32) std::array<float, 8> x0, y0, dx, dy;
-};
-
-__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i
-lanes_of(const std::array<std::int32_t, 8>& values) {
-  return _mm256_load_si256(reinterpret_cast<const __m256i*>(values.data()));
-}
-
-__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256
-lanes_of(const std::array<float, 8>& values) {
-  return _mm256_load_ps(values.data());
-}
-
-// Four bytes from each of base + offset (lanes `wanted`; the others 0), as a gather does but by
-// eight loads: gathers are slow on this machine's CPU (an Ice Lake server; measured: 24 cycles a
-// gather, 10 for eight loads). The lanes not wanted read from base itself.
-__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i four_bytes_at(const std::uint8_t* base,
-                                                                           __m256i offset,
-                                                                           __m256i wanted) {
-  alignas(32) std::array<std::int32_t, 8> at;
-  _mm256_store_si256(reinterpret_cast<__m256i*>(at.data()), _mm256_and_si256(offset, wanted));
-  std::array<std::int32_t, 8> value;
-  for (std::size_t j = 0; j < 8; ++j)
-    std::memcpy(&value[j], base + at[j], sizeof value[j]);
-  const __m256i loaded = _mm256_setr_epi32(value[0], value[1], value[2], value[3], value[4],
-                                           value[5], value[6], value[7]);
-  return _mm256_and_si256(loaded, wanted);
-}
-
-// The eight columns of RefineLanes in registers: their samples as ColumnSampler gives them (the
-// same arithmetic, so the same values). Every row asked for must be one whose samples
-// ColumnSampler::gatherable() allows.
-class RefineColumnsAvx2 {
- public:
-  __attribute__((target("avx2")))
-  RefineColumnsAvx2(const RefineLanes& lanes, const ImageView& current, const ImageView& background)
-      : column_(lanes_of(lanes.u)),
-        centre_(lanes_of(lanes.centre)),
-        x0_(lanes_of(lanes.x0)),
-        y0_(lanes_of(lanes.y0)),
-        dx_(lanes_of(lanes.dx)),
-        dy_(lanes_of(lanes.dy)),
-        current_stride_(_mm256_set1_epi32(current.stride)),
-        background_stride_(_mm256_set1_epi32(background.stride)),
-        current_(current.data),
-        top_row_(background.data),
-        bottom_row_(background.data + background.stride) {}
-
-  // The current frame at `rows` of the columns (lanes not `wanted`: 0).
-  __attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i current(__m256i rows,
-                                                                       __m256i wanted) const {
-    const __m256i offset = _mm256_add_epi32(_mm256_mullo_epi32(rows, current_stride_), column_);
-    return _mm256_and_si256(four_bytes_at(current_, offset, wanted), _mm256_set1_epi32(0xff));
-  }
-
-  // The background-free samples at `rows`: ColumnSampler::operator() (lanes not `wanted`: 0).
-  __attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256 sample(__m256i rows,
-                                                                     __m256i wanted) const {
-    const __m256i low_byte = _mm256_set1_epi32(0xff);
-    const __m256 k = _mm256_cvtepi32_ps(_mm256_sub_epi32(rows, centre_));
-    const __m256 x = _mm256_add_ps(x0_, _mm256_mul_ps(dx_, k));
-    const __m256 y = _mm256_add_ps(y0_, _mm256_mul_ps(dy_, k));
-    const __m256i ix = _mm256_cvttps_epi32(x), iy = _mm256_cvttps_epi32(y);
-    const __m256 fx = _mm256_sub_ps(x, _mm256_cvtepi32_ps(ix));
-    const __m256 fy = _mm256_sub_ps(y, _mm256_cvtepi32_ps(iy));
-    const __m256i offset = _mm256_add_epi32(_mm256_mullo_epi32(iy, background_stride_), ix);
-    const __m256i top = four_bytes_at(top_row_, offset, wanted);
-    const __m256i bottom = four_bytes_at(bottom_row_, offset, wanted);
-    const __m256 p00 = _mm256_cvtepi32_ps(_mm256_and_si256(top, low_byte));
-    const __m256 p01 = _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srli_epi32(top, 8), low_byte));
-    const __m256 p10 = _mm256_cvtepi32_ps(_mm256_and_si256(bottom, low_byte));
-    const __m256 p11 = _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srli_epi32(bottom, 8), low_byte));
-    const __m256 upper = _mm256_add_ps(p00, _mm256_mul_ps(fx, _mm256_sub_ps(p01, p00)));
-    const __m256 lower = _mm256_add_ps(p10, _mm256_mul_ps(fx, _mm256_sub_ps(p11, p10)));
-    const __m256 warped = _mm256_add_ps(upper, _mm256_mul_ps(fy, _mm256_sub_ps(lower, upper)));
-    const __m256 value = _mm256_cvtepi32_ps(current(rows, wanted));
-    return _mm256_max_ps(_mm256_sub_ps(value, warped), _mm256_setzero_ps());
-  }
-
- private:
-  __m256i column_, centre_;
-  __m256 x0_, y0_, dx_, dy_;
-  __m256i current_stride_, background_stride_;
-  const std::uint8_t* current_;
-  const std::uint8_t* top_row_;
-  const std::uint8_t* bottom_row_;
-};
-
-__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i select(__m256i mask, __m256i yes,
-                                                                    __m256i no) {
-  return _mm256_blendv_epi8(no, yes, mask);
-}
-
-__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256 select(__m256i mask, __m256 yes,
-                                                                   __m256 no) {
-  return _mm256_blendv_ps(no, yes, _mm256_castsi256_ps(mask));
-}
-
-// Where a flank of a clipped run crosses `level` (refine_row()'s crossing()): from the sample
-// next to the run, `inside` (value inside_value), one row further by `step` (-1 or +1).
-__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256
-crossing_avx2(const RefineColumnsAvx2& columns, __m256i inside, int step, __m256 inside_value,
-              __m256 level, __m256i wanted) {
-  const __m256 at_inside = _mm256_cvtepi32_ps(inside);
-  const __m256 outside = _mm256_cvtepi32_ps(
-      columns.current(_mm256_add_epi32(inside, _mm256_set1_epi32(step)), wanted));
-  const __m256 t =
-      _mm256_div_ps(_mm256_sub_ps(inside_value, level), _mm256_sub_ps(inside_value, outside));
-  const __m256 moved =
-      _mm256_add_ps(at_inside, _mm256_mul_ps(_mm256_set1_ps(static_cast<float>(step)),
-                                             _mm256_min_ps(t, _mm256_set1_ps(1.0f))));
-  const __m256 stays = _mm256_or_ps(_mm256_cmp_ps(inside_value, level, _CMP_LE_OQ),
-                                    _mm256_cmp_ps(outside, inside_value, _CMP_GE_OQ));
-  return _mm256_blendv_ps(moved, at_inside, stays);
-}
-
-// refine_row() of eight columns, lanes side by side: the same arithmetic on the same samples,
-// so the same results. `last` is the frame's last row.
-__attribute__((target("avx2"))) inline void refine_eight_avx2(const RefineLanes& lanes,
-                                                              const ImageView& current,
-                                                              const ImageView& background, int last,
-                                                              int saturation,
-                                                              std::array<float, 8>& result) {
-  const RefineColumnsAvx2 columns(lanes, current, background);
-  const __m256i one = _mm256_set1_epi32(1);
-  const __m256i all = _mm256_set1_epi32(-1);
-  const __m256i lo = lanes_of(lanes.lo), count = lanes_of(lanes.count);
-  const __m256i last_row = _mm256_set1_epi32(last);
-  // The search window: the first largest sample of each lane.
-  __m256 most = _mm256_set1_ps(-1.0f);
-  __m256i best = lo;
-  const int longest = *std::max_element(lanes.count.begin(), lanes.count.end());
-  for (int k = 0; k < longest; ++k) {
-    const __m256i step = _mm256_set1_epi32(k);
-    const __m256i wanted = _mm256_cmpgt_epi32(count, step);
-    const __m256i rows = _mm256_add_epi32(lo, step);
-    const __m256 value = columns.sample(rows, wanted);
-    const __m256i larger =
-        _mm256_and_si256(_mm256_castps_si256(_mm256_cmp_ps(value, most, _CMP_GT_OQ)), wanted);
-    most = select(larger, value, most);
-    best = select(larger, rows, best);
-  }
-
-  // A clipped core: the run of saturated rows around the peak, walked out from it.
-  const __m256i below_saturation = _mm256_set1_epi32(saturation - 1);
-  const __m256i clipped = _mm256_cmpgt_epi32(columns.current(best, all), below_saturation);
-  __m256i top = best, bottom = best;
-  for (__m256i going = clipped; !_mm256_testz_si256(going, going);) {
-    const __m256i next = _mm256_sub_epi32(top, one);
-    going = _mm256_and_si256(going, _mm256_cmpgt_epi32(top, _mm256_setzero_si256()));
-    going =
-        _mm256_and_si256(going, _mm256_cmpgt_epi32(columns.current(next, going), below_saturation));
-    top = select(going, next, top);
-  }
-  for (__m256i going = clipped; !_mm256_testz_si256(going, going);) {
-    const __m256i next = _mm256_add_epi32(bottom, one);
-    going = _mm256_and_si256(going, _mm256_cmpgt_epi32(last_row, bottom));
-    going =
-        _mm256_and_si256(going, _mm256_cmpgt_epi32(columns.current(next, going), below_saturation));
-    bottom = select(going, next, bottom);
-  }
-  // Runs that reach within two rows of an end: their middle.
-  const __m256i near_end = _mm256_or_si256(_mm256_cmpgt_epi32(_mm256_set1_epi32(2), top),
-                                           _mm256_cmpgt_epi32(bottom, _mm256_set1_epi32(last - 2)));
-  const __m256 middle =
-      _mm256_mul_ps(_mm256_set1_ps(0.5f), _mm256_cvtepi32_ps(_mm256_add_epi32(top, bottom)));
-  // Else midway between the crossings of the flanks.
-  const __m256i flanked = _mm256_andnot_si256(near_end, clipped);
-  const __m256i above_run = _mm256_sub_epi32(top, one), below_run = _mm256_add_epi32(bottom, one);
-  const __m256 above = _mm256_cvtepi32_ps(columns.current(above_run, flanked));
-  const __m256 below = _mm256_cvtepi32_ps(columns.current(below_run, flanked));
-  const __m256 level = _mm256_min_ps(above, below);
-  const __m256 crossings =
-      _mm256_mul_ps(_mm256_set1_ps(0.5f),
-                    _mm256_add_ps(crossing_avx2(columns, above_run, -1, above, level, flanked),
-                                  crossing_avx2(columns, below_run, +1, below, level, flanked)));
-  const __m256 clipped_row = select(near_end, middle, crossings);
-
-  // Else the Gaussian 3-point fit on the baseline-free samples, where the baseline's samples lie
-  // inside the frame.
-  const __m256i edge = lanes_of(lanes.edge), spacing = lanes_of(lanes.spacing);
-  const __m256i off_frame = _mm256_or_si256(
-      _mm256_cmpgt_epi32(edge, best), _mm256_cmpgt_epi32(_mm256_add_epi32(best, edge), last_row));
-  const __m256i fitted = _mm256_andnot_si256(_mm256_or_si256(clipped, off_frame), all);
-  const __m256 before = columns.sample(_mm256_sub_epi32(best, edge), fitted);
-  const __m256 after = columns.sample(_mm256_add_epi32(best, edge), fitted);
-  const __m256 slope =
-      _mm256_div_ps(_mm256_sub_ps(after, before), _mm256_cvtepi32_ps(_mm256_add_epi32(edge, edge)));
-  const __m256 baseline = _mm256_mul_ps(_mm256_set1_ps(0.5f), _mm256_add_ps(before, after));
-  const __m256 rise = _mm256_mul_ps(slope, _mm256_cvtepi32_ps(spacing));
-  alignas(32) std::array<float, 8> a, b, c, rows, spacings, results;
-  _mm256_store_ps(a.data(), _mm256_sub_ps(columns.sample(_mm256_sub_epi32(best, spacing), fitted),
-                                          _mm256_sub_ps(baseline, rise)));
-  _mm256_store_ps(b.data(), _mm256_sub_ps(most, baseline));
-  _mm256_store_ps(c.data(), _mm256_sub_ps(columns.sample(_mm256_add_epi32(best, spacing), fitted),
-                                          _mm256_add_ps(baseline, rise)));
-  _mm256_store_ps(rows.data(), _mm256_cvtepi32_ps(best));
-  _mm256_store_ps(spacings.data(), _mm256_cvtepi32_ps(spacing));
-  _mm256_store_ps(results.data(), select(clipped, clipped_row, _mm256_cvtepi32_ps(best)));
-  alignas(32) std::array<std::int32_t, 8> fit;
-  _mm256_store_si256(reinterpret_cast<__m256i*>(fit.data()), fitted);
-  for (std::size_t j = 0; j < 8; ++j) {
-    result[j] =
-        fit[j] != 0 ? rows[j] + spacings[j] * gaussian_offset(a[j], b[j], c[j]) : results[j];
-  }
-}
-#endif
 
 }  // namespace
 
@@ -430,71 +217,52 @@ float Frontend::refine_row(int u, float v_guess) const {
   return static_cast<float>(best) + static_cast<float>(spacing) * gaussian_offset(a, b, c);
 }
 
-void Frontend::refine(std::span<ProfilePoint> points, std::size_t count) const {
-#if LASERLINE_AVX2_KERNELS
-  if (avx2_ && subtracting_ && !glowing_) {
-    refine_avx2(points, count);
+void Frontend::refine(std::span<ProfilePoint> points, std::size_t count) {
+  if (!subtracting_ || glowing_) {
+    for (std::size_t k = 0; k < count; ++k)
+      points[refine_points_[k]].v = refine_row(refine_columns_[k], refine_guesses_[k]);
     return;
   }
-#endif
-  for (std::size_t k = 0; k < count; ++k)
-    points[refine_points_[k]].v = refine_row(refine_columns_[k], refine_guesses_[k]);
-}
-
-#if LASERLINE_AVX2_KERNELS
-// refine() with refine_eight_avx2(), eight columns at a time: the points whose samples can all be
-// gathered (nearly all), the others through refine_row().
-__attribute__((target("avx2"))) void Frontend::refine_avx2(std::span<ProfilePoint> points,
-                                                           std::size_t count) const {
+  // The points whose samples all lie inside the frame and the background (nearly all): together
+  // through the vector kernel, the same arithmetic as refine_row(); the others one by one.
   const int last = height_ - 1;
-  RefineLanes lanes;
-  std::array<std::size_t, 8> point_of{};  // the profile's index of each lane's point
-  std::array<float, 8> rows{};
-  std::size_t filled = 0;
-  for (std::size_t k = 0; k <= count; ++k) {
-    // (After the last point, the lanes still filled run, the rest a copy of the first.)
-    if (k == count) {
-      if (filled == 0) break;
-      for (std::size_t j = filled; j < 8; ++j) {
-        for (auto* field :
-             {&lanes.u, &lanes.centre, &lanes.lo, &lanes.count, &lanes.spacing, &lanes.edge})
-          (*field)[j] = (*field)[0];
-        for (auto* field : {&lanes.x0, &lanes.y0, &lanes.dx, &lanes.dy})
-          (*field)[j] = (*field)[0];
-      }
-    } else {
-      const int u = refine_columns_[k];
-      const float guess = refine_guesses_[k];
-      const RefineStart start = refine_start(guess);
-      const ColumnSampler column(current_, &background_, to_background_, u, start.centre);
-      // The fit's samples reach `edge` rows beyond the window (where they lie in the frame).
-      const bool gathered =
-          start.hi - start.lo + 1 <= 32 && column.gatherable(std::max(start.lo - start.edge, 0),
-                                                             std::min(start.hi + start.edge, last));
-      if (!gathered) {
-        points[refine_points_[k]].v = refine_row(u, guess);
-        continue;
-      }
-      const ColumnSampler::Line line = column.line();
-      lanes.u[filled] = u;
-      lanes.centre[filled] = start.centre;
-      lanes.lo[filled] = start.lo;
-      lanes.count[filled] = start.hi - start.lo + 1;
-      lanes.spacing[filled] = start.spacing;
-      lanes.edge[filled] = start.edge;
-      lanes.x0[filled] = line.x0;
-      lanes.y0[filled] = line.y0;
-      lanes.dx[filled] = line.dx;
-      lanes.dy[filled] = line.dy;
-      point_of[filled] = refine_points_[k];
-      if (++filled < 8) continue;
+  RefineLanes& lanes = refine_lanes_;
+  std::size_t n = 0;
+  for (std::size_t k = 0; k < count; ++k) {
+    const int u = refine_columns_[k];
+    const float guess = refine_guesses_[k];
+    const RefineStart start = refine_start(guess);
+    const ColumnSampler column(current_, &background_, to_background_, u, start.centre);
+    // The fit's samples reach `edge` rows beyond the window (where they lie in the frame).
+    if (!column.gatherable(std::max(start.lo - start.edge, 0),
+                           std::min(start.hi + start.edge, last))) {
+      points[refine_points_[k]].v = refine_row(u, guess);
+      continue;
     }
-    refine_eight_avx2(lanes, current_, background_, last, options_.saturation_level, rows);
-    for (std::size_t j = 0; j < filled; ++j)
-      points[point_of[j]].v = rows[j];
-    filled = 0;
+    const ColumnSampler::Line line = column.line();
+    lanes.u[n] = u;
+    lanes.centre[n] = start.centre;
+    lanes.lo[n] = start.lo;
+    lanes.count[n] = start.hi - start.lo + 1;
+    lanes.spacing[n] = start.spacing;
+    lanes.edge[n] = start.edge;
+    lanes.x0[n] = line.x0;
+    lanes.y0[n] = line.y0;
+    lanes.dx[n] = line.dx;
+    lanes.dy[n] = line.dy;
+    lanes.point[n] = refine_points_[k];
+    ++n;
   }
+  const kernels::RefineColumns columns{
+      lanes.u.data(),           lanes.centre.data(),  lanes.lo.data(),
+      lanes.count.data(),       lanes.spacing.data(), lanes.edge.data(),
+      lanes.x0.data(),          lanes.y0.data(),      lanes.dx.data(),
+      lanes.dy.data(),          current_.data,        current_.stride,
+      background_.data,         background_.stride,   last,
+      options_.saturation_level};
+  kernels::refine_columns(columns, static_cast<int>(n), lanes.rows.data());
+  for (std::size_t j = 0; j < n; ++j)
+    points[lanes.point[j]].v = lanes.rows[j];
 }
-#endif
 
 }  // namespace laserline::pipeline

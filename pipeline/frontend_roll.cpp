@@ -1,7 +1,7 @@
 // The front end's pass down the rows (paper III-C to III-E), after the row normalisation
 // (frontend.cpp): the band-pass of the normalised rows, the noise level, the SNR, and the
-// candidates per column, in blocks of rows and strips of columns; its row kernels, portable and in
-// AVX2, compiled into each target's version of the pass.
+// candidates per column, in blocks of rows and strips of columns (its vector kernels in
+// pipeline/kernels/).
 #include <algorithm>
 #include <array>
 #include <bit>
@@ -15,6 +15,7 @@
 
 #include "pipeline/frontend.hpp"
 #include "pipeline/frontend_common.hpp"
+#include "pipeline/kernels/kernels.hpp"
 
 namespace laserline::pipeline {
 
@@ -22,35 +23,11 @@ using namespace frontend_detail;
 
 namespace {
 
-// The band-pass row from the box sums of the normalised rows, each box sliding one row on:
-// sum += entering - leaving (rows of zeros beyond the ends). The band-pass, inner mean minus outer
-// mean, is held as the integer a * inner sum - b * outer sum (the constructor picks a and b and
-// the unit): exact, and in 16-bit lanes (sixteen to an AVX2 register) wherever it and the sums
-// fit (a * inner sum alone may not: that arithmetic is modulo 2^16, and the result fits).
-// `most` is the row's largest band-pass (candidates need the threshold).
-template <class Lane, class Sum = std::make_unsigned_t<Lane>>
-LASERLINE_ROW_KERNEL void band_pass_row(Sum* __restrict inner,
-                                        const std::uint16_t* __restrict inner_entering,
-                                        const std::uint16_t* __restrict inner_leaving,
-                                        Sum* __restrict outer,
-                                        const std::uint16_t* __restrict outer_entering,
-                                        const std::uint16_t* __restrict outer_leaving, Sum a, Sum b,
-                                        int count, Lane* __restrict out, int& most) {
-  Lane largest = std::numeric_limits<Lane>::min();
-  for (int u = 0; u < count; ++u) {
-    const auto i = static_cast<Sum>(inner[u] + inner_entering[u] - inner_leaving[u]);
-    const auto o = static_cast<Sum>(outer[u] + outer_entering[u] - outer_leaving[u]);
-    inner[u] = i;
-    outer[u] = o;
-    const auto band = static_cast<Lane>(static_cast<Sum>(a * i - b * o));
-    out[u] = band;
-    largest = std::max(largest, band);
-  }
-  most = largest;
-}
-
-// The same where a box is cut short by an end of the rows (a few rows at either end): the means
-// over what each box covers (inner weight wi, outer wo per unit of sum), in the band-pass's unit.
+// The band-pass row where a box is cut short by an end of the rows (a few rows at either end): the
+// means over what each box covers (inner weight wi, outer wo per unit of sum), in the band-pass's
+// unit. (Elsewhere kernels::band_pass_row(): the box sums slide one row on, sum += entering -
+// leaving, and the band-pass, inner mean minus outer mean, is the exact integer
+// a * inner sum - b * outer sum, in 16-bit lanes wherever it and the sums fit.)
 template <class Lane, class Sum = std::make_unsigned_t<Lane>>
 LASERLINE_ROW_KERNEL void band_pass_row_cut_short(
     Sum* __restrict inner, const std::uint16_t* __restrict inner_entering,
@@ -73,184 +50,24 @@ LASERLINE_ROW_KERNEL void band_pass_row_cut_short(
   most = largest;
 }
 
-// The candidates of a band-pass row, as bits (bit i of word i / 64 for column i of the strip):
-// the pixels at or above `threshold` (the noise is at least 1, so nothing below can pass the SNR
-// threshold) that are a maximum of the band-pass within `reach` rows up and down (strictly above
-// the rows above, at least the rows below). Row r + k is at ring + slot[k]. Few pass (a fraction
-// of a percent), so the rest of the test runs on them alone.
-// Portable version: byte flags, then eight at a time into bits.
-template <class Lane>
-LASERLINE_ROW_KERNEL void peak_bits(const Lane* ring, const std::size_t* slot, int reach,
-                                    Lane threshold, int count, std::uint8_t* __restrict flags,
-                                    std::uint64_t* __restrict bits) {
-  const Lane* __restrict row = ring + slot[0];
-  for (int u = 0; u < count; ++u)
-    flags[u] = static_cast<std::uint8_t>(row[u] >= threshold);
-  for (int k = 1; k <= reach; ++k) {
-    const Lane* __restrict above = ring + slot[-k];
-    const Lane* __restrict below = ring + slot[k];
-    for (int u = 0; u < count; ++u)
-      flags[u] = static_cast<std::uint8_t>(flags[u] & (row[u] > above[u]) & (row[u] >= below[u]));
-  }
-  for (int w = 0; w * 64 < count; ++w)
-    bits[w] = 0;
-  for (int c = 0; c < count; c += 8) {
-    std::uint64_t eight = 0;
-    std::memcpy(&eight, flags + c, sizeof eight);
-    // Flags of 0 or 1 in the bytes: the product gathers flag k into bit k of its top byte.
-    static_assert(std::endian::native == std::endian::little);
-    const std::uint64_t gathered = (eight * 0x0102040810204080u) >> 56;
-    bits[c / 64] |= gathered << (c % 64);
-  }
-}
-
-#if LASERLINE_AVX2_KERNELS
-// peak_bits() of sixteen 16-bit lanes from column u: a compare mask.
-template <int kReach = 0>  // the reach if known at compile time
-__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i peaks_of_sixteen(
-    const std::int16_t* ring, const std::size_t* slot, int reach, __m256i below_threshold, int u) {
-  if constexpr (kReach > 0) reach = kReach;
-  const std::int16_t* column = ring + u;
-  const __m256i centre = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(column + slot[0]));
-  __m256i peak = _mm256_cmpgt_epi16(centre, below_threshold);
-  for (int k = 1; k <= reach; ++k) {
-    const __m256i above = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(column + slot[-k]));
-    const __m256i below = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(column + slot[k]));
-    const __m256i higher = _mm256_cmpgt_epi16(centre, above);
-    const __m256i lower = _mm256_cmpgt_epi16(below, centre);
-    peak = _mm256_and_si256(peak, _mm256_andnot_si256(lower, higher));
-  }
-  return peak;
-}
-
-// peak_bits() for 16-bit lanes in AVX2: compare masks packed to bytes and their top bits taken
-// (count a multiple of 16).
-template <int kReach>
-__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL void peak_bits_avx2_with(
-    const std::int16_t* ring, const std::size_t* slot, int reach, std::int16_t threshold, int count,
-    std::uint64_t* bits) {
-  const __m256i below_threshold = _mm256_set1_epi16(static_cast<short>(threshold - 1));
-  for (int w = 0; w * 64 < count; ++w)
-    bits[w] = 0;
-  for (int u = 0; u < count; u += 32) {
-    const __m256i first = peaks_of_sixteen<kReach>(ring, slot, reach, below_threshold, u);
-    const __m256i second =
-        u + 16 < count ? peaks_of_sixteen<kReach>(ring, slot, reach, below_threshold, u + 16)
-                       : _mm256_setzero_si256();
-    // packs interleaves the 128-bit halves: the permutation puts the bytes back in order.
-    const __m256i bytes = _mm256_permute4x64_epi64(_mm256_packs_epi16(first, second), 0xd8);
-    const auto mask = static_cast<std::uint32_t>(_mm256_movemask_epi8(bytes));
-    bits[u / 64] |= static_cast<std::uint64_t>(mask) << (u % 64);
-  }
-}
-
-__attribute__((target("avx2"))) inline void peak_bits_avx2(const std::int16_t* ring,
-                                                           const std::size_t* slot, int reach,
-                                                           std::int16_t threshold, int count,
-                                                           std::uint64_t* bits) {
-  // (The usual reach, 2 rows for a 3-row laser width, unrolled.)
-  if (reach == 2) {
-    peak_bits_avx2_with<2>(ring, slot, reach, threshold, count, bits);
-  } else {
-    peak_bits_avx2_with<0>(ring, slot, reach, threshold, count, bits);
-  }
-}
-#endif
-
 }  // namespace
 
 struct Frontend::StageImages {
   std::span<float> normalised, band_pass, signal_to_noise;
 };
 
-namespace {
-
-// The sum of |band-pass| over a noise window less its guard band (see Frontend::noise_level()):
-// over the `rows` rows from each of `above` and `below` (offsets into the strip's band-pass ring),
-// columns [first, first + count) of the ring. Exact: 64-bit.
-template <class Lane>
-std::uint64_t window_sum(const Lane* ring, const Frontend::NoiseWindow& window, int first,
-                         int count) {
-  std::uint64_t sum = 0;
-  for (const std::size_t* rows : {window.above, window.below}) {
-    for (int j = 0; j < window.rows; ++j) {
-      const Lane* row = ring + rows[j] + first;
-      for (int i = 0; i < count; ++i)
-        sum += static_cast<std::uint64_t>(row[i] < 0 ? -static_cast<std::int64_t>(row[i]) : row[i]);
-    }
-  }
-  return sum;
-}
-
-#if LASERLINE_AVX2_KERNELS
-// |band-pass| of sixteen 16-bit lanes, summed in pairs to 32-bit lanes with the weights `ones`
-// (1 for the window's columns, else 0).
-__attribute__((target("avx2"))) LASERLINE_ROW_KERNEL __m256i magnitude_pairs(const std::int16_t* x,
-                                                                             __m256i ones) {
-  return _mm256_madd_epi16(
-      _mm256_abs_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(x))), ones);
-}
-
-// window_sum() of 16-bit lanes in AVX2, sixteen columns to a register, the columns beyond `count`
-// weighted 0. Reads up to 15 lanes past the last column (the ring is padded for it). Each 32-bit
-// lane sums two columns over the rows: at most 2 x 32767 x 1000 rows (the largest noise window)
-// fits, and for a window at most sixteen columns wide (the usual case: one register, summed in
-// 32 bits) so does the whole sum.
-__attribute__((target("avx2"))) inline std::uint64_t window_sum_avx2(
-    const std::int16_t* ring, const Frontend::NoiseWindow& window, int first, int count) {
-  const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-  const std::int16_t* columns = ring + first;
-  std::uint64_t sum = 0;
-  for (int c = 0; c < count; c += 16) {
-    const __m256i ones =
-        _mm256_and_si256(_mm256_cmpgt_epi16(_mm256_set1_epi16(static_cast<short>(count - c)), lane),
-                         _mm256_set1_epi16(1));
-    // (The rows above and below the guard band in two sums: two chains of additions.)
-    __m256i above = _mm256_setzero_si256(), below = _mm256_setzero_si256();
-    for (int j = 0; j < window.rows; ++j) {
-      above = _mm256_add_epi32(above, magnitude_pairs(columns + window.above[j] + c, ones));
-      below = _mm256_add_epi32(below, magnitude_pairs(columns + window.below[j] + c, ones));
-    }
-    const __m256i both = _mm256_add_epi32(above, below);
-    if (count <= 16) {
-      __m128i total =
-          _mm_add_epi32(_mm256_castsi256_si128(both), _mm256_extracti128_si256(both, 1));
-      total = _mm_add_epi32(total, _mm_shuffle_epi32(total, 0x4e));
-      total = _mm_add_epi32(total, _mm_shuffle_epi32(total, 0xb1));
-      return static_cast<std::uint32_t>(_mm_cvtsi128_si32(total));
-    }
-    __m256i wide = _mm256_add_epi64(_mm256_cvtepu32_epi64(_mm256_castsi256_si128(both)),
-                                    _mm256_cvtepu32_epi64(_mm256_extracti128_si256(both, 1)));
-    const __m128i pairs =
-        _mm_add_epi64(_mm256_castsi256_si128(wide), _mm256_extracti128_si256(wide, 1));
-    sum += static_cast<std::uint64_t>(_mm_cvtsi128_si64(pairs)) +
-           static_cast<std::uint64_t>(_mm_extract_epi64(pairs, 1));
-  }
-  return sum;
-}
-#endif
-
-}  // namespace
-
 template <class Lane>
 float Frontend::noise_level(const Lane* ring, const NoiseWindow& window, int u, int begin) const {
   std::uint64_t sum = 0;
   const int count = 2 * noise_pad_ + 1;
   if (u >= noise_pad_ && u + noise_pad_ < width_) {
-    const int first = u - noise_pad_ - begin;
-    bool summed = false;
-#if LASERLINE_AVX2_KERNELS
-    if constexpr (std::is_same_v<Lane, std::int16_t>) {
-      if (avx2_) {
-        sum = window_sum_avx2(ring, window, first, count);
-        summed = true;
-      }
-    }
-#endif
-    if (!summed) sum = window_sum(ring, window, first, count);
+    sum = kernels::window_sum(ring, window.above, window.below, window.rows, u - noise_pad_ - begin,
+                              count);
   } else {  // at the image's sides the window repeats the edge column
-    for (int k = -noise_pad_; k <= noise_pad_; ++k)
-      sum += window_sum(ring, window, std::clamp(u + k, 0, width_ - 1) - begin, 1);
+    for (int k = -noise_pad_; k <= noise_pad_; ++k) {
+      sum += kernels::window_sum(ring, window.above, window.below, window.rows,
+                                 std::clamp(u + k, 0, width_ - 1) - begin, 1);
+    }
   }
   // III-D: the minimal noise level is 1.
   return std::max(static_cast<float>(sum) * band_unit_ * noise_norm_, 1.0f);
@@ -402,13 +219,8 @@ LASERLINE_ROW_KERNEL void Frontend::band_pass_rows(const RollPass<Lane>& pass,
     const std::uint16_t* outer_in = strip.normalised(b + ho);
     const std::uint16_t* outer_out = strip.normalised(b - ho - 1);
     if (b >= ho && b + ho < rows) {
-      if (count == kRingColumns) {
-        band_pass_row(inner, inner_in, inner_out, outer, outer_in, outer_out, pass.a, pass.b,
-                      kRingColumns, out, row_most);
-      } else {
-        band_pass_row(inner, inner_in, inner_out, outer, outer_in, outer_out, pass.a, pass.b, count,
-                      out, row_most);
-      }
+      row_most = kernels::band_pass_row(inner, inner_in, inner_out, outer, outer_in, outer_out,
+                                        pass.a, pass.b, count, out);
     } else {
       const int i0 = std::max(b - hi, 0), i1 = std::min(b + hi + 1, rows);
       const int o0 = std::max(b - ho, 0), o1 = std::min(b + ho + 1, rows);
@@ -468,20 +280,7 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
   // Candidates: maxima of the band-pass within `reach` rows at or above the threshold.
   const std::size_t* rows_at = strip.band_rows + (r - strip.band_base);
   std::uint64_t* bits = peak_bits_.data();
-#if LASERLINE_AVX2_KERNELS
-  if constexpr (std::is_same_v<Lane, std::int16_t>) {
-    if (avx2_) {
-      peak_bits_avx2(strip.band_ring, rows_at, reach_, pass.lane_threshold, count, bits);
-    } else {
-      peak_bits(strip.band_ring, rows_at, reach_, pass.lane_threshold, count, peak_flags_.data(),
-                bits);
-    }
-  } else
-#endif
-  {
-    peak_bits(strip.band_ring, rows_at, reach_, pass.lane_threshold, count, peak_flags_.data(),
-              bits);
-  }
+  kernels::peak_bits(strip.band_ring, rows_at, reach_, pass.lane_threshold, count, bits);
   const Lane* up = strip.band(r - 1);
   const Lane* down = strip.band(r + 1);
 
@@ -595,12 +394,10 @@ void Frontend::roll(const StageImages* images) {
   }
 }
 
-LASERLINE_DENSE_KERNEL
 void Frontend::roll_narrow(const StageImages* images) {
   roll_with(images, narrow_);
 }
 
-LASERLINE_DENSE_KERNEL
 void Frontend::roll_wide(const StageImages* images) {
   roll_with(images, wide_);
 }

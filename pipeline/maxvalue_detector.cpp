@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "pipeline/kernels/kernels.hpp"
 #include "pipeline/options.hpp"
 #include "pipeline/subpixel.hpp"
 
@@ -27,29 +28,12 @@ void MaxValueDetector::detect(const ImageView& image, const FrameContext& frame,
   const int width = image.width;
   if (!frame.laser_on || static_cast<int>(max_value_.size()) != width || image.height > 65535)
     return;
-  std::fill(max_value_.begin(), max_value_.end(), 0);
-  std::fill(first_row_.begin(), first_row_.end(), 0);
-  std::fill(last_row_.begin(), last_row_.end(), 0);
-  std::fill(sum_.begin(), sum_.end(), 0);
-
-  std::uint8_t* max_value = max_value_.data();
-  std::uint16_t* first_row = first_row_.data();
-  std::uint16_t* last_row = last_row_.data();
-  std::uint32_t* sum = sum_.data();
-  for (int v = 0; v < image.height; ++v) {
-    const std::uint8_t* p = image.row(v);
-    const auto row = static_cast<std::uint16_t>(v);
-    // Branch-free so that the compiler vectorises across columns.
-    for (int u = 0; u < width; ++u) {
-      const std::uint8_t x = p[u];
-      const bool greater = x > max_value[u];
-      const bool not_less = x >= max_value[u];
-      sum[u] += x;
-      max_value[u] = greater ? x : max_value[u];
-      first_row[u] = greater ? row : first_row[u];
-      last_row[u] = not_less ? row : last_row[u];
-    }
-  }
+  kernels::column_maxima(image.data, image.stride, 0, width, image.height, max_value_.data(),
+                         first_row_.data(), last_row_.data(), sum_.data());
+  const std::uint8_t* max_value = max_value_.data();
+  const std::uint16_t* first_row = first_row_.data();
+  const std::uint16_t* last_row = last_row_.data();
+  const std::uint32_t* sum = sum_.data();
 
   const float inv_height = 1.0f / static_cast<float>(image.height);
   for (int u = 0; u < width; ++u) {

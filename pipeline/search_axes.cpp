@@ -6,9 +6,7 @@
 #include <numbers>
 #include <utility>
 
-#if defined(__SSE2__)
-#include <emmintrin.h>
-#endif
+#include "pipeline/kernels/kernels.hpp"
 
 namespace laserline::pipeline {
 
@@ -128,51 +126,13 @@ void transpose_scalar(const std::uint8_t* src, std::ptrdiff_t src_stride, int ro
   }
 }
 
-#if defined(__SSE2__)
-// A 16 x 16 block through four rounds of interleaves (bytes, words, double words, quad words):
-// each round doubles the run of one source column held together in a register.
-void transpose16(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
-                 std::ptrdiff_t dst_stride) {
-  __m128i r[16], t[16];
-  for (int i = 0; i < 16; ++i)
-    r[i] = _mm_loadu_si128(reinterpret_cast<const __m128i*>(src + i * src_stride));
-  for (int k = 0; k < 8; ++k) {  // rows 2k, 2k+1 paired: columns 0-7, then 8-15
-    t[k] = _mm_unpacklo_epi8(r[2 * k], r[2 * k + 1]);
-    t[k + 8] = _mm_unpackhi_epi8(r[2 * k], r[2 * k + 1]);
-  }
-  for (int half = 0; half < 16; half += 8) {  // columns 0-7, then 8-15
-    for (int k = 0; k < 4; ++k) {             // rows 4k .. 4k+3: columns +0-3, then +4-7
-      r[half + k] = _mm_unpacklo_epi16(t[half + 2 * k], t[half + 2 * k + 1]);
-      r[half + k + 4] = _mm_unpackhi_epi16(t[half + 2 * k], t[half + 2 * k + 1]);
-    }
-  }
-  for (int quad = 0; quad < 16; quad += 4) {  // four columns: rows 0-3, 4-7, 8-11, 12-15 in r
-    const __m128i low01 = _mm_unpacklo_epi32(r[quad], r[quad + 1]);       // columns 0, 1: rows 0-7
-    const __m128i high01 = _mm_unpackhi_epi32(r[quad], r[quad + 1]);      // columns 2, 3: rows 0-7
-    const __m128i low23 = _mm_unpacklo_epi32(r[quad + 2], r[quad + 3]);   // rows 8-15
-    const __m128i high23 = _mm_unpackhi_epi32(r[quad + 2], r[quad + 3]);  // rows 8-15
-    t[quad] = _mm_unpacklo_epi64(low01, low23);
-    t[quad + 1] = _mm_unpackhi_epi64(low01, low23);
-    t[quad + 2] = _mm_unpacklo_epi64(high01, high23);
-    t[quad + 3] = _mm_unpackhi_epi64(high01, high23);
-  }
-  for (int i = 0; i < 16; ++i)
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(dst + i * dst_stride), t[i]);
-}
-#endif
-
 void transpose(const ImageView& frame, std::uint8_t* dst, std::ptrdiff_t dst_stride) {
   const int w = frame.width, h = frame.height;
   constexpr int kTile = 16;
   const int whole_rows = h / kTile * kTile, whole_columns = w / kTile * kTile;
   for (int y = 0; y < whole_rows; y += kTile) {
     for (int x = 0; x < whole_columns; x += kTile) {
-#if defined(__SSE2__)
-      transpose16(frame.row(y) + x, frame.stride, dst + x * dst_stride + y, dst_stride);
-#else
-      transpose_scalar(frame.row(y) + x, frame.stride, kTile, kTile, dst + x * dst_stride + y,
-                       dst_stride);
-#endif
+      kernels::transpose16(frame.row(y) + x, frame.stride, dst + x * dst_stride + y, dst_stride);
     }
     transpose_scalar(frame.row(y) + whole_columns, frame.stride, kTile, w - whole_columns,
                      dst + whole_columns * dst_stride + y, dst_stride);

@@ -18,6 +18,8 @@ packages=(
   libyaml-cpp-dev
   libopencv-dev
   libeigen3-dev
+  # the pipeline's vector kernels, one source for every CPU (SSE4/AVX2/AVX-512, NEON/SVE)
+  libhwy-dev
   libsystemd-dev
   zlib1g-dev
   # laserline-view's HTTP server

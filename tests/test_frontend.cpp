@@ -11,6 +11,8 @@
 #include <stdexcept>
 #include <vector>
 
+#include <hwy/targets.h>
+
 #include "allocation_counter.hpp"
 #include "pipeline/frontend_detectors.hpp"
 #include "pipeline/options.hpp"
@@ -18,6 +20,18 @@
 
 namespace laserline::pipeline {
 namespace {
+
+// Runs `body` once per kernel target Highway compiled that this CPU runs (pipeline/kernels/).
+template <class Body>
+void for_each_kernel_target(Body body) {
+  const std::vector<std::int64_t> targets = hwy::SupportedAndGeneratedTargets();
+  ASSERT_GE(targets.size(), 2u);
+  for (const std::int64_t target : targets) {
+    hwy::SetSupportedTargetsForTest(target);
+    body(hwy::TargetName(target));
+  }
+  hwy::SetSupportedTargetsForTest(0);
+}
 
 ScannerGeometry small_geometry() {
   ScannerGeometry g;
@@ -217,7 +231,7 @@ TEST(Frontend, RollingPassMatchesTheStagesComputedWhole) {
 // neighbours). The homography (a roll and a shift) moves some warp blocks partly off the
 // background at the left, top and right. Smooth images (at most ~3 grey levels per pixel) keep
 // the error of a block's translation and of the fixed-point weights small; the bound adds the
-// 1/16 grey level the normalised rows keep. The AVX2 and portable kernels must agree exactly.
+// 1/16 grey level the normalised rows keep. Every target's kernels give the same rows.
 TEST(Frontend, SubtractsTheBackgroundSeenThroughTheHomography) {
   const ScannerGeometry g = small_geometry();
   Frontend frontend(g, FrontendOptions{});
@@ -237,12 +251,14 @@ TEST(Frontend, SubtractsTheBackgroundSeenThroughTheHomography) {
 
   const int rows = frontend.rows().rows(), stride = frontend.stride();
   const std::size_t size = static_cast<std::size_t>(rows) * stride;
-  std::vector<float> with_intrinsics(size), portable(size);
+  std::vector<float> dispatched(size);
   frontend.set_frame_minus_background(current.view(), background.view(), h);
-  frontend.stage_images(with_intrinsics, {}, {});
-  frontend.use_intrinsics(false);
-  frontend.stage_images(portable, {}, {});
-  EXPECT_EQ(with_intrinsics, portable);
+  frontend.stage_images(dispatched, {}, {});
+  for_each_kernel_target([&](const char* target) {
+    std::vector<float> on_target(size);
+    frontend.stage_images(on_target, {}, {});
+    EXPECT_EQ(on_target, dispatched) << target;
+  });
 
   auto sample = [&](const Image& image, double x, double y) {
     const int ix = static_cast<int>(std::floor(x)), iy = static_cast<int>(std::floor(y));
@@ -257,7 +273,7 @@ TEST(Frontend, SubtractsTheBackgroundSeenThroughTheHomography) {
     const double v = frontend.rows().source_row(r);
     for (int u = 0; u < g.width; ++u) {
       const auto [x, y] = h.map(u, v);
-      const double got = portable[r * stride + u];
+      const double got = dispatched[r * stride + u];
       // Within a pixel of the background's edge the block's translation may decide otherwise.
       const double margin = 1.0;
       if (x < -margin || x > g.width - 1 + margin || y < -margin || y > g.height - 1 + margin) {
@@ -283,10 +299,10 @@ TEST(Frontend, SubtractsTheBackgroundSeenThroughTheHomography) {
   EXPECT_LT(worst, 0.5);
 }
 
-// The kernels written in AVX2 intrinsics and their portable versions find the same candidates,
-// to the bit, with 16- and 32-bit band-pass lanes, the usual reach of 2 rows and a wider one: on
+// The kernels of every target (AVX2, SSE4, scalar, ... on x86-64) find the same candidates, to the
+// bit, with 16- and 32-bit band-pass lanes, the usual reach of 2 rows and a wider one: on
 // textured frames (many candidates, most rejected) minus a textured background.
-TEST(Frontend, IntrinsicsAndPortableKernelsFindTheSameCandidates) {
+TEST(Frontend, EveryKernelTargetFindsTheSameCandidates) {
   const ScannerGeometry g = small_geometry();
   Image current(g.width, g.height, 0), background(g.width, g.height, 0);
   std::uint32_t state = 777;
@@ -309,21 +325,27 @@ TEST(Frontend, IntrinsicsAndPortableKernelsFindTheSameCandidates) {
   for (const FrontendOptions& o : {narrow, wide, wide_reach}) {
     Frontend frontend(g, o);
     frontend.reset(g.width, g.height);
-    Profile with_intrinsics(frontend.max_points(g.width)), portable(frontend.max_points(g.width));
+    Profile dispatched(frontend.max_points(g.width));
     frontend.set_frame_minus_background(current.view(), background.view(), h);
-    frontend.find_candidates(with_intrinsics);
-    frontend.use_intrinsics(false);
-    frontend.forget_previous_frame();  // the same frame again, not its successor
-    frontend.find_candidates(portable);
-    ASSERT_EQ(with_intrinsics.size(), portable.size());
-    EXPECT_GT(portable.size(), static_cast<std::size_t>(g.width));  // many, some not valid
+    frontend.find_candidates(dispatched);
+    for_each_kernel_target([&](const char* target) {
+      Profile on_target(frontend.max_points(g.width));
+      frontend.forget_previous_frame();  // the same frame again, not its successor
+      frontend.find_candidates(on_target);
+      ASSERT_EQ(on_target.size(), dispatched.size()) << target;
+      for (std::size_t i = 0; i < dispatched.size(); ++i) {
+        const ProfilePoint& a = on_target.points()[i];
+        const ProfilePoint& b = dispatched.points()[i];
+        EXPECT_TRUE(a.u == b.u && a.v == b.v && a.snr_db == b.snr_db && a.valid == b.valid)
+            << target << " point " << i << ": " << a.u << ", " << a.v << " against " << b.u << ", "
+            << b.v;
+      }
+    });
+    EXPECT_GT(dispatched.size(), static_cast<std::size_t>(g.width));  // many, some not valid
     // Both of the refinement's paths ran: the Gaussian fit, and the centre of a clipped run.
     int on_line = 0, on_clipped_line = 0;
-    for (std::size_t i = 0; i < portable.size(); ++i) {
-      const ProfilePoint& a = with_intrinsics.points()[i];
-      const ProfilePoint& b = portable.points()[i];
-      EXPECT_TRUE(a.u == b.u && a.v == b.v && a.snr_db == b.snr_db && a.valid == b.valid)
-          << "point " << i << ": " << a.u << ", " << a.v << " against " << b.u << ", " << b.v;
+    for (std::size_t i = 0; i < dispatched.size(); ++i) {
+      const ProfilePoint& b = dispatched.points()[i];
       if (b.valid && std::abs(b.v - line(b.u)) < 1.0) ++on_line;
       if (b.valid && std::abs(b.v - clipped(b.u)) < 1.0) ++on_clipped_line;
     }
