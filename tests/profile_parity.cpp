@@ -159,6 +159,7 @@ int compare(const std::string& expected_path, const std::string& actual_path) {
                 actual_path.c_str(), expected.size());
     return 0;
   }
+  if (differing == 0) first_heading = heading;  // one file is the other cut short
   std::fprintf(
       stderr,
       "profile_parity: %s differs from %s: %ld lines differ (%zu lines expected, %zu got), "
