@@ -38,6 +38,9 @@ packages=(
   # the service: systemd-analyze verify/security and systemd-sysusers in the tests, the .deb
   # (file: how CPack tells the programs it strips and scans for their libraries)
   systemd dpkg-dev file
+  # the arm64 cross build of the pipeline and its tests (scripts/test-arm64.sh): Debian's cross
+  # compiler, qemu-user to run what it builds, and the arm64 libraries it links (multiarch)
+  g++-aarch64-linux-gnu qemu-user libgtest-dev:arm64 libgmock-dev:arm64 libhwy-dev:arm64
 )
 
 sudo_cmd=()
@@ -46,10 +49,23 @@ if [ "$(id -u)" -ne 0 ]; then
   sudo_cmd=(sudo)
 fi
 
+# The arm64 packages need the architecture known to dpkg (once; apt then fetches its lists).
+if ! dpkg --print-foreign-architectures | grep -qx arm64; then
+  echo "install-deps: adding the arm64 architecture (for the cross build's libraries)"
+  "${sudo_cmd[@]}" dpkg --add-architecture arm64
+fi
+
+# Installed: of the host's architecture (or for all), unless the name says which (NAME:arm64).
+native=$(dpkg --print-architecture)
+installed() {
+  local name=${1%%:*} arch=${1#*:}
+  [ "$arch" != "$1" ] || arch=$native
+  dpkg-query -W -f='${Architecture} ${Status}\n' "$name" 2>/dev/null |
+    grep -qE "^($arch|all) install ok installed\$"
+}
 missing=()
 for p in "${packages[@]}"; do
-  status=$(dpkg-query -W -f='${Status}' "$p" 2>/dev/null || true)
-  [ "$status" = "install ok installed" ] || missing+=("$p")
+  installed "$p" || missing+=("$p")
 done
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install-deps: all ${#packages[@]} packages already installed"
