@@ -19,6 +19,7 @@
 #include <thread>
 #include <vector>
 
+#include "allocation_counter.hpp"
 #include "daemon/backends.hpp"
 #include "daemon/frame_path.hpp"
 #include "hal/clock.hpp"
@@ -97,6 +98,31 @@ TEST(GpioStrobe, ReadsEachEdgeWithItsKernelTimestamp) {
     strobe.close();
     if (active_low) laserline_gpio_shim_drive_input(kStrobeOffset, 0, 0);
   }
+}
+
+// Steady state: the reader thread takes edges into the history without allocating (counted on
+// every thread while edges are driven and read).
+TEST(GpioStrobe, ReadingEdgesAllocatesNothing) {
+  use_log("allocations");
+  hal::GpioStrobe strobe(strobe_options("gpiochip0", "STROBE"));
+  std::string error;
+  ASSERT_TRUE(strobe.open(&error)) << error;
+  std::int64_t t = hal::monotonic_ns();
+  laserline_gpio_shim_drive_input(kStrobeOffset, 1, t);  // warm-up: the first read
+  laserline_gpio_shim_drive_input(kStrobeOffset, 0, t + 100 * kUs);
+  ASSERT_TRUE(wait_for_exposures(strobe.history(), 1));
+  ASSERT_TRUE(testing::allocation_counter_works());
+  testing::start_counting_allocations();
+  for (int i = 1; i <= 200; ++i) {
+    t += 1 * kMs;
+    laserline_gpio_shim_drive_input(kStrobeOffset, 1, t);
+    laserline_gpio_shim_drive_input(kStrobeOffset, 0, t + 100 * kUs);
+    if (i % 8 == 0) wait_for_exposures(strobe.history(), static_cast<std::uint64_t>(i) + 1);
+  }
+  const bool all = wait_for_exposures(strobe.history(), 201);
+  const testing::Allocations counted = testing::stop_counting_allocations();
+  ASSERT_TRUE(all) << strobe.history().completed();
+  EXPECT_EQ(counted.count, 0) << counted.bytes << " bytes allocated over 200 exposures";
 }
 
 TEST(GpioStrobe, MissingChipLineOrBusyLineIsOneLineNamingThem) {
