@@ -23,10 +23,11 @@ void ExposureHistory::end(std::int64_t mono_ns) {
   if (open_start_ == 0) return;
   const std::uint64_t index = completed_.load(std::memory_order_relaxed);
   Slot& slot = slots_[index & mask_];
+  // Boehm's seqlock without fences (ThreadSanitizer has none): the data's release stores carry
+  // the odd sequence to a reader that sees them, so it finds the sequence changed.
   slot.sequence.store(2 * index + 1, std::memory_order_relaxed);
-  std::atomic_thread_fence(std::memory_order_release);
-  slot.start.store(open_start_, std::memory_order_relaxed);
-  slot.end.store(mono_ns, std::memory_order_relaxed);
+  slot.start.store(open_start_, std::memory_order_release);
+  slot.end.store(mono_ns, std::memory_order_release);
   slot.sequence.store(2 * (index + 1), std::memory_order_release);
   completed_.store(index + 1, std::memory_order_release);
   open_start_ = 0;
@@ -37,9 +38,8 @@ bool ExposureHistory::get(std::uint64_t index, ExposureInterval* out) const {
   const Slot& slot = slots_[index & mask_];
   const std::uint64_t expected = 2 * (index + 1);
   if (slot.sequence.load(std::memory_order_acquire) != expected) return false;
-  const std::int64_t start = slot.start.load(std::memory_order_relaxed);
-  const std::int64_t end = slot.end.load(std::memory_order_relaxed);
-  std::atomic_thread_fence(std::memory_order_acquire);
+  const std::int64_t start = slot.start.load(std::memory_order_acquire);
+  const std::int64_t end = slot.end.load(std::memory_order_acquire);
   if (slot.sequence.load(std::memory_order_relaxed) != expected) return false;  // overwritten
   *out = ExposureInterval{index, start, end};
   return true;
