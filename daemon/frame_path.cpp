@@ -35,22 +35,22 @@ T* claim_waiting(SpscRing<T>& ring, const std::atomic<bool>& stopping) {
 
 // Names the thread and, when asked, gives it its real-time priority and CPUs. Returns "" or why
 // the system refused.
-std::string configure_thread(std::thread& thread, const ThreadSpec& spec, bool realtime,
+std::string configure_thread(pthread_t thread, const ThreadSpec& spec, bool realtime,
                              const std::vector<int>& cpus) {
-  pthread_setname_np(thread.native_handle(), spec.name);
+  pthread_setname_np(thread, spec.name);
   if (!realtime || spec.fifo_priority == 0) return "";
   if (!cpus.empty()) {
     cpu_set_t set;
     CPU_ZERO(&set);
     for (int cpu : cpus)
       CPU_SET(cpu, &set);
-    if (const int e = pthread_setaffinity_np(thread.native_handle(), sizeof(set), &set); e != 0) {
+    if (const int e = pthread_setaffinity_np(thread, sizeof(set), &set); e != 0) {
       return std::string("realtime.cpus: cannot pin ") + spec.name + ": " + std::strerror(e);
     }
   }
   sched_param param{};
   param.sched_priority = spec.fifo_priority;
-  if (const int e = pthread_setschedparam(thread.native_handle(), SCHED_FIFO, &param); e != 0) {
+  if (const int e = pthread_setschedparam(thread, SCHED_FIFO, &param); e != 0) {
     return std::string("realtime.enabled: cannot give ") + spec.name + " SCHED_FIFO priority " +
            std::to_string(spec.fifo_priority) + ": " + std::strerror(e) +
            " (needs CAP_SYS_NICE or LimitRTPRIO)";
@@ -78,7 +78,12 @@ const char* to_string(CameraState state) {
 
 FramePath::FramePath(const DaemonConfig& config, hal::Camera& camera, hal::Laser& laser,
                      pipeline::Detector& detector, lcm::LCM& lcm)
-    : config_(config), camera_(camera), laser_(laser), detector_(&detector), lcm_(lcm) {}
+    : config_(config),
+      camera_(camera),
+      laser_(laser),
+      strobe_(laser.strobe()),
+      detector_(&detector),
+      lcm_(lcm) {}
 
 FramePath::~FramePath() {
   stop();
@@ -119,6 +124,7 @@ bool FramePath::start(std::string* error) {
                         config_.calibration_channel, config_.profile_all_points},
       config_.detector, max_points, format_, config_.calibration);
   publisher_->status().camera_backend = config_.camera_backend;
+  publisher_->status().strobe_state.reserve(kStrobeLineBytes);
   encoder_ = std::make_unique<RawFrameEncoder>(config_.raw_frames, format_);
   // Enough room for every frame of a status period at 4x the nominal rate.
   const auto window = static_cast<std::size_t>(
@@ -142,7 +148,17 @@ bool FramePath::start(std::string* error) {
   for (auto [thread, spec] :
        {std::pair{&publisher_thread_, kPublisherThread}, std::pair{&image_thread_, kImageThread},
         std::pair{&worker_thread_, kWorkerThread}, std::pair{&camera_thread_, kCameraThread}}) {
-    const std::string problem = configure_thread(*thread, spec, config_.realtime, config_.cpus);
+    const std::string problem =
+        configure_thread(thread->native_handle(), spec, config_.realtime, config_.cpus);
+    if (!problem.empty()) {
+      stop();
+      if (error != nullptr) *error = problem;
+      return false;
+    }
+  }
+  if (strobe_ != nullptr && strobe_->native_thread() != pthread_t{}) {
+    const std::string problem =
+        configure_thread(strobe_->native_thread(), kStrobeThread, config_.realtime, config_.cpus);
     if (!problem.empty()) {
       stop();
       if (error != nullptr) *error = problem;
@@ -210,11 +226,24 @@ void FramePath::camera_loop() {
   // so a frame whose exposure began before its switch is known (and counted) as uncertain.
   hal::LaserSwitch last_switch;
   LaserMode laser_mode = config_.laser_mode;
+  // With a strobe line: the last switches, against which each frame's exposure decides its
+  // laser state, and the matching of frames to the strobe's exposures.
+  hal::LaserSwitchHistory switches;
+  hal::ExposureMatcher matcher;
+  const auto match_tolerance_ns = static_cast<std::int64_t>(0.25e9 / config_.frame_rate_hz);
+  auto switch_recorded = [&](bool on) {
+    hal::LaserSwitch record;
+    record.mono_ns = 0;
+    switch_laser(on, grab_index, &record);
+    if (record.mono_ns == 0) return;  // refused: is_on() says on, the next frame tries again
+    last_switch = record;
+    switches.add(record);
+  };
 
   while (!stopping_.load(std::memory_order_relaxed)) {
     run_commands(laser_mode, frames_flowing, grab_index);
     const bool want_laser = frames_flowing && desired_laser(laser_mode, grab_index);
-    if (want_laser != laser_.is_on()) switch_laser(want_laser, grab_index, &last_switch);
+    if (want_laser != laser_.is_on()) switch_recorded(want_laser);
 
     FrameSlot* slot = lossless ? claim_waiting(*frames_, stopping_) : frames_->try_claim();
     if (lossless && slot == nullptr) break;  // stopping
@@ -224,10 +253,34 @@ void FramePath::camera_loop() {
     info.laser_on = want_laser;  // cameras that observe the laser themselves overwrite it
     const hal::GrabStatus status = camera_.grab(pixels, info, timeout);
     switch (status) {
-      case hal::GrabStatus::kOk:
+      case hal::GrabStatus::kOk: {
         info.laser_switch_mono_ns = last_switch.mono_ns;
-        if (last_switch.for_frame == grab_index && last_switch.mono_ns > info.exposure_mono_ns) {
-          counters_.laser_late_switches.fetch_add(1, std::memory_order_relaxed);
+        info.exposure_start_mono_ns = 0;
+        info.exposure_end_mono_ns = 0;
+        hal::ExposureInterval exposure;
+        const bool own_switch = last_switch.for_frame == grab_index && last_switch.mono_ns != 0;
+        if (strobe_ != nullptr &&
+            matcher.match(strobe_->history(), info.camera_ns, info.arrival_mono_ns,
+                          match_tolerance_ns, &exposure)) {
+          // Exact: the switch times against the exposure's edges. A partly lit frame counts as
+          // lit: it must not serve as a laser-off background.
+          info.exposure_start_mono_ns = exposure.start_mono_ns;
+          info.exposure_end_mono_ns = exposure.end_mono_ns;
+          const hal::LaserExposure lit =
+              switches.during(exposure.start_mono_ns, exposure.end_mono_ns);
+          if (lit != hal::LaserExposure::kUnknown) info.laser_on = lit != hal::LaserExposure::kOff;
+          if (lit == hal::LaserExposure::kMixed ||
+              (own_switch && last_switch.mono_ns > exposure.start_mono_ns)) {
+            counters_.laser_late_switches.fetch_add(1, std::memory_order_relaxed);
+          }
+          counters_.strobe_matched.fetch_add(1, std::memory_order_relaxed);
+        } else {
+          // The estimate: the camera's timestamp mapped to the host clock.
+          if (own_switch && last_switch.mono_ns > info.exposure_mono_ns) {
+            counters_.laser_late_switches.fetch_add(1, std::memory_order_relaxed);
+          }
+          if (strobe_ != nullptr)
+            counters_.strobe_unmatched.fetch_add(1, std::memory_order_relaxed);
         }
         ++grab_index;
         frames_flowing = true;
@@ -240,15 +293,18 @@ void FramePath::camera_loop() {
           counters_.frames_dropped.fetch_add(1, std::memory_order_relaxed);
         }
         break;
+      }
       case hal::GrabStatus::kTimeout:
         frames_flowing = false;
-        if (laser_.is_on()) switch_laser(false, grab_index);
+        if (strobe_ != nullptr) matcher.restart(strobe_->history());
+        if (laser_.is_on()) switch_recorded(false);
         counters_.grab_timeouts.fetch_add(1, std::memory_order_relaxed);
         counters_.camera_state.store(CameraState::kTimeout, std::memory_order_relaxed);
         break;
       case hal::GrabStatus::kError:
         frames_flowing = false;
-        if (laser_.is_on()) switch_laser(false, grab_index);
+        if (strobe_ != nullptr) matcher.restart(strobe_->history());
+        if (laser_.is_on()) switch_recorded(false);
         counters_.grab_errors.fetch_add(1, std::memory_order_relaxed);
         counters_.camera_state.store(CameraState::kError, std::memory_order_relaxed);
         {
@@ -451,6 +507,17 @@ void FramePath::fill_status(std::int64_t now_mono, std::int64_t period_ns) {
   s.laser_safety_offs = counters_.laser_safety_offs.load(std::memory_order_relaxed);
   s.laser_errors = counters_.laser_errors.load(std::memory_order_relaxed);
   s.laser_late_switches = counters_.laser_late_switches.load(std::memory_order_relaxed);
+  {
+    const std::int64_t matched = counters_.strobe_matched.load(std::memory_order_relaxed);
+    const std::int64_t unmatched = counters_.strobe_unmatched.load(std::memory_order_relaxed);
+    char line[kStrobeLineBytes];
+    describe_strobe(now_mono, matched - last_status_matched_, unmatched - last_status_unmatched_,
+                    line, sizeof line);
+    s.strobe_state.assign(line);  // within the capacity reserved at start: no allocation
+    s.strobe_unmatched_frames = unmatched;
+    last_status_matched_ = matched;
+    last_status_unmatched_ = unmatched;
+  }
   const hal::CameraHealth health = camera_.health();
   s.camera_reconnects = health.reconnects;
   s.camera_missing_packets = health.missing_packets;
@@ -485,6 +552,31 @@ void FramePath::fill_status(std::int64_t now_mono, std::int64_t period_ns) {
   s.pipeline_p50_ms = static_cast<float>(pipeline.p50_ms);
   s.pipeline_p99_ms = static_cast<float>(pipeline.p99_ms);
   s.pipeline_max_ms = static_cast<float>(pipeline.max_ms);
+}
+
+void FramePath::describe_strobe(std::int64_t now_mono, std::int64_t matched, std::int64_t unmatched,
+                                char* out, std::size_t size) const {
+  if (size == 0) return;
+  out[0] = '\0';
+  if (strobe_ == nullptr) return;
+  const char* what = strobe_->describe().c_str();
+  const std::int64_t last_edge = strobe_->history().last_edge_mono_ns();
+  // Silent: longer without an edge than three frame periods, and at least a second.
+  const auto silent_ns =
+      std::max<std::int64_t>(1'000'000'000, static_cast<std::int64_t>(3e9 / config_.frame_rate_hz));
+  constexpr const char* kFallback = "laser state from the camera's timestamps (estimate)";
+  if (last_edge == 0) {
+    std::snprintf(out, size, "silent: no edge on %s since start; %s", what, kFallback);
+  } else if (now_mono - last_edge > silent_ns) {
+    std::snprintf(out, size, "silent: no edge on %s for %.1f s; %s", what,
+                  static_cast<double>(now_mono - last_edge) * 1e-9, kFallback);
+  } else if (unmatched > 0) {
+    std::snprintf(out, size, "%lld of %lld frames not matched to an exposure on %s; %s",
+                  static_cast<long long>(unmatched), static_cast<long long>(matched + unmatched),
+                  what, kFallback);
+  } else {
+    std::snprintf(out, size, "ok");
+  }
 }
 
 void FramePath::publisher_loop() {
@@ -582,6 +674,8 @@ FramePathSummary FramePath::summary() const {
   s.frames_over_budget = counters_.frames_over_budget.load();
   s.laser_switches = counters_.laser_switches.load();
   s.laser_late_switches = counters_.laser_late_switches.load();
+  s.strobe_matched = counters_.strobe_matched.load();
+  s.strobe_unmatched = counters_.strobe_unmatched.load();
   s.latency = final_latency_;  // complete once stop() returned
   s.pipeline = final_pipeline_;
   return s;

@@ -16,6 +16,7 @@
 #include "daemon/raw_frame_encoder.hpp"
 #include "daemon/spsc_ring.hpp"
 #include "hal/camera.hpp"
+#include "hal/exposure_strobe.hpp"
 #include "hal/laser.hpp"
 #include "pipeline/detector.hpp"
 
@@ -37,6 +38,8 @@ struct FramePathSummary {
   std::int64_t frames_over_budget = 0;
   std::int64_t laser_switches = 0;
   std::int64_t laser_late_switches = 0;
+  std::int64_t strobe_matched = 0;
+  std::int64_t strobe_unmatched = 0;
   LatencySummary latency;   // exposure -> profile published
   LatencySummary pipeline;  // frame arrival -> profile published
 };
@@ -92,6 +95,11 @@ class FramePath {
 
   // True once the camera ended by itself (a replayed recording reached its end).
   bool source_ended() const { return source_ended_.load(std::memory_order_acquire); }
+  // The strobe's health in one line into `out` (no allocation): "" without laser.strobe_line,
+  // "ok", or why frames fall back to the estimate. `matched`/`unmatched`: frames of the period
+  // looked at. Any thread.
+  void describe_strobe(std::int64_t now_mono, std::int64_t matched, std::int64_t unmatched,
+                       char* out, std::size_t size) const;
 
  private:
   void camera_loop();
@@ -112,6 +120,7 @@ class FramePath {
   const DaemonConfig& config_;
   hal::Camera& camera_;
   hal::Laser& laser_;
+  hal::ExposureStrobe* strobe_;   // the laser's strobe line, nullptr without one
   pipeline::Detector* detector_;  // the worker's; replaced by a threshold command
   lcm::LCM& lcm_;
   std::unique_ptr<lcm::LCM> image_lcm_;  // raw frames over UDP: their own socket and lock
@@ -148,6 +157,9 @@ class FramePath {
 
   // Publisher-thread state for per-period figures.
   std::int64_t last_status_frames_ = 0;
+  std::int64_t last_status_matched_ = 0;
+  std::int64_t last_status_unmatched_ = 0;
+  static constexpr std::size_t kStrobeLineBytes = 240;  // status_t.strobe_state at most
   std::int64_t points_in_period_ = 0;
   std::int64_t profiles_in_period_ = 0;
   CpuUsage cpu_;

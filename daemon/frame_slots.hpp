@@ -49,6 +49,10 @@ struct FramePathCounters {
   std::atomic<std::int64_t> frames_over_budget{0};  // detection longer than one frame period
   std::atomic<std::int64_t> processing_max_ns{0};   // longest detection since the last status
   std::atomic<std::int64_t> laser_late_switches{0};
+  // laser.strobe_line: frames matched to an exposure on the strobe, and frames that were not
+  // (their laser state is the estimate from the camera's timestamp).
+  std::atomic<std::int64_t> strobe_matched{0};
+  std::atomic<std::int64_t> strobe_unmatched{0};
   std::atomic<std::int64_t> last_frame_mono_ns{0};
   std::atomic<std::int64_t> bad_commands{0};  // command channel: not a valid command_t
   std::atomic<CameraState> camera_state{CameraState::kStarting};

@@ -29,6 +29,7 @@
 #include "daemon/service_notifier.hpp"
 #include "daemon/thread_priorities.hpp"
 #include "hal/clock.hpp"
+#include "hal/exposure_strobe.hpp"
 #include "tools/cli.hpp"
 
 namespace {
@@ -227,12 +228,19 @@ class HealthLine {
         seconds > 0 ? static_cast<double>(processed - last_processed_) / seconds : 0;
     last_ns_ = now_ns;
     last_processed_ = processed;
-    char line[400];
+    const std::int64_t matched = c.strobe_matched.load(std::memory_order_relaxed);
+    const std::int64_t unmatched = c.strobe_unmatched.load(std::memory_order_relaxed);
+    char strobe[256];
+    path.describe_strobe(now_ns, matched - last_matched_, unmatched - last_unmatched_, strobe,
+                         sizeof strobe);
+    last_matched_ = matched;
+    last_unmatched_ = unmatched;
+    char line[700];
     std::snprintf(
         line, sizeof line,
         "camera %s, %.1f frames/s, %lld processed, %lld dropped, %lld over budget, %lld grab "
         "timeouts, %lld grab errors, laser %s, CPU %.0f%%, raw frames %lld published, %lld "
-        "dropped",
+        "dropped%s%s",
         laserline::daemon::to_string(c.camera_state.load(std::memory_order_relaxed)), rate,
         static_cast<long long>(processed),
         static_cast<long long>(c.frames_dropped.load(std::memory_order_relaxed)),
@@ -241,13 +249,16 @@ class HealthLine {
         static_cast<long long>(c.grab_errors.load(std::memory_order_relaxed)),
         laser_on ? "on" : "off", cpu_.percent_since_last(),
         static_cast<long long>(path.images_published()),
-        static_cast<long long>(c.images_dropped.load(std::memory_order_relaxed)));
+        static_cast<long long>(c.images_dropped.load(std::memory_order_relaxed)),
+        strobe[0] != '\0' ? ", strobe " : "", strobe);
     return line;
   }
 
  private:
   std::int64_t last_ns_ = laserline::hal::monotonic_ns();
   std::int64_t last_processed_ = 0;
+  std::int64_t last_matched_ = 0;
+  std::int64_t last_unmatched_ = 0;
   laserline::daemon::CpuUsage cpu_;
 };
 
@@ -374,6 +385,13 @@ int main(int argc, char** argv) {
         error.c_str());
     return 1;
   }
+  // The strobe before the camera: its first exposure is the first frame's (matched by order).
+  if (laserline::hal::ExposureStrobe* strobe = backends.laser->strobe();
+      strobe != nullptr && !strobe->open(&error)) {
+    log(LogLevel::kError, "laserlined: laser (%s): %s", config.laser_backend.c_str(),
+        error.c_str());
+    return 1;
+  }
   if (!backends.camera->open(&error)) {
     log(LogLevel::kError, "laserlined: camera (%s): %s", config.camera_backend.c_str(),
         error.c_str());
@@ -479,6 +497,13 @@ int main(int argc, char** argv) {
       "forced off because frames stopped",
       config.laser_backend.c_str(), static_cast<long long>(s.laser_switches),
       static_cast<long long>(s.laser_late_switches), static_cast<long long>(s.laser_safety_offs));
+  if (laserline::hal::ExposureStrobe* strobe = backends.laser->strobe(); strobe != nullptr) {
+    log(LogLevel::kInfo,
+        "laserlined: strobe %s: %lld frames matched to their exposure, %lld not (their laser "
+        "state estimated)",
+        strobe->describe().c_str(), static_cast<long long>(s.strobe_matched),
+        static_cast<long long>(s.strobe_unmatched));
+  }
   g_laser = nullptr;
   if (path.source_ended() && s.frames_captured == 0 && exit_status == 0) {
     // A replay that replayed nothing failed, even though it ended as recordings do.

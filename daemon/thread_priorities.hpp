@@ -12,6 +12,9 @@ struct ThreadSpec {
   int nice = 0;       // for SCHED_OTHER threads: > 0 yields the CPU to everything else
 };
 
+// The camera's strobe line (laser.strobe_line): above the camera thread, so that an exposure's
+// edges are in its history before the camera thread looks for them when the frame arrives.
+inline constexpr ThreadSpec kStrobeThread{"ll-strobe", 70};
 inline constexpr ThreadSpec kCameraThread{"ll-camera", 60};
 inline constexpr ThreadSpec kWorkerThread{"ll-worker", 50};
 // Below the frame path, since LCM's publish takes a lock and makes a syscall (it may block, which

@@ -33,6 +33,11 @@ struct FrameInfo {
   // Host CLOCK_MONOTONIC of the last laser switch before this frame was grabbed (0 = none yet).
   // When it is later than exposure_mono_ns the switch came too late for this frame.
   std::int64_t laser_switch_mono_ns = 0;
+  // The exposure as the camera's strobe output showed it (laser.strobe_line), host
+  // CLOCK_MONOTONIC; both 0 where no strobe edge was matched to the frame. laser_on is then
+  // decided from the laser's switch times against them (hal/exposure_strobe.hpp).
+  std::int64_t exposure_start_mono_ns = 0;
+  std::int64_t exposure_end_mono_ns = 0;
   // The exposure time and analogue gain the camera reports for this frame; NaN where it does not.
   double exposure_us = std::numeric_limits<double>::quiet_NaN();
   double gain_db = std::numeric_limits<double>::quiet_NaN();

@@ -6,10 +6,13 @@
 #include <cstring>
 
 #include "hal/clock.hpp"
+#include "hal/gpio_line.hpp"
+#include "hal/gpio_strobe.hpp"
 
 namespace laserline::hal {
 
 GpioLaser::GpioLaser(GpioLaserOptions options) : options_(std::move(options)) {
+  if (!options_.strobe.line.chip.empty()) strobe_ = std::make_unique<GpioStrobe>(options_.strobe);
   pthread_mutexattr_t attr;
   pthread_mutexattr_init(&attr);
   pthread_mutexattr_setprotocol(&attr, PTHREAD_PRIO_INHERIT);
@@ -35,12 +38,8 @@ void GpioLaser::close() {
   }
 }
 
-namespace {
-
-// Opens the chip and looks the line up: GPIO_GET_LINEINFO only, nothing is requested, so the
-// line's level does not change. On failure, *chip is closed again and *why says what is wrong.
-bool find_line(const GpioLaserOptions& options, gpiod_chip** chip, gpiod_line** line,
-               std::string* line_desc, std::string* why) {
+bool find_gpio_line(const GpioLineAddress& address, gpiod_chip** chip, gpiod_line** line,
+                    std::string* line_desc, std::string* why) {
   auto fail = [&](const std::string& what) {
     *why = what;
     if (*chip != nullptr) gpiod_chip_close(*chip);
@@ -49,26 +48,26 @@ bool find_line(const GpioLaserOptions& options, gpiod_chip** chip, gpiod_line** 
     return false;
   };
   errno = 0;
-  *chip = gpiod_chip_open_lookup(options.chip.c_str());
+  *chip = gpiod_chip_open_lookup(address.chip.c_str());
   if (*chip == nullptr) {
-    return fail("chip '" + options.chip +
+    return fail("chip '" + address.chip +
                 "': cannot open: " + (errno != 0 ? std::strerror(errno) : "no such GPIO chip"));
   }
   const std::string chip_name =
       std::string(gpiod_chip_name(*chip)) + " (" + gpiod_chip_label(*chip) + ")";
   const unsigned lines = gpiod_chip_num_lines(*chip);
-  if (options.offset >= 0) {
-    *line_desc = "line " + std::to_string(options.offset) + " of " + chip_name;
-    if (static_cast<unsigned>(options.offset) >= lines) {
+  if (address.offset >= 0) {
+    *line_desc = "line " + std::to_string(address.offset) + " of " + chip_name;
+    if (static_cast<unsigned>(address.offset) >= lines) {
       return fail(*line_desc + ": the chip has only " + std::to_string(lines) + " lines (0.." +
                   std::to_string(lines - 1) + ")");
     }
-    *line = gpiod_chip_get_line(*chip, static_cast<unsigned>(options.offset));
+    *line = gpiod_chip_get_line(*chip, static_cast<unsigned>(address.offset));
     if (*line == nullptr) return fail(*line_desc + ": " + std::strerror(errno));
   } else {
-    *line_desc = "line '" + options.line_name + "' of " + chip_name;
+    *line_desc = "line '" + address.line_name + "' of " + chip_name;
     errno = 0;
-    *line = gpiod_chip_find_line(*chip, options.line_name.c_str());
+    *line = gpiod_chip_find_line(*chip, address.line_name.c_str());
     if (*line == nullptr) {
       return fail(*line_desc + ": " +
                   (errno == ENOENT || errno == 0 ? "no line of that name" : std::strerror(errno)));
@@ -77,14 +76,12 @@ bool find_line(const GpioLaserOptions& options, gpiod_chip** chip, gpiod_line** 
   return true;
 }
 
-}  // namespace
-
 bool GpioLaser::probe(std::string* found, std::string* error) {
   gpiod_chip* chip = nullptr;
   gpiod_line* line = nullptr;
   std::string line_desc;
   std::string why;
-  if (!find_line(options_, &chip, &line, &line_desc, &why)) {
+  if (!find_gpio_line(address(), &chip, &line, &line_desc, &why)) {
     if (error != nullptr) *error = why;
     return false;
   }
@@ -111,6 +108,11 @@ bool GpioLaser::probe(std::string* found, std::string* error) {
   if (found != nullptr) {
     *found = named + ": free, now an " + (output ? "output" : "input") + " (not requested)";
   }
+  std::string strobe_found;
+  if (strobe_ != nullptr) {
+    if (!strobe_->probe(&strobe_found, error)) return false;
+    if (found != nullptr) *found += "; " + strobe_found;
+  }
   return true;
 }
 
@@ -123,7 +125,7 @@ bool GpioLaser::open(std::string* error) {
   };
   std::string line_desc;
   std::string why;
-  if (!find_line(options_, &chip_, &line_, &line_desc, &why)) return fail(why);
+  if (!find_gpio_line(address(), &chip_, &line_, &line_desc, &why)) return fail(why);
   const int flags = options_.active_low ? GPIOD_LINE_REQUEST_FLAG_ACTIVE_LOW : 0;
   if (gpiod_line_request_output_flags(line_, options_.consumer.c_str(), flags, 0) != 0) {
     const int e = errno;

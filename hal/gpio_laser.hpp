@@ -6,6 +6,7 @@
 #include <memory>
 #include <string>
 
+#include "hal/gpio_strobe.hpp"
 #include "hal/laser.hpp"
 
 struct gpiod_chip;
@@ -20,11 +21,13 @@ struct GpioLaserOptions {
   std::string line_name;    // the line's name in the device tree (used when offset is -1)
   bool active_low = false;  // the laser driver is enabled by a low level
   std::string consumer = "laserlined";  // shown by gpioinfo while we hold the line
+  // The camera's strobe output (`laser.strobe_line`); strobe.line.chip empty = none wired.
+  GpioStrobeOptions strobe;
 };
 
 class YamlMap;
 // The gpiod backend's factory (hal/registry.hpp): chip, line, active_low and consumer from the
-// `laser:` section.
+// `laser:` section, and the strobe's strobe_line, strobe_chip and strobe_active_low.
 std::unique_ptr<Laser> create_gpio_laser(YamlMap& options);
 
 // The laser's enable input on a GPIO output line, through libgpiod 1.6. open() requests the line
@@ -47,19 +50,26 @@ class GpioLaser final : public Laser {
   bool open(std::string* error) override;
   // Opens the chip and looks the line up without requesting it (its level stays as it is):
   // "line 2 of gpiochip0 (label) ('LASER_EN'): free, now an input (not requested)". A line
-  // another process holds is an error: open() would fail.
+  // another process holds is an error: open() would fail. The strobe line likewise, after it.
   bool probe(std::string* found, std::string* error) override;
   bool set(bool on, std::uint64_t for_frame, LaserSwitch* record) override;
   bool is_on() const override { return on_.load(std::memory_order_acquire); }
+  // The strobe line when one is configured; open() leaves it closed (--laser-off must not
+  // depend on it): the daemon opens it before the camera.
+  ExposureStrobe* strobe() override { return strobe_.get(); }
 
  private:
   void close();
+  GpioLineAddress address() const {
+    return GpioLineAddress{options_.chip, options_.offset, options_.line_name};
+  }
 
   GpioLaserOptions options_;
   gpiod_chip* chip_ = nullptr;
   gpiod_line* line_ = nullptr;
   pthread_mutex_t mutex_;
   std::atomic<bool> on_{false};
+  std::unique_ptr<GpioStrobe> strobe_;
 };
 
 }  // namespace laserline::hal

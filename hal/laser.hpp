@@ -5,6 +5,8 @@
 
 namespace laserline::hal {
 
+class ExposureStrobe;
+
 // One laser switch, stamped right after the output changed (PX4 camera_trigger habit).
 struct LaserSwitch {
   bool on = false;
@@ -32,6 +34,9 @@ class Laser {
   // and callers treat it as on until a later off succeeds).
   virtual bool set(bool on, std::uint64_t for_frame, LaserSwitch* record) = 0;
   virtual bool is_on() const = 0;
+  // The camera's strobe output where it is wired to an input beside the laser
+  // (hal/exposure_strobe.hpp), opened by its owner; nullptr where none is.
+  virtual ExposureStrobe* strobe() { return nullptr; }
 };
 
 }  // namespace laserline::hal

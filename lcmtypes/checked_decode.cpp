@@ -146,7 +146,8 @@ bool walk_status(Walker& w, const Limits& limits) {
          w.skip(kBool + kI64 + 12 * kI64 + 2 * kF32 + kI32 + 6 * kF32 + kF32 + kI64 + kF32 +
                     8 * kI64 + 3 * kI64,
                 "counters") &&
-         w.end("laserline.status_t");
+         w.string("strobe_state", limits.max_string_bytes) &&
+         w.skip(kI64, "strobe_unmatched_frames") && w.end("laserline.status_t");
 }
 
 bool walk_command(Walker& w, const Limits& limits) {

@@ -76,6 +76,8 @@ laserline::status_t status() {
   s.bad_messages = 4;
   s.bad_frames = 5;
   s.instance_id = 0x0123456789abcdef;
+  s.strobe_state = "silent: no edge on line 'STROBE' of gpiochip0 (chip) since start";
+  s.strobe_unmatched_frames = 239;
   return s;
 }
 
@@ -125,6 +127,8 @@ TEST(CheckedDecode, RealMessagesRoundTripAndEveryPrefixIsRefused) {
   EXPECT_EQ(encode(sb), s);
   EXPECT_EQ(sb.bad_frames, 5);
   EXPECT_EQ(sb.instance_id, 0x0123456789abcdef);
+  EXPECT_EQ(sb.strobe_state, status().strobe_state);
+  EXPECT_EQ(sb.strobe_unmatched_frames, 239);
   every_prefix_refused<laserline::status_t>(s);
   const Bytes i = encode(image(16, 8));
   laserline::image_t ib;

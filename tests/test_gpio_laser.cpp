@@ -84,7 +84,7 @@ void use_log(const std::filesystem::path& path) {
 TEST_F(GpioLaserTest, OpensOffSwitchesWithRecordsAndLeavesOff) {
   use_log(log_);
   {
-    GpioLaser laser(GpioLaserOptions{"gpiochip0", 0, "", false, "test-laser"});
+    GpioLaser laser(GpioLaserOptions{"gpiochip0", 0, "", false, "test-laser", {}});
     std::string error;
     ASSERT_TRUE(laser.open(&error)) << error;
     EXPECT_FALSE(laser.is_on());
@@ -127,7 +127,7 @@ TEST_F(GpioLaserTest, OpensOffSwitchesWithRecordsAndLeavesOff) {
 TEST_F(GpioLaserTest, ActiveLowDrivesTheInvertedLevelAndFindsLinesByName) {
   use_log(log_);
   {
-    GpioLaser laser(GpioLaserOptions{"0", -1, "LASER_EN", true, "laserlined"});
+    GpioLaser laser(GpioLaserOptions{"0", -1, "LASER_EN", true, "laserlined", {}});
     std::string error;
     ASSERT_TRUE(laser.open(&error)) << error;
     ASSERT_TRUE(laser.set(true, 0, nullptr));
@@ -145,21 +145,21 @@ TEST_F(GpioLaserTest, ActiveLowDrivesTheInvertedLevelAndFindsLinesByName) {
 TEST_F(GpioLaserTest, MissingChipLineOrBusyLineIsAClearError) {
   use_log(log_);
   std::string error;
-  GpioLaser no_chip(GpioLaserOptions{"gpiochip7", 0, "", false, "laserlined"});
+  GpioLaser no_chip(GpioLaserOptions{"gpiochip7", 0, "", false, "laserlined", {}});
   EXPECT_FALSE(no_chip.open(&error));
   EXPECT_EQ(error, "chip 'gpiochip7': cannot open: No such file or directory");
 
-  GpioLaser no_offset(GpioLaserOptions{"gpiochip0", 9, "", false, "laserlined"});
+  GpioLaser no_offset(GpioLaserOptions{"gpiochip0", 9, "", false, "laserlined", {}});
   EXPECT_FALSE(no_offset.open(&error));
   EXPECT_EQ(error, "line 9 of gpiochip0 (laserline-shim): the chip has only 4 lines (0..3)");
 
-  GpioLaser no_name(GpioLaserOptions{"gpiochip0", -1, "LASER", false, "laserlined"});
+  GpioLaser no_name(GpioLaserOptions{"gpiochip0", -1, "LASER", false, "laserlined", {}});
   EXPECT_FALSE(no_name.open(&error));
   EXPECT_EQ(error, "line 'LASER' of gpiochip0 (laserline-shim): no line of that name");
 
-  GpioLaser holder(GpioLaserOptions{"gpiochip0", 1, "", false, "other-daemon"});
+  GpioLaser holder(GpioLaserOptions{"gpiochip0", 1, "", false, "other-daemon", {}});
   ASSERT_TRUE(holder.open(&error)) << error;
-  GpioLaser second(GpioLaserOptions{"gpiochip0", 1, "", false, "laserlined"});
+  GpioLaser second(GpioLaserOptions{"gpiochip0", 1, "", false, "laserlined", {}});
   EXPECT_FALSE(second.open(&error));
   EXPECT_EQ(error,
             "line 1 of gpiochip0 (laserline-shim): cannot request it as an output: Device or "
@@ -173,11 +173,11 @@ TEST_F(GpioLaserTest, ProbeFindsTheLineWithoutRequestingIt) {
   use_log(log_);
   std::string found;
   std::string error;
-  GpioLaser by_name(GpioLaserOptions{"gpiochip0", -1, "LASER_EN", false, "laserlined"});
+  GpioLaser by_name(GpioLaserOptions{"gpiochip0", -1, "LASER_EN", false, "laserlined", {}});
   ASSERT_TRUE(by_name.probe(&found, &error)) << error;
   EXPECT_EQ(found,
             "line 'LASER_EN' of gpiochip0 (laserline-shim): free, now an input (not requested)");
-  GpioLaser by_offset(GpioLaserOptions{"gpiochip0", 2, "", false, "laserlined"});
+  GpioLaser by_offset(GpioLaserOptions{"gpiochip0", 2, "", false, "laserlined", {}});
   ASSERT_TRUE(by_offset.probe(&found, &error)) << error;
   EXPECT_EQ(found,
             "line 2 of gpiochip0 (laserline-shim) ('LASER_EN'): free, now an input (not "
@@ -185,21 +185,21 @@ TEST_F(GpioLaserTest, ProbeFindsTheLineWithoutRequestingIt) {
   EXPECT_TRUE(pins().empty()) << "probing requested or drove the line:\n" << describe(pins());
   EXPECT_FALSE(by_name.is_on());
 
-  GpioLaser no_chip(GpioLaserOptions{"gpiochip7", 0, "", false, "laserlined"});
+  GpioLaser no_chip(GpioLaserOptions{"gpiochip7", 0, "", false, "laserlined", {}});
   EXPECT_FALSE(no_chip.probe(&found, &error));
   EXPECT_EQ(error, "chip 'gpiochip7': cannot open: No such file or directory");
-  GpioLaser no_offset(GpioLaserOptions{"gpiochip0", 9, "", false, "laserlined"});
+  GpioLaser no_offset(GpioLaserOptions{"gpiochip0", 9, "", false, "laserlined", {}});
   EXPECT_FALSE(no_offset.probe(&found, &error));
   EXPECT_EQ(error, "line 9 of gpiochip0 (laserline-shim): the chip has only 4 lines (0..3)");
-  GpioLaser no_name(GpioLaserOptions{"gpiochip0", -1, "LASER", false, "laserlined"});
+  GpioLaser no_name(GpioLaserOptions{"gpiochip0", -1, "LASER", false, "laserlined", {}});
   EXPECT_FALSE(no_name.probe(&found, &error));
   EXPECT_EQ(error, "line 'LASER' of gpiochip0 (laserline-shim): no line of that name");
 
-  GpioLaser holder(GpioLaserOptions{"gpiochip0", 1, "", false, "other-daemon"});
+  GpioLaser holder(GpioLaserOptions{"gpiochip0", 1, "", false, "other-daemon", {}});
   ASSERT_TRUE(holder.open(&error)) << error;
   ASSERT_TRUE(holder.set(true, 0, nullptr));
   const std::size_t held_events = pins().size();
-  GpioLaser second(GpioLaserOptions{"gpiochip0", 1, "", false, "laserlined"});
+  GpioLaser second(GpioLaserOptions{"gpiochip0", 1, "", false, "laserlined", {}});
   EXPECT_FALSE(second.probe(&found, &error));
   EXPECT_EQ(error,
             "line 1 of gpiochip0 (laserline-shim) ('SPARE1'): in use by 'other-daemon' (laserlined "
@@ -207,9 +207,9 @@ TEST_F(GpioLaserTest, ProbeFindsTheLineWithoutRequestingIt) {
   EXPECT_EQ(pins().size(), held_events) << describe(pins());
   EXPECT_EQ(pins().back().level, 1) << "the holder's level must stay";
 
-  GpioLaser running(GpioLaserOptions{"gpiochip0", -1, "STROBE", false, "laserlined"});
+  GpioLaser running(GpioLaserOptions{"gpiochip0", -1, "STROBE", false, "laserlined", {}});
   ASSERT_TRUE(running.open(&error)) << error;
-  GpioLaser checked(GpioLaserOptions{"gpiochip0", -1, "STROBE", false, "laserlined"});
+  GpioLaser checked(GpioLaserOptions{"gpiochip0", -1, "STROBE", false, "laserlined", {}});
   EXPECT_FALSE(checked.probe(&found, &error));
   EXPECT_EQ(error,
             "line 'STROBE' of gpiochip0 (laserline-shim): in use by 'laserlined' (another "

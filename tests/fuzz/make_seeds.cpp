@@ -122,6 +122,8 @@ laserline::status_t status() {
   s.bad_messages = 2;
   s.bad_frames = 1;
   s.instance_id = 0x1234'5678'9abc'def0;
+  s.strobe_state = "silent: no edge on line 'STROBE' of gpiochip0 (chip) since start";
+  s.strobe_unmatched_frames = 239;
   return s;
 }
 

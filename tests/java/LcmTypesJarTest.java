@@ -62,10 +62,12 @@ public class LcmTypesJarTest {
     s.bad_messages = 7;
     s.bad_frames = 2;
     s.instance_id = 0x7eadbeef12345678L;
+    s.strobe_state = "ok";
     status_t sb = new status_t(encode(s));
     check(sb.frames_processed == 301 && sb.cpu_percent == 23.5f, "status");
     check(sb.bad_messages == 7 && sb.bad_frames == 2 && sb.instance_id == 0x7eadbeef12345678L,
           "status input counters and instance id");
+    check(sb.strobe_state.equals("ok"), "status strobe_state");
     check(profile_t.LCM_FINGERPRINT != status_t.LCM_FINGERPRINT, "fingerprints");
     System.out.println("LcmTypesJarTest: profile_t and status_t round-trip through the jar");
   }

@@ -14,9 +14,14 @@
 //                              with: like the kernel, which keeps a line's level after its
 //                              holder exited, however it exited (kill -9 included).
 //
-// What it does not cover: edge events (GPIO_GET_LINEEVENT_IOCTL), the v2 uAPI, line-config
-// changes on a live handle, and chips other than gpiochip0. Like the kernel, releasing a line
-// leaves its last level on the pin.
+// Edge events (GPIO_GET_LINEEVENT_IOCTL): the line's event file is a pipe; a test that links the
+// shim drives an input line with laserline_gpio_shim_drive_input(offset, level, time), which
+// queues the edge's gpioevent_data with that exact timestamp (logged as event "input"), as the
+// kernel does from its interrupt (logical level: active-low swaps rising and falling).
+//
+// What it does not cover: the v2 uAPI, line-config changes on a live handle, the kernel's
+// 16-event queue limit, and chips other than gpiochip0. Like the kernel, releasing a line leaves
+// its last level on the pin.
 #include <dlfcn.h>
 #include <fcntl.h>
 #include <linux/gpio.h>
@@ -56,6 +61,9 @@ struct Handle {
   int fd = -1;
   int count = 0;
   unsigned offsets[GPIOHANDLES_MAX] = {};
+  // Line events (one line): the pipe's write end, and which edges were asked for.
+  int event_write_fd = -1;
+  std::uint32_t event_flags = 0;
 };
 
 struct Chip {
@@ -247,8 +255,42 @@ int chip_ioctl(Chip& c, unsigned long request, void* arg) {
       req->fd = fd;
       return 0;
     }
+    case GPIO_GET_LINEEVENT_IOCTL: {
+      auto* req = static_cast<gpioevent_request*>(arg);
+      if (req->lineoffset >= static_cast<std::uint32_t>(c.num_lines) ||
+          (req->handleflags & GPIOHANDLE_REQUEST_OUTPUT) != 0 ||
+          (req->eventflags & GPIOEVENT_REQUEST_BOTH_EDGES) == 0) {
+        errno = EINVAL;
+        return -1;
+      }
+      if (c.lines[req->lineoffset].requested) {
+        errno = EBUSY;
+        return -1;
+      }
+      Handle* h = find_handle(c, -1);
+      if (h == nullptr) {
+        errno = ENOMEM;
+        return -1;
+      }
+      int fds[2];
+      if (pipe2(fds, O_CLOEXEC) != 0) return -1;
+      h->fd = fds[0];
+      h->event_write_fd = fds[1];
+      h->event_flags = req->eventflags;
+      h->count = 1;
+      h->offsets[0] = req->lineoffset;
+      Line& l = c.lines[req->lineoffset];
+      l.requested = true;
+      l.output = false;
+      l.active_low = (req->handleflags & GPIOHANDLE_REQUEST_ACTIVE_LOW) != 0;
+      std::snprintf(l.consumer, sizeof(l.consumer), "%s",
+                    req->consumer_label[0] ? req->consumer_label : "?");
+      log_event(c, req->lineoffset, "request");
+      req->fd = fds[0];
+      return 0;
+    }
     default:
-      errno = ENOTTY;  // edge events and the v2 uAPI are not emulated
+      errno = ENOTTY;  // the v2 uAPI is not emulated
       return -1;
   }
 }
@@ -377,8 +419,11 @@ int close(int fd) {
         l.active_low = false;
         l.consumer[0] = '\0';
       }
+      if (h->event_write_fd >= 0) next(h->event_write_fd);
       h->fd = -1;
       h->count = 0;
+      h->event_write_fd = -1;
+      h->event_flags = 0;
     }
   }
   return next(fd);
@@ -427,6 +472,41 @@ int access(const char* path, int how) {
   using AccessFn = int (*)(const char*, int);
   static const AccessFn next = real<AccessFn>("access");
   return next(path, how);
+}
+
+// The test's hand on an input line: its physical level becomes `physical_level` at host
+// CLOCK_MONOTONIC `mono_ns`. A change is logged ("input") and, when the line is requested for
+// that edge's events, queued on its event file with exactly that timestamp. Returns 0, or -1 for
+// a line the chip does not have or one driven as an output.
+int laserline_gpio_shim_drive_input(unsigned offset, int physical_level, long long mono_ns) {
+  Chip& c = chip();
+  std::lock_guard lock(c.mutex);
+  initialise(c);
+  if (offset >= static_cast<unsigned>(c.num_lines) || c.lines[offset].output) {
+    errno = EINVAL;
+    return -1;
+  }
+  Line& l = c.lines[offset];
+  const int physical = physical_level != 0 ? 1 : 0;
+  if (physical == l.physical) return 0;
+  l.physical = physical;
+  log_event(c, offset, "input");
+  for (const Handle& h : c.handles) {
+    if (h.fd < 0 || h.event_write_fd < 0 || h.offsets[0] != offset) continue;
+    const bool rising = (physical != 0) != l.active_low;  // the logical level, as the kernel
+    if ((h.event_flags &
+         (rising ? GPIOEVENT_REQUEST_RISING_EDGE : GPIOEVENT_REQUEST_FALLING_EDGE)) == 0) {
+      continue;
+    }
+    gpioevent_data event{};
+    event.timestamp = static_cast<std::uint64_t>(mono_ns);
+    event.id = rising ? GPIOEVENT_EVENT_RISING_EDGE : GPIOEVENT_EVENT_FALLING_EDGE;
+    // One write of one record: a pipe writes it whole, so the reader sees whole events.
+    if (write(h.event_write_fd, &event, sizeof event) != static_cast<ssize_t>(sizeof event)) {
+      return -1;
+    }
+  }
+  return 0;
 }
 
 }  // extern "C"
