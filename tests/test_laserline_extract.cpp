@@ -1078,6 +1078,23 @@ TEST_F(LaserlineExtract, ConfigurationOptionsAreUsed) {
   expect_frames_match(read_csv(path("points.csv")), {{0, 0}}, scene);
 }
 
+// A full disk: the first CSV write that fails is named and ends the run at once with status 1
+// (no summary of a run that did not finish).
+TEST_F(LaserlineExtract, WriteFailureEndsTheRunWithStatusOne) {
+  if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full";
+  hal::SimScene scene(options_);
+  ASSERT_TRUE(cv::imwrite(path("f0.png"), render(scene, 0)));
+  ASSERT_TRUE(cv::imwrite(path("f1.png"), render(scene, 1)));
+  const RunResult r = run_command(std::string(LASERLINE_EXTRACT_PATH) + " --calib " + calib_ +
+                                  " --detector maxvalue --output /dev/full " + path("f0.png") +
+                                  " " + path("f1.png"));
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("laserline-extract: /dev/full: write failed: No space left on device\n"),
+            std::string::npos)
+      << r.out;
+  EXPECT_EQ(r.out.find("frames from"), std::string::npos) << r.out;
+}
+
 // x y z snr of every point of a PLY file as laserline-extract writes it, the header checked.
 std::vector<std::array<float, 4>> read_ply(const std::string& path) {
   static_assert(std::endian::native == std::endian::little, "reads the floats as they are");

@@ -368,7 +368,7 @@ class Extractor {
     if (std::fflush(csv_) != 0 || std::ferror(csv_) != 0) {
       progress_.message("laserline-extract: " + options_.output +
                         ": write failed: " + std::strerror(errno));
-      std::exit(1);
+      throw laserline::cli::Exit(1);
     }
   }
 
@@ -409,7 +409,7 @@ class Extractor {
     if (!ply_->commit()) {
       progress_.message("laserline-extract: " + options_.ply +
                         ": write failed: " + std::strerror(errno));
-      std::exit(1);
+      throw laserline::cli::Exit(1);
     }
   }
 
@@ -690,13 +690,12 @@ void extract_log(Extractor& x, const std::string& path, std::size_t input, std::
 }
 
 [[noreturn]] void usage_error(const std::string& line) {
-  std::fprintf(stderr, "laserline-extract: %s (see --help)\n", line.c_str());
-  std::exit(2);
+  laserline::cli::usage_error("laserline-extract", line);
 }
 
 [[noreturn]] void fatal(const std::string& line) {
   std::fprintf(stderr, "laserline-extract: %s\n", line.c_str());
-  std::exit(2);
+  throw laserline::cli::Exit(2);
 }
 
 std::string detector_list() {
@@ -910,9 +909,7 @@ std::vector<std::string> images_in_folder(const std::string& folder, std::error_
   return names;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+int run_extract(int argc, char** argv) {
   // OpenCV's own warnings (e.g. a failing decoder) would duplicate our one line per problem.
   cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);
   Options options = parse_arguments(argc, argv);
@@ -1148,4 +1145,10 @@ int main(int argc, char** argv) {
   }
   if (empty_result) return 3;
   return x.failures() > 0 ? 1 : 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return laserline::cli::run(argc, argv, run_extract);
 }
