@@ -28,9 +28,9 @@ ALLOWED_UNDERSCORE_EXIT = {
 
 EXTENSIONS = (".cpp", ".hpp", ".cc", ".h", ".c")
 FORBIDDEN = re.compile(r"(?<![\w.>])(?:std\s*::\s*|::\s*)?(exit|quick_exit|_Exit|_exit)\s*\(")
-# A comment, a raw string, a string or a character literal, in the order they can start.
+# A comment, a raw string, a string or a character literal (not a digit separator: 5'000).
 NOT_CODE = re.compile(
-    r'//[^\n]*|/\*.*?\*/|R"([^(\s]*)\(.*?\)\1"|"(?:\\.|[^"\\\n])*"|\'(?:\\.|[^\'\\\n])*\'',
+    r'//[^\n]*|/\*.*?\*/|R"([^(\s]*)\(.*?\)\1"|"(?:\\.|[^"\\\n])*"|(?<![0-9A-Fa-f_])\'(?:\\.|[^\'\\\n])*\'',
     re.DOTALL,
 )
 
