@@ -21,6 +21,7 @@
 #include "hal/calibration.hpp"
 #include "hal/laser_channel.hpp"
 #include "hal/sim/sim_scene.hpp"
+#include "tools/laser_line_removal.hpp"
 #include "tools/laser_plane_calibration.hpp"
 
 namespace laserline {
