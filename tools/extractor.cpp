@@ -157,7 +157,7 @@ void Extractor::add_to_cloud(std::int64_t index, const std::string& where,
     ++cloud_accepted_;
     // No 3-D point: the ray misses the laser sheet in front of the camera.
     if (!std::isfinite(p.xyz[2])) continue;
-    const std::array<double, 3> camera{p.xyz[0], p.xyz[1], p.xyz[2]};
+    const Eigen::Vector3d camera(p.xyz[0], p.xyz[1], p.xyz[2]);
     ply_->add(poses_ != nullptr ? pose.apply(camera) : camera, p.snr_db);
     ++cloud_triangulated_;
   }
