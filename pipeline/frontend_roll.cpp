@@ -2,6 +2,8 @@
 // (frontend.cpp): the band-pass of the normalised rows, the noise level, the SNR, and the
 // candidates per column, in blocks of rows and strips of columns; its row kernels, portable and in
 // AVX2, compiled into each target's version of the pass.
+// Over 600 lines: the kernels must be in the file of the pass compiled per target
+// (target_clones) that inlines them.
 #include <algorithm>
 #include <array>
 #include <bit>

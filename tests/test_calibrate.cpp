@@ -1,6 +1,7 @@
 // Laser-plane calibration (tools/laser_plane_calibration, laserline-calibrate) on checkerboard
 // views rendered by the simulated scanner: the recovered plane against the plane the views were
 // rendered with, the calibration file's round trip, and the errors for bad inputs.
+// Over 600 lines: one unit (the calibration), on shared rendered board views.
 #include <gtest/gtest.h>
 
 #include <sys/wait.h>

@@ -1,6 +1,7 @@
 // laserline-extract run as the real executable on frames rendered by the simulated scanner and
 // written as PNG files, folders, videos and LCM logs; its CSV is checked against the simulator's
 // exact ground truth.
+// Over 600 lines: one program, its inputs, outputs and refusals, on one fixture.
 #include <gtest/gtest.h>
 
 #include <sys/wait.h>

@@ -1,3 +1,8 @@
+// Laser-plane calibration (laser_plane_calibration.hpp): corners and the laser line in each view,
+// the intrinsics, the boards' poses, the line's points on the boards in 3-D and the plane through
+// them. The line's removal from a board image is in laser_line_removal.cpp, the files in
+// laser_plane_calibration_files.cpp. Over 600 lines: calibrate_laser_plane runs its stages in turn
+// on the views' shared state (corners, poses, the line's points), each leaving views out.
 #include "tools/laser_plane_calibration.hpp"
 
 #include <algorithm>
