@@ -15,6 +15,8 @@ namespace laserline::tools::extract {
 
 enum class InputKind : std::uint8_t { kMissing, kFolder, kLog, kVideo, kImage };
 
+// What an argument is: a folder, an LCM log (by its first sync word), a video (by its
+// extension), else an image; kMissing when it does not exist.
 InputKind kind_of(const std::string& input);
 
 // The calibration the frames are extracted with, and what a log must name to be extracted.
