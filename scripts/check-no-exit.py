@@ -46,12 +46,11 @@ def sources(root):
             ["git", "-C", root, "ls-files", "-z"], check=True, capture_output=True, text=True
         ).stdout.split("\0")
     except (OSError, subprocess.CalledProcessError):
-        listed = [
-            os.path.relpath(os.path.join(folder, name), root)
-            for folder, _, names in os.walk(root)
-            if "/build" not in folder and "/." not in folder
-            for name in names
-        ]
+        listed = []
+        for folder, subfolders, names in os.walk(root):
+            # Not the build trees nor hidden folders (.git).
+            subfolders[:] = [d for d in subfolders if d != "build" and not d.startswith(".")]
+            listed += [os.path.relpath(os.path.join(folder, name), root) for name in names]
     return sorted(f for f in listed if f.endswith(EXTENSIONS))
 
 
