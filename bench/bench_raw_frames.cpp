@@ -9,6 +9,7 @@
 //   2]
 #include <cstdio>
 #include <cstdlib>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -36,6 +37,7 @@ struct Result {
 
 bool g_realtime = false;
 
+// Throws std::runtime_error when the laser, the camera or the frame path does not start.
 Result run(const Variant& v, double seconds) {
   laserline::daemon::DaemonConfig config = laserline::daemon::builtin_config();
   config.lcm_url = "udpm://239.255.76.67:7667?ttl=0";
@@ -49,15 +51,13 @@ Result run(const Variant& v, double seconds) {
   laserline::daemon::Backends backends = laserline::daemon::create_backends(config);
   std::string error;
   if (!backends.laser->open(&error) || !backends.camera->open(&error)) {
-    std::fprintf(stderr, "bench: %s\n", error.c_str());
-    std::exit(1);
+    throw std::runtime_error(error);
   }
   lcm::LCM lcm(config.lcm_url);
   laserline::daemon::FramePath path(config, *backends.camera, *backends.laser, *backends.detector,
                                     lcm);
   if (!path.start(&error)) {
-    std::fprintf(stderr, "bench: %s\n", error.c_str());
-    std::exit(1);
+    throw std::runtime_error(error);
   }
   std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
   path.stop();
@@ -92,7 +92,12 @@ int main(int argc, char** argv) {
   std::vector<std::vector<Result>> results(variants.size());
   for (int round = 0; round < rounds; ++round) {
     for (std::size_t i = 0; i < variants.size(); ++i) {
-      results[i].push_back(run(variants[i], seconds));
+      try {
+        results[i].push_back(run(variants[i], seconds));
+      } catch (const std::runtime_error& e) {
+        std::fprintf(stderr, "bench: %s\n", e.what());
+        return 1;
+      }
       const Result& r = results[i].back();
       std::fprintf(stderr, "round %d %-16s p99 %.2f ms (%lld frames, %lld raw)\n", round,
                    variants[i].name, r.p99, static_cast<long long>(r.frames),

@@ -176,7 +176,7 @@ Options parse_args(int argc, char** argv) {
   // A flag's value that cannot be used: one line naming the flag.
   auto value_error = [](const std::string& message) {
     log(LogLevel::kError, "laserlined: %s", message.c_str());
-    std::exit(2);
+    throw laserline::cli::Exit(2);
   };
   while (args.next()) {
     const std::string& arg = args.name();
@@ -202,7 +202,7 @@ Options parse_args(int argc, char** argv) {
       o.laser_off = true;
     } else if (arg == "--print-default-config") {
       std::fputs(laserline::daemon::builtin_config_text(), stdout);
-      std::exit(0);
+      throw laserline::cli::Exit(0);
     } else {
       args.fail("unexpected argument '" + args.value() + "'");
     }
@@ -312,9 +312,7 @@ int check_config(const DaemonConfig& config, Backends& backends, bool probe) {
   return 0;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+int run_daemon(int argc, char** argv) {
   // Stop signals are blocked before any thread exists, so every thread inherits the mask and no
   // frame-path thread is ever interrupted by them; the signal thread takes them.
   const sigset_t stop_signals = stop_signal_set();
@@ -512,4 +510,10 @@ int main(int argc, char** argv) {
     exit_status = 1;
   }
   return exit_status;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return laserline::cli::run(argc, argv, run_daemon);
 }

@@ -1,6 +1,6 @@
 #include "hal/memory_camera.hpp"
 #include "hal/sim/sim_camera.hpp"
-#include "hal/sim_options.hpp"
+#include "hal/sim/sim_options.hpp"
 #include "hal/yaml_reader.hpp"
 
 namespace laserline::hal {

@@ -1,3 +1,6 @@
+// Camera pixel formats into the detectors' mono8: mono 8/16-bit, RGB/BGR, YUYV and Bayer mosaics.
+// Over 600 lines: each format's row helpers must be in the file of the frame kernel compiled per
+// target (target_clones) that inlines them.
 #include "hal/pixel_conversion.hpp"
 
 #include <bit>

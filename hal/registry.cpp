@@ -5,7 +5,7 @@
 #include "hal/aravis_camera.hpp"
 #include "hal/gpio_laser.hpp"
 #include "hal/memory_camera.hpp"
-#include "hal/sim_options.hpp"
+#include "hal/sim/sim_options.hpp"
 #include "hal/v4l2_camera.hpp"
 
 namespace laserline::hal {

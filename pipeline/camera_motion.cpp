@@ -346,11 +346,8 @@ CameraMotion CameraMotionEstimator::estimate(std::span<const FeatureTrack> track
       ++best_front;
     }
   }
-  for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c)
-      result.rotation[r * 3 + c] = rotation(r, c);
-    result.translation[r] = translation(r);
-  }
+  result.rotation = rotation;
+  result.translation = translation;
 
   // Rotation alone (Procrustes on the inliers' rays): when it explains the image motion to within
   // essential_min_parallax_px, the translation's direction is not determined by the image.

@@ -3,6 +3,7 @@
 // motion.cpp, features.cpp, tracking.cpp, homography.cpp, camera_motion.cpp and five_point.cpp.
 #pragma once
 
+#include <Eigen/Core>
 #include <array>
 #include <cstdint>
 #include <limits>
@@ -55,8 +56,8 @@ struct MotionOptions {
 // coordinates (x right, y down, z forward), t of unit length (a single camera knows no scale).
 struct CameraMotion {
   bool valid = false;
-  std::array<double, 9> rotation{1, 0, 0, 0, 1, 0, 0, 0, 1};  // row-major R
-  std::array<double, 3> translation{};                        // t, |t| = 1 when valid
+  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();  // R
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();   // t, |t| = 1 when valid
   int inliers = 0;
   // |t of this frame pair| / |t of the previous pair|, from features tracked over the three
   // frames (triangulated with both pairs); NaN when unknown.

@@ -24,15 +24,6 @@ double box_distance(const LineSegment& a, const LineSegment& b) {
 }
 
 using Vector3 = Eigen::Vector3d;
-using RowMajor3 = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
-
-// A pair's rotation and translation as Eigen views of its row-major arrays (no copy).
-Eigen::Map<const RowMajor3> rotation_of(const PairMotion& motion) {
-  return Eigen::Map<const RowMajor3>(motion.rotation.data());
-}
-Eigen::Map<const Vector3> translation_of(const PairMotion& motion) {
-  return Eigen::Map<const Vector3>(motion.translation.data());
-}
 
 }  // namespace
 
@@ -234,8 +225,8 @@ bool back_project(const ScannerGeometry& camera, const PairMotion& first, const 
     return false;
   }
   // In frame n-1: ray 0 from camera n-2's centre t1 along R1 a, ray 1 from the origin along b.
-  const Vector3 d0 = rotation_of(first) * a;
-  const Vector3 t1 = translation_of(first);
+  const Vector3 d0 = first.rotation * a;
+  const Vector3 t1 = first.translation;
   // Closest points t1 + mu d0 and lambda b: least squares of mu d0 - lambda b = -t1.
   const double d0d0 = d0.dot(d0), bb = b.dot(b), d0b = d0.dot(b);
   const double d0t = d0.dot(t1), bt = b.dot(t1);
@@ -250,7 +241,7 @@ bool back_project(const ScannerGeometry& camera, const PairMotion& first, const 
   if (!(x(2) > 0) || !(x(2) <= max_depth_baselines * baseline)) return false;
 
   // How far the point lands from the two observations it came from.
-  const Vector3 in0 = rotation_of(first).transpose() * (x - t1);
+  const Vector3 in0 = first.rotation.transpose() * (x - t1);
   if (!(in0(2) > 0)) return false;
   const auto p0 = camera.pixel(in0(0) / in0(2), in0(1) / in0(2));
   const auto p1 = camera.pixel(x(0) / x(2), x(1) / x(2));
@@ -259,7 +250,7 @@ bool back_project(const ScannerGeometry& camera, const PairMotion& first, const 
   ray_gap_px = std::max(e0, e1);
 
   // Into frame n, with the translation in the first pair's units.
-  const Vector3 in2 = rotation_of(second) * x + second.relative_scale * translation_of(second);
+  const Vector3 in2 = second.rotation * x + second.relative_scale * second.translation;
   if (!(in2(2) > 0)) return false;
   x2 = camera.pixel(in2(0) / in2(2), in2(1) / in2(2));
   return true;

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <Eigen/Core>
 #include <array>
 #include <cstdint>
 #include <limits>
@@ -71,8 +72,8 @@ struct ValidationOptions {
 // of t relative to the previous frame pair's (NaN when unknown).
 struct PairMotion {
   bool valid = false;
-  std::array<double, 9> rotation{1, 0, 0, 0, 1, 0, 0, 0, 1};  // row-major
-  std::array<double, 3> translation{};
+  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
   double relative_scale = std::numeric_limits<double>::quiet_NaN();
 };
 

@@ -3,6 +3,7 @@
 // a private network namespace this test makes for itself (discovery would otherwise broadcast on
 // the machine's interfaces). The daemon tests run laserlined as a separate process with the
 // stand-in GPIO chip (tests/standins/gpiochip_shim.cpp) preloaded, so the laser's pin is logged.
+// Over 600 lines: one backend, on one stand-in camera and network namespace.
 #include <arv.h>
 #include <gtest/gtest.h>
 #include <signal.h>

@@ -1,6 +1,7 @@
 // Laser-plane calibration (tools/laser_plane_calibration, laserline-calibrate) on checkerboard
 // views rendered by the simulated scanner: the recovered plane against the plane the views were
 // rendered with, the calibration file's round trip, and the errors for bad inputs.
+// Over 600 lines: one unit (the calibration), on shared rendered board views.
 #include <gtest/gtest.h>
 
 #include <sys/wait.h>
@@ -21,6 +22,7 @@
 #include "hal/calibration.hpp"
 #include "hal/laser_channel.hpp"
 #include "hal/sim/sim_scene.hpp"
+#include "tools/laser_line_removal.hpp"
 #include "tools/laser_plane_calibration.hpp"
 
 namespace laserline {

@@ -1,3 +1,5 @@
+// The configuration file: every key read, checked and refused in one line naming file, line and
+// key. Over 600 lines: one unit (daemon/config), every section of the file.
 #include "daemon/config.hpp"
 
 #include <gtest/gtest.h>

@@ -20,8 +20,8 @@
 
 #include "daemon/config.hpp"
 #include "hal/clock.hpp"
+#include "hal/sim/sim_options.hpp"
 #include "hal/sim/sim_scene.hpp"
-#include "hal/sim_options.hpp"
 #include "hal/yaml_reader.hpp"
 #include "private_network.hpp"
 #include "run_command.hpp"

@@ -2,6 +2,7 @@
 // tests/standins/gpiochip_shim.cpp: linked into this test for the in-process tests, LD_PRELOADed
 // into laserlined for the daemon's safety paths and the alternate-mode timing. The shim's log is
 // the "oscilloscope": every level change on the pin with its host time.
+// Over 600 lines: one backend, on one stand-in chip and its log.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/resource.h>

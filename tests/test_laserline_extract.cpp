@@ -1,6 +1,7 @@
 // laserline-extract run as the real executable on frames rendered by the simulated scanner and
 // written as PNG files, folders, videos and LCM logs; its CSV is checked against the simulator's
 // exact ground truth.
+// Over 600 lines: one program, its inputs, outputs and refusals, on one fixture.
 #include <gtest/gtest.h>
 
 #include <sys/wait.h>
@@ -1076,6 +1077,23 @@ TEST_F(LaserlineExtract, ConfigurationOptionsAreUsed) {
   r = extract(path("f.png"));
   EXPECT_EQ(r.exit_code, 0) << r.out;
   expect_frames_match(read_csv(path("points.csv")), {{0, 0}}, scene);
+}
+
+// A full disk: the first CSV write that fails is named and ends the run at once with status 1
+// (no summary of a run that did not finish).
+TEST_F(LaserlineExtract, WriteFailureEndsTheRunWithStatusOne) {
+  if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full";
+  hal::SimScene scene(options_);
+  ASSERT_TRUE(cv::imwrite(path("f0.png"), render(scene, 0)));
+  ASSERT_TRUE(cv::imwrite(path("f1.png"), render(scene, 1)));
+  const RunResult r = run_command(std::string(LASERLINE_EXTRACT_PATH) + " --calib " + calib_ +
+                                  " --detector maxvalue --output /dev/full " + path("f0.png") +
+                                  " " + path("f1.png"));
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("laserline-extract: /dev/full: write failed: No space left on device\n"),
+            std::string::npos)
+      << r.out;
+  EXPECT_EQ(r.out.find("frames from"), std::string::npos) << r.out;
 }
 
 // x y z snr of every point of a PLY file as laserline-extract writes it, the header checked.

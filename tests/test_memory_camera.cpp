@@ -24,7 +24,7 @@
 #include "hal/registry.hpp"
 #include "hal/sim/sim_camera.hpp"
 #include "hal/sim/sim_laser.hpp"
-#include "hal/sim_options.hpp"
+#include "hal/sim/sim_options.hpp"
 #include "hal/yaml_reader.hpp"
 #include "lcmtypes/checked_decode.hpp"
 #include "lcmtypes/lcm_log.hpp"

@@ -1,6 +1,7 @@
 // MotionEstimator: homography accuracy against frames warped by a known homography (OpenCV does
 // the warping, only here), the laser filter with a line that stays while the scene moves, invalid
 // estimates, no allocation in update(), and sizes too small for the pyramid.
+// Over 600 lines: one unit (the motion stage), on shared warped and rendered frames.
 #include "pipeline/motion.hpp"
 
 #include <gtest/gtest.h>
@@ -13,6 +14,7 @@
 #include <cstdlib>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
+#include <opencv2/core/eigen.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 #include <string>
@@ -424,10 +426,12 @@ double angle_between(const cv::Vec3d& a, const cv::Vec3d& b) {
 }
 
 cv::Matx33d rotation_of(const CameraMotion& m) {
-  return cv::Matx33d(m.rotation.data());
+  cv::Matx33d r;
+  cv::eigen2cv(m.rotation, r);
+  return r;
 }
 cv::Vec3d translation_of(const CameraMotion& m) {
-  return {m.translation[0], m.translation[1], m.translation[2]};
+  return {m.translation(0), m.translation(1), m.translation(2)};
 }
 
 // Points in front of the first camera, 1.2 .. 3 m deep, spread over the image.

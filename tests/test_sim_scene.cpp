@@ -1,3 +1,6 @@
+// The simulated scanner's plain scan: the rendered line, its ground truth and the camera's path.
+// Over 600 lines: one unit (the simulator), on shared reference computations
+// (sim_scene_reference.hpp).
 #include "hal/sim/sim_scene.hpp"
 
 #include <gtest/gtest.h>

@@ -3,6 +3,8 @@
 // checks the renderer against a computation made here from the options as sim_scene.hpp documents
 // them (geometry in closed form or by brute force, light by the stated model), never against the
 // renderer's own intermediate numbers.
+// Over 600 lines: one unit (the simulator's renderer), a section per feature, sharing the
+// reference geometry above them.
 
 #include <gtest/gtest.h>
 

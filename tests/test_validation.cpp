@@ -2,6 +2,7 @@
 // matching, triangulation and back-projection over three frames.
 #include <gtest/gtest.h>
 
+#include <Eigen/Core>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -20,27 +21,12 @@ namespace {
 
 using namespace laserline::pipeline;
 
-using Mat3 = std::array<double, 9>;
-using Vec3 = std::array<double, 3>;
+using Mat3 = Eigen::Matrix3d;
+using Vec3 = Eigen::Vector3d;
 
-Mat3 multiply(const Mat3& a, const Mat3& b) {
-  Mat3 c{};
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j)
-      for (int k = 0; k < 3; ++k)
-        c[i * 3 + j] += a[i * 3 + k] * b[k * 3 + j];
-  return c;
-}
-Mat3 transpose(const Mat3& a) {
-  return {a[0], a[3], a[6], a[1], a[4], a[7], a[2], a[5], a[8]};
-}
-Vec3 transform(const Mat3& r, const Vec3& x) {
-  return {r[0] * x[0] + r[1] * x[1] + r[2] * x[2], r[3] * x[0] + r[4] * x[1] + r[5] * x[2],
-          r[6] * x[0] + r[7] * x[1] + r[8] * x[2]};
-}
 Mat3 tilt(double degrees) {  // about the camera x axis, as a pan-tilt unit scanning
   const double a = degrees * M_PI / 180.0, c = std::cos(a), s = std::sin(a);
-  return {1, 0, 0, 0, c, -s, 0, s, c};
+  return (Mat3() << 1, 0, 0, 0, c, -s, 0, s, c).finished();
 }
 
 // Camera k: X_camera = R_k X_world + c_k. A vehicle moving along x while the unit tilts.
@@ -51,18 +37,16 @@ struct Pose {
 Pose pose(int k, double step_m, double tilt_deg) {
   const Mat3 r = tilt(tilt_deg * k);
   const Vec3 centre{step_m * k, 0.0, 0.0};  // camera centre in the world
-  const Vec3 rc = transform(r, centre);
-  return {r, {-rc[0], -rc[1], -rc[2]}};
+  return {r, -(r * centre)};
 }
 // Motion from camera a to camera b, |t| = 1, the scale relative to `earlier_length`.
 PairMotion relative(const Pose& a, const Pose& b, double& length, double earlier_length) {
   PairMotion m;
   m.valid = true;
-  m.rotation = multiply(b.r, transpose(a.r));
-  const Vec3 rc = transform(m.rotation, a.c);
-  const Vec3 t{b.c[0] - rc[0], b.c[1] - rc[1], b.c[2] - rc[2]};
-  length = std::sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]);
-  m.translation = {t[0] / length, t[1] / length, t[2] / length};
+  m.rotation = b.r * a.r.transpose();
+  const Vec3 t = b.c - m.rotation * a.c;
+  length = t.norm();
+  m.translation = t / length;
   m.relative_scale = earlier_length > 0 ? length / earlier_length : std::nan("");
   return m;
 }
@@ -74,8 +58,7 @@ void add_curve(const ScannerGeometry& g, const Pose& p, const std::function<Vec3
   std::vector<double> best(static_cast<std::size_t>(g.width), 1e9);
   for (double s = 0; s <= 1.0; s += 1e-5) {
     const Vec3 w = curve(s);
-    const Vec3 x = transform(p.r, w);
-    const Vec3 c{x[0] + p.c[0], x[1] + p.c[1], x[2] + p.c[2]};
+    const Vec3 c = p.r * w + p.c;
     const double u = g.fx * c[0] / c[2] + g.cx, v = g.fy * c[1] / c[2] + g.cy;
     const int column = static_cast<int>(std::lround(u));
     if (column < 0 || column >= g.width) continue;
@@ -184,7 +167,7 @@ TEST(BackProjection, StaticPointLandsWhereItIsSeenAndALaserPointDoesNot) {
   const PairMotion first = relative(p0, p1, l1, 0);
   const PairMotion second = relative(p1, p2, l2, l1);
   auto project = [&](const Pose& p, const Vec3& w) {
-    const Vec3 x = transform(p.r, w);
+    const Vec3 x = p.r * w;
     return std::array<double, 2>{g.fx * (x[0] + p.c[0]) / (x[2] + p.c[2]) + g.cx,
                                  g.fy * (x[1] + p.c[1]) / (x[2] + p.c[2]) + g.cy};
   };
@@ -221,7 +204,7 @@ TEST(BackProjection, StaticPointThroughADistortingLens) {
   const PairMotion first = relative(p0, p1, l1, 0);
   const PairMotion second = relative(p1, p2, l2, l1);
   auto project = [&](const Pose& p, const Vec3& w) {
-    const Vec3 x = transform(p.r, w);
+    const Vec3 x = p.r * w;
     return g.pixel((x[0] + p.c[0]) / (x[2] + p.c[2]), (x[1] + p.c[1]) / (x[2] + p.c[2]));
   };
   const Vec3 w{0.4, -0.3, 1.3};  // towards a corner, where the lens moves it most

@@ -3,7 +3,6 @@
 #include <getopt.h>
 
 #include <cstdio>
-#include <cstdlib>
 #include <string>
 #include <utility>
 
@@ -76,10 +75,10 @@ bool Arguments::next() {
       return true;
     case kHelp:
       std::fputs(usage_.c_str(), stdout);
-      std::exit(0);
+      throw Exit(0);
     case kVersion:
       std::printf("%s %s\n", program_.c_str(), version());
-      std::exit(0);
+      throw Exit(0);
     case ':':
       fail(option_name(optopt) + ": missing value");
     case '?':
@@ -97,7 +96,20 @@ bool Arguments::next() {
 
 void Arguments::fail(const std::string& message) const {
   write_error_(program_ + ": " + message + " (see --help)");
-  std::exit(2);
+  throw Exit(2);
+}
+
+int run(int argc, char** argv, int (*body)(int argc, char** argv)) {
+  try {
+    return body(argc, argv);
+  } catch (const Exit& request) {
+    return request.status();
+  }
+}
+
+void usage_error(const std::string& program, const std::string& message) {
+  std::fprintf(stderr, "%s: %s (see --help)\n", program.c_str(), message.c_str());
+  throw Exit(2);
 }
 
 const char* version() {

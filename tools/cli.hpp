@@ -12,10 +12,31 @@ struct Option {
   bool takes_value;
 };
 
+// Ends the program with `status` from wherever it is thrown below main; what the program had to
+// say is already written. Thrown instead of calling std::exit so that the stack unwinds and every
+// owner closes what it holds. No std::exception: a `catch (const std::exception&)` on the way
+// must not take it for an error.
+class Exit {
+ public:
+  explicit Exit(int status) : status_(status) {}
+  int status() const { return status_; }
+
+ private:
+  int status_;
+};
+
+// Every program's main: `return laserline::cli::run(argc, argv, run_listen);` runs the program's
+// body and returns its status, or that of an Exit thrown from it.
+int run(int argc, char** argv, int (*body)(int argc, char** argv));
+
+// "PROGRAM: MESSAGE (see --help)" on stderr, then Exit(2): a usage error found after the options
+// were read.
+[[noreturn]] void usage_error(const std::string& program, const std::string& message);
+
 // The command line of every laserline program, read with getopt_long: `--opt value` and
 // `--opt=value` alike, `--` ends the options. `--help` (and `-h`) prints the usage and
-// `--version` the program's version, each then exiting 0. An unknown option, a missing value
-// or a value given to a flag is one line naming it, then exit status 2.
+// `--version` the program's version, each then ending the program with status 0 (Exit). An
+// unknown option, a missing value or a value given to a flag is one line naming it, then Exit(2).
 //
 //   Arguments args(argc, argv, "laserline-listen", kUsage, {{"url", true}, {"duration", true}});
 //   while (args.next()) {
@@ -35,7 +56,7 @@ class Arguments {
   // The option's value, or the argument itself.
   const std::string& value() const { return value_; }
 
-  // "PROGRAM: MESSAGE (see --help)" through the error writer, then exit status 2.
+  // "PROGRAM: MESSAGE (see --help)" through the error writer, then Exit(2).
   [[noreturn]] void fail(const std::string& message) const;
   // Where the one-line errors go (default: stderr with a newline); laserlined sends them to its
   // journal-aware log.

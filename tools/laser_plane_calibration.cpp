@@ -1,37 +1,33 @@
+// Laser-plane calibration (laser_plane_calibration.hpp): corners and the laser line in each view,
+// the intrinsics, the boards' poses, the line's points on the boards in 3-D and the plane through
+// them. The line's removal from a board image is in laser_line_removal.cpp, the files in
+// laser_plane_calibration_files.cpp. Over 600 lines: calibrate_laser_plane runs its stages in turn
+// on the views' shared state (corners, poses, the line's points), each leaving views out.
 #include "tools/laser_plane_calibration.hpp"
 
-#include <unistd.h>
-
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
-#include <cstring>
-#include <filesystem>
 #include <map>
 #include <memory>
 #include <numbers>
 #include <opencv2/calib3d.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <optional>
-#include <sstream>
 
 #include "tools/frame_channel.hpp"
+#include "tools/laser_line_removal.hpp"
 
 namespace laserline::tools {
 
 namespace {
-
-namespace fs = std::filesystem;
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 // Boards whose normals differ by less than this are parallel for the purpose of calibration.
 constexpr double kMinPoseSpreadDeg = 3.0;
 // A view's laser line: points within this distance (undistorted pixels) of the RANSAC line.
 constexpr double kLineInlierPx = 2.0;
-constexpr int kLineRansacIterations = 300;
 // A view needs this many points on its line to take part.
 constexpr int kMinLinePoints = 20;
 // Candidates closer to the board's outline than this (pixels) are left out: the line's end on
@@ -40,21 +36,6 @@ constexpr double kBoardInsetPx = 6.0;
 // A board seen more obliquely than this gives its line's points as rays that graze it: a small
 // error in the pose moves them far along the board.
 constexpr double kMaxTiltDeg = 75.0;
-// Removal of the line before the corner search (raw pixels, the lens still in them): points
-// within this distance of the course followed, at least this many of them.
-constexpr double kRemovalInlierPx = 3.0;
-constexpr int kMinRemovalPoints = 12;
-// The band filled is at most this wide on either side of the line's centre, and ends where the
-// line's brightness above its surroundings has fallen to this fraction of its peak.
-constexpr int kMaxHalfWidthPx = 40;
-constexpr double kWidthLevel = 0.1;
-// The profile across the line has stopped falling where it falls by less than this fraction of
-// the line's height per pixel.
-constexpr double kFootSlope = 0.02;
-// A line stands at least this high (grey levels) above its foot on either side, and on its lower
-// side at least this fraction of its height on the other.
-constexpr double kMinRise = 8.0;
-constexpr double kRiseBalance = 0.25;
 // On a laser-on image alone, the detector's points count within this distance of the band the
 // line was taken out of.
 constexpr int kGateMarginPx = 2;
@@ -197,41 +178,6 @@ int place_hidden_corners(std::vector<cv::Point2f>& corners, const cv::Mat& band,
   return count;
 }
 
-// The straight line through most points (within `tolerance`), by RANSAC then least squares;
-// returns the inliers' indices.
-std::vector<std::size_t> line_inliers(const std::vector<cv::Point2d>& points, double tolerance) {
-  std::vector<std::size_t> best;
-  if (points.size() < 2) return best;
-  cv::RNG rng(0x6c617365);  // fixed: the same views give the same calibration
-  auto inliers_of = [&](const cv::Point2d& p, const cv::Point2d& direction) {
-    std::vector<std::size_t> in;
-    const cv::Point2d n(-direction.y, direction.x);
-    for (std::size_t i = 0; i < points.size(); ++i) {
-      if (std::abs((points[i] - p).dot(n)) <= tolerance) in.push_back(i);
-    }
-    return in;
-  };
-  const int count = static_cast<int>(points.size());
-  for (int k = 0; k < kLineRansacIterations; ++k) {
-    const int i = rng.uniform(0, count), j = rng.uniform(0, count);
-    const cv::Point2d d = points[static_cast<std::size_t>(j)] - points[static_cast<std::size_t>(i)];
-    const double length = std::hypot(d.x, d.y);
-    if (length < 10.0) continue;
-    auto in = inliers_of(points[static_cast<std::size_t>(i)], d / length);
-    if (in.size() > best.size()) best = std::move(in);
-  }
-  // Least-squares refinement once, then the final inlier set.
-  if (best.size() >= 2) {
-    std::vector<cv::Point2f> fit;
-    for (std::size_t i : best)
-      fit.emplace_back(static_cast<float>(points[i].x), static_cast<float>(points[i].y));
-    cv::Vec4f line;
-    cv::fitLine(fit, line, cv::DIST_L2, 0, 0.01, 0.01);
-    best = inliers_of(cv::Point2d(line[2], line[3]), cv::Point2d(line[0], line[1]));
-  }
-  return best;
-}
-
 // What the detector is told about the scanner: the nominal mount decides which way its epipolar
 // lines run (columns, rows for a projector beside the camera, or at an angle).
 pipeline::DetectorOptions detector_options(const PlaneCalibrationOptions& o,
@@ -287,74 +233,6 @@ class LineFinder {
   std::unique_ptr<pipeline::Detector> detector_;
   pipeline::Profile profile_;
 };
-
-// A grey level between pixels (bilinear), the image's edge extended. The image is at least 2x2.
-double sample(const cv::Mat& image, double x, double y) {
-  x = std::clamp(x, 0.0, image.cols - 1.001);
-  y = std::clamp(y, 0.0, image.rows - 1.001);
-  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-  const double fx = x - x0, fy = y - y0;
-  const std::uint8_t* r0 = image.ptr<std::uint8_t>(y0) + x0;
-  const std::uint8_t* r1 = image.ptr<std::uint8_t>(y0 + 1) + x0;
-  return (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
-}
-
-// The line's full width at half maximum across it at `p`, in pixels, along the unit `normal`:
-// its peak within a pixel of `p`, its floor the lower of the two sides where the profile stops
-// falling. NaN where the core is clipped (at or above `saturation`: the width at half of a
-// clipped height is too wide), or where the profile does not fall to half on both sides within
-// kMaxHalfWidthPx.
-double full_width_at_half_maximum(const cv::Mat& image, cv::Point2d p, cv::Point2d normal,
-                                  double saturation) {
-  constexpr double kStep = 0.25;
-  constexpr int kReach = static_cast<int>(kMaxHalfWidthPx / kStep);
-  auto at = [&](int k) {
-    const cv::Point2d q = p + normal * (k * kStep);
-    if (q.x < 0 || q.y < 0 || q.x > image.cols - 2 || q.y > image.rows - 2) {
-      return std::numeric_limits<double>::quiet_NaN();
-    }
-    return sample(image, q.x, q.y);
-  };
-  int centre = 0;
-  double peak = -1;
-  for (int k = -static_cast<int>(1 / kStep); k <= static_cast<int>(1 / kStep); ++k) {
-    const double v = at(k);
-    if (v > peak) {
-      peak = v;
-      centre = k;
-    }
-  }
-  if (!(peak >= 0) || peak >= saturation) return std::numeric_limits<double>::quiet_NaN();
-  // Each side's floor: where the profile stops falling (beyond lies other light).
-  double floor_level = peak;
-  for (const int sign : {-1, 1}) {
-    double lowest = peak;
-    for (int k = 1; k <= kReach; ++k) {
-      const double v = at(centre + sign * k);
-      if (!(v <= lowest + 0.5)) break;  // rising again, or off the image
-      lowest = std::min(lowest, v);
-    }
-    floor_level = std::min(floor_level, lowest);
-  }
-  if (!(peak - floor_level >= kMinRise)) return std::numeric_limits<double>::quiet_NaN();
-  const double half = 0.5 * (peak + floor_level);
-  double width = 0;
-  for (const int sign : {-1, 1}) {
-    double previous = peak, crossing = std::numeric_limits<double>::quiet_NaN();
-    for (int k = 1; k <= kReach; ++k) {
-      const double v = at(centre + sign * k);
-      if (std::isnan(v)) break;
-      if (v <= half) {
-        crossing = (k - 1 + (previous - half) / std::max(previous - v, 1e-9)) * kStep;
-        break;
-      }
-      previous = v;
-    }
-    if (std::isnan(crossing)) return crossing;
-    width += crossing;
-  }
-  return width;
-}
 
 void find_laser(BoardView& bv, const ViewImages& images, const PlaneCalibrationOptions& o,
                 const hal::CameraIntrinsics& cam, LineFinder& finder, ViewReport& report) {
@@ -418,7 +296,7 @@ void find_laser(BoardView& bv, const ViewImages& images, const PlaneCalibrationO
   std::vector<cv::Point2d> undistorted;
   cv::undistortPoints(raw, undistorted, k, dist, cv::noArray(), k);
 
-  const std::vector<std::size_t> in = line_inliers(undistorted, kLineInlierPx);
+  const std::vector<std::size_t> in = straight_line_inliers(undistorted, kLineInlierPx);
   // The line's direction in the image, for its width across it.
   cv::Point2d across(0, 1);
   if (in.size() >= 2) {
@@ -515,242 +393,6 @@ double median(std::vector<double> v) {
   std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
   return v[v.size() / 2];
 }
-
-// The laser's line as a polynomial across its straight course: s = sum c_k tau^k in the frame of
-// the straight line (t along it from `origin`, s along its normal), tau = (t - t_mid) / t_scale
-// so that the fit is well conditioned. The lens bends a straight line into nearly a parabola
-// (k1), with a fourth-order part (k2) toward the image's edges.
-struct LineCourse {
-  static constexpr int kTerms = 5;
-  cv::Point2d origin, direction, normal;
-  double t_mid = 0, t_scale = 1, t_min = 0, t_max = 0;
-  cv::Vec<double, kTerms> c{};
-  double rms = 0;
-
-  double across(double t) const {
-    const double tau = (t - t_mid) / t_scale;
-    double s = 0;
-    for (int k = kTerms - 1; k >= 0; --k)
-      s = s * tau + c[k];
-    return s;
-  }
-  cv::Point2d at(double t, double s) const { return origin + t * direction + s * normal; }
-};
-
-// The points of (t, s) within kRemovalInlierPx of the course; sets its t range and RMS.
-std::vector<std::size_t> near_course(LineCourse& course, const std::vector<double>& t,
-                                     const std::vector<double>& s) {
-  std::vector<std::size_t> near;
-  double sq = 0;
-  course.t_min = 1e300;
-  course.t_max = -1e300;
-  for (std::size_t i = 0; i < t.size(); ++i) {
-    const double r = s[i] - course.across(t[i]);
-    if (std::abs(r) > kRemovalInlierPx) continue;
-    near.push_back(i);
-    sq += r * r;
-    course.t_min = std::min(course.t_min, t[i]);
-    course.t_max = std::max(course.t_max, t[i]);
-  }
-  course.rms = near.empty() ? 0.0 : std::sqrt(sq / static_cast<double>(near.size()));
-  return near;
-}
-
-// Least squares of the course's polynomial (`terms` of them) through the points `use`.
-void fit_course(LineCourse& course, const std::vector<double>& t, const std::vector<double>& s,
-                const std::vector<std::size_t>& use, int terms) {
-  double lo = 1e300, hi = -1e300;
-  for (std::size_t i : use) {
-    lo = std::min(lo, t[i]);
-    hi = std::max(hi, t[i]);
-  }
-  course.t_mid = 0.5 * (lo + hi);
-  course.t_scale = std::max(0.5 * (hi - lo), 1.0);
-  cv::Mat a(static_cast<int>(use.size()), terms, CV_64F),
-      b(static_cast<int>(use.size()), 1, CV_64F);
-  for (std::size_t k = 0; k < use.size(); ++k) {
-    const double tau = (t[use[k]] - course.t_mid) / course.t_scale;
-    double power = 1.0;
-    for (int j = 0; j < terms; ++j, power *= tau)
-      a.at<double>(static_cast<int>(k), j) = power;
-    b.at<double>(static_cast<int>(k)) = s[use[k]];
-  }
-  cv::Mat c;
-  cv::solve(a, b, c, cv::DECOMP_SVD);
-  course.c = {};
-  for (int j = 0; j < terms; ++j)
-    course.c[j] = c.at<double>(j);
-}
-
-// The line's course through `points`, or false when fewer than kMinRemovalPoints lie on one.
-// The frame is the straight line through most points; the parabola through most points in that
-// frame (RANSAC: a distorted line may leave the straight one's tolerance long before its ends),
-// refined by least squares.
-bool follow_line(const std::vector<cv::Point2d>& points, LineCourse& course,
-                 std::vector<std::size_t>& near) {
-  const std::vector<std::size_t> straight = line_inliers(points, kRemovalInlierPx);
-  if (static_cast<int>(straight.size()) < kMinRemovalPoints) return false;
-  std::vector<cv::Point2f> fit;
-  for (std::size_t i : straight)
-    fit.emplace_back(static_cast<float>(points[i].x), static_cast<float>(points[i].y));
-  cv::Vec4f line;
-  cv::fitLine(fit, line, cv::DIST_L2, 0, 0.01, 0.01);
-  course.origin = cv::Point2d(line[2], line[3]);
-  course.direction = cv::Point2d(line[0], line[1]);
-  course.normal = cv::Point2d(-line[1], line[0]);
-  std::vector<double> t(points.size()), s(points.size());
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    const cv::Point2d d = points[i] - course.origin;
-    t[i] = d.dot(course.direction);
-    s[i] = d.dot(course.normal);
-  }
-  near = near_course(course, t, s);  // the straight line itself (c = 0)
-  cv::RNG rng(0x636f7572);           // fixed: the same views give the same calibration
-  const int count = static_cast<int>(points.size());
-  for (int k = 0; k < kLineRansacIterations; ++k) {
-    std::vector<std::size_t> three = {static_cast<std::size_t>(rng.uniform(0, count)),
-                                      static_cast<std::size_t>(rng.uniform(0, count)),
-                                      static_cast<std::size_t>(rng.uniform(0, count))};
-    std::sort(three.begin(), three.end(),
-              [&](std::size_t i, std::size_t j) { return t[i] < t[j]; });
-    if (t[three[1]] - t[three[0]] < 10.0 || t[three[2]] - t[three[1]] < 10.0) continue;
-    LineCourse trial = course;
-    fit_course(trial, t, s, three, 3);
-    std::vector<std::size_t> in = near_course(trial, t, s);
-    if (in.size() > near.size()) {
-      near = std::move(in);
-      course = trial;
-    }
-  }
-  for (int round = 0; round < 5 && static_cast<int>(near.size()) >= kMinRemovalPoints; ++round) {
-    fit_course(course, t, s, near, near.size() >= 30 ? LineCourse::kTerms : 3);
-    std::vector<std::size_t> next = near_course(course, t, s);
-    const bool same = next == near;
-    near = std::move(next);
-    if (same) break;
-  }
-  return static_cast<int>(near.size()) >= kMinRemovalPoints;
-}
-
-// The mean brightness across a line (over its length, so that the squares average out) at each
-// offset from its centre: how high it stands above its feet on either side, and how far out it
-// reaches (where it has fallen to kWidthLevel of its height above its foot).
-struct AcrossLine {
-  double rise[2] = {0, 0};
-  int reach[2] = {0, 0};
-};
-
-AcrossLine across_line(const cv::Mat& image, const LineCourse& course) {
-  constexpr int kS = kMaxHalfWidthPx;
-  std::vector<double> profile(2 * kS + 1, 0.0);
-  int lengthwise = 0;
-  for (double t = course.t_min; t <= course.t_max; t += 2.0, ++lengthwise) {
-    const double centre = course.across(t);
-    for (int s = -kS; s <= kS; ++s) {
-      const cv::Point2d p = course.at(t, centre + s);
-      profile[static_cast<std::size_t>(s + kS)] += sample(image, p.x, p.y);
-    }
-  }
-  for (double& v : profile)
-    v /= std::max(lengthwise, 1);
-  const int spread = static_cast<int>(std::ceil(2.0 * course.rms));
-  double peak = 0;
-  for (int s = -1 - spread; s <= 1 + spread; ++s)
-    peak = std::max(peak, profile[static_cast<std::size_t>(s + kS)]);
-  AcrossLine a;
-  for (int side = 0; side < 2; ++side) {
-    const int sign = side == 0 ? -1 : 1;
-    const auto at = [&](int k) { return profile[static_cast<std::size_t>(kS + sign * k)]; };
-    double lowest = peak;
-    for (int k = 1; k <= kS; ++k)
-      lowest = std::min(lowest, at(k));
-    // The line's foot: past its upper half, where the profile stops falling (what lies beyond,
-    // e.g. the dark edge of the board, is not the line's).
-    const double flat = kFootSlope * (peak - lowest);
-    int foot = kS;
-    for (int k = 1; k <= kS; ++k) {
-      if (at(k) < 0.5 * (peak + lowest) && at(k) > at(k - 1) - flat) {
-        foot = k - 1;
-        break;
-      }
-    }
-    a.rise[side] = peak - at(foot);
-    const double level = at(foot) + kWidthLevel * a.rise[side];
-    a.reach[side] = foot;
-    for (int k = 1; k <= foot; ++k) {
-      if (at(k) <= level) {
-        a.reach[side] = k;
-        break;
-      }
-    }
-  }
-  return a;
-}
-
-}  // namespace
-
-LineRemoval remove_laser_line(const cv::Mat& board, const cv::Mat& laser,
-                              const std::vector<cv::Point2d>& points, cv::Mat& out) {
-  if (board.type() != CV_8UC1 || laser.type() != CV_8UC1 || board.size() != laser.size() ||
-      board.cols < 2 || board.rows < 2) {
-    fail("remove_laser_line: the board and laser images must be mono8 of one size, at least 2x2");
-  }
-  LineRemoval removal;
-  out = board.clone();
-  LineCourse course;
-  std::vector<std::size_t> near;
-  if (!follow_line(points, course, near)) return removal;
-  // A laser line stands out of its surroundings on both sides in its own light; a step (the
-  // board's edge) or a row of squares' edges taken for one does not.
-  const AcrossLine light = across_line(laser, course);
-  const double low = std::min(light.rise[0], light.rise[1]);
-  const double high = std::max(light.rise[0], light.rise[1]);
-  if (!(low >= kMinRise && low >= kRiseBalance * high)) return removal;
-  // Its width where it matters, in the board's image.
-  const AcrossLine seen = across_line(board, course);
-  for (int side = 0; side < 2; ++side) {
-    // One pixel more for the tail below the level, and the course's own scatter.
-    removal.half_width_px[side] =
-        std::min(static_cast<double>(kMaxHalfWidthPx), seen.reach[side] + 1.0 + 2.0 * course.rms);
-  }
-
-  // The band, filled along the normal from its two sides. It runs a half width beyond the
-  // points found, where the line fades out.
-  const double h0 = removal.half_width_px[0], h1 = removal.half_width_px[1];
-  const double t0 = course.t_min - std::max(h0, h1), t1 = course.t_max + std::max(h0, h1);
-  std::vector<cv::Point2f> hull;
-  for (double t = t0;; t += 4.0) {
-    const double tt = std::min(t, t1), centre = course.across(tt);
-    const cv::Point2d a = course.at(tt, centre - h0 - 1), b = course.at(tt, centre + h1 + 1);
-    hull.emplace_back(static_cast<float>(a.x), static_cast<float>(a.y));
-    hull.emplace_back(static_cast<float>(b.x), static_cast<float>(b.y));
-    if (tt >= t1) break;
-  }
-  const cv::Rect box = cv::boundingRect(hull) & cv::Rect(0, 0, board.cols, board.rows);
-  removal.band = cv::Mat::zeros(board.size(), CV_8UC1);
-  for (int y = box.y; y < box.y + box.height; ++y) {
-    std::uint8_t* row = out.ptr<std::uint8_t>(y);
-    std::uint8_t* filled = removal.band.ptr<std::uint8_t>(y);
-    for (int x = box.x; x < box.x + box.width; ++x) {
-      const cv::Point2d d = cv::Point2d(x, y) - course.origin;
-      const double t = d.dot(course.direction);
-      if (t < t0 || t > t1) continue;
-      const double centre = course.across(t);
-      const double s = d.dot(course.normal) - centre;
-      if (s < -h0 || s > h1) continue;
-      const double lo = -h0 - 1, hi = h1 + 1;
-      const cv::Point2d a = course.at(t, centre + lo), b = course.at(t, centre + hi);
-      const double w = (s - lo) / (hi - lo);
-      row[x] = cv::saturate_cast<std::uint8_t>((1 - w) * sample(board, a.x, a.y) +
-                                               w * sample(board, b.x, b.y));
-      filled[x] = 255;
-    }
-  }
-  removal.points = static_cast<int>(near.size());
-  return removal;
-}
-
-namespace {
 
 ViewImages images_of(const CalibrationView& v, const hal::LaserChannel& laser,
                      const hal::LaserChannel& board) {
@@ -1299,92 +941,6 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
   laser.baseline_m = std::clamp(baseline, 1e-3, 10.0);
   laser.angle_deg = std::clamp(angle, 1.0, 179.0);
   return result;
-}
-
-void write_calibration_file(const std::string& path, const PlaneCalibrationResult& r,
-                            const std::string& provenance) {
-  FILE* f = std::fopen(path.c_str(), "w");
-  if (f == nullptr) fail(path + ": cannot be written: " + std::strerror(errno));
-  const hal::CameraIntrinsics& c = r.calibration.camera;
-  const hal::LaserMount& l = r.calibration.laser;
-  const auto p = l.plane_coefficients();
-  std::fprintf(f, "# laserline calibration written by laserline-calibrate\n");
-  std::fprintf(f, "# %s\n", provenance.c_str());
-  if (r.intrinsics_estimated) {
-    std::fprintf(f, "# camera: estimated, calibrateCamera RMS %.3f px\n", r.camera_rms_px);
-  } else {
-    std::fprintf(f, "# camera: given\n");
-  }
-  std::fprintf(f, "# board corners reprojected: RMS %.3f px\n", r.corner_rms_px);
-  std::fprintf(f,
-               "# laser plane fit: %d of %d points, distance RMS %.3f mm, max %.3f mm; image RMS "
-               "%.3f px, max %.3f px\n",
-               r.inliers, r.points, r.plane_rms_mm, r.plane_max_mm, r.plane_rms_px, r.plane_max_px);
-  std::fprintf(f,
-               "# the line was seen at depths %.3f to %.3f m: detector.frontend.min_depth_m and "
-               "max_depth_m must cover the working range\n",
-               r.depth_min_m, r.depth_max_m);
-  std::fprintf(f,
-               "camera: {width: %d, height: %d, fx: %.10g, fy: %.10g, cx: %.10g, cy: %.10g, "
-               "distortion: [%.10g, %.10g, %.10g, %.10g, %.10g]}\n",
-               c.width, c.height, c.fx, c.fy, c.cx, c.cy, c.distortion[0], c.distortion[1],
-               c.distortion[2], c.distortion[3], c.distortion[4]);
-  std::fprintf(f, "laser:\n");
-  std::fprintf(f, "  # the paper's d and beta nearest to the plane%s; `plane` is what is used\n",
-               r.fits_baseline_model ? "" : " (clamped: the plane does not fit that model)");
-  std::fprintf(f, "  baseline_m: %.10g\n  angle_deg: %.10g\n  side: %s\n", l.baseline_m,
-               l.angle_deg, hal::to_string(l.side));
-  if (r.sheet_width_measured) {
-    std::fprintf(f,
-                 "  # measured: the line's full width at half maximum times its depth over f, "
-                 "median of %d points\n",
-                 r.width_points);
-  }
-  std::fprintf(f, "  sheet_width_m: %.10g\n", l.sheet_width_m);
-  std::fprintf(f, "  # a*X + b*Y + c*Z + e = 0, camera frame, metres; (a, b, c) a unit vector\n");
-  std::fprintf(f, "  plane: [%.12g, %.12g, %.12g, %.12g]\n", p[0], p[1], p[2], p[3]);
-  const bool ok = std::ferror(f) == 0;
-  if (std::fclose(f) != 0 || !ok) fail(path + ": could not be written completely");
-}
-
-cv::Mat load_image(const std::string& path, const hal::LaserChannel& channel) {
-  cv::Mat raw;
-  std::string problem;
-  // A damaged file (cut short) decodes with grey where data is missing: refused, not measured.
-  if (!read_image_file(path, raw, problem)) fail(path + ": " + problem);
-  cv::Mat out;
-  if (!to_laser_mono8(raw, channel, out, problem)) fail(path + ": " + problem);
-  return raw;
-}
-
-std::vector<std::string> expand_image_inputs(const std::vector<std::string>& inputs) {
-  static const char* const kExtensions[] = {".png", ".jpg", ".jpeg", ".tif", ".tiff",
-                                            ".bmp", ".pgm", ".ppm",  ".pnm", ".webp"};
-  std::vector<std::string> files;
-  for (const auto& input : inputs) {
-    std::error_code ec;
-    if (fs::is_directory(input, ec)) {
-      std::vector<std::string> found;
-      for (const auto& entry : fs::directory_iterator(input, ec)) {
-        std::string ext = entry.path().extension().string();
-        std::transform(ext.begin(), ext.end(), ext.begin(),
-                       [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
-        if (entry.is_regular_file() && std::any_of(std::begin(kExtensions), std::end(kExtensions),
-                                                   [&](const char* e) { return ext == e; })) {
-          found.push_back(entry.path().string());
-        }
-      }
-      if (ec) fail(input + ": folder cannot be read: " + ec.message());
-      std::sort(found.begin(), found.end());
-      if (found.empty()) fail(input + ": folder holds no image files");
-      files.insert(files.end(), found.begin(), found.end());
-    } else if (fs::exists(input, ec)) {
-      files.push_back(input);
-    } else {
-      fail(input + ": no such file or folder");
-    }
-  }
-  return files;
 }
 
 }  // namespace laserline::tools

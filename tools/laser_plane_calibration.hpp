@@ -129,25 +129,6 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
 void write_calibration_file(const std::string& path, const PlaneCalibrationResult& result,
                             const std::string& provenance);
 
-// The laser line taken out of a laser-on image so that the checkerboard under it can be found:
-// `points` are the line's points as detectors found them (raw pixels, any order; points off the
-// line are outliers) in `laser` (the laser's light), `board` the image the board is searched in
-// (mono8, same size). The line, in any direction, is followed as a straight line bent by the lens
-// (a polynomial across it); it must stand out of its surroundings on both sides in `laser` (a
-// step or a row of squares' edges does not). Its width is measured in `board` across it, and
-// only that band is filled in `out` (a copy of `board`), each pixel interpolated along the
-// line's normal between the pixels just beyond the band on either side: the squares' edges that
-// cross the line continue across it; what ran along the line inside the band is lost (see
-// `band`). `points` is 0 when no line was found (fewer than a dozen points on one, or not
-// standing out): `out` is then `board` unchanged.
-struct LineRemoval {
-  int points = 0;                    // the points followed
-  double half_width_px[2] = {0, 0};  // the band filled on either side of the line's centre
-  cv::Mat band;                      // mono8, 255 where filled (empty when nothing was)
-};
-LineRemoval remove_laser_line(const cv::Mat& board, const cv::Mat& laser,
-                              const std::vector<cv::Point2d>& points, cv::Mat& out);
-
 // An image file as read (mono or colour, 8 or 16 bit), checked to give the laser's channel.
 // Throws PlaneCalibrationError naming the file.
 cv::Mat load_image(const std::string& path, const hal::LaserChannel& channel);

@@ -58,8 +58,7 @@ constexpr const char* kUsage =
     "Exit status: 0 written, 1 the views do not give a calibration, 2 bad arguments.\n";
 
 [[noreturn]] void usage_error(const std::string& message) {
-  std::fprintf(stderr, "laserline-calibrate: %s (see --help)\n", message.c_str());
-  std::exit(2);
+  laserline::cli::usage_error("laserline-calibrate", message);
 }
 
 double parse_number(const std::string& option, const char* text, double min, double max) {
@@ -140,9 +139,7 @@ void print_report(const laserline::tools::PlaneCalibrationResult& r, bool width_
               r.plane_max_px);
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+int run_calibrate(int argc, char** argv) {
   cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);
   laserline::tools::PlaneCalibrationOptions options;
   std::string calib_path, output;
@@ -295,4 +292,10 @@ int main(int argc, char** argv) {
     return 1;
   }
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return laserline::cli::run(argc, argv, run_calibrate);
 }

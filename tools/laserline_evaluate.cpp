@@ -32,9 +32,7 @@ constexpr const char* kUsage =
     "turbidity (0 to 12 FTU, the wall 1.4 m away) for band-pass widths 2, 3, 4.5 and 6\n"
     "(passband_ratio), and each detector's recall, as FILE.png and FILE.csv.\n";
 
-}  // namespace
-
-int main(int argc, char** argv) {
+int run_evaluate(int argc, char** argv) {
   using namespace laserline;
   double tolerance = 2.0;
   int frames = 16;
@@ -179,4 +177,10 @@ int main(int argc, char** argv) {
     if (markdown) std::printf("\n");
   }
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return laserline::cli::run(argc, argv, run_evaluate);
 }

@@ -75,9 +75,7 @@ constexpr const char* kUsage =
     "  LCM_URL  where to listen (default udpm://239.255.76.67:7667?ttl=0); e.g.\n"
     "           'file://dive.lcmlog?speed=0' reads a recording\n";
 
-}  // namespace
-
-int main(int argc, char** argv) {
+int run_example_subscriber(int argc, char** argv) {
   std::string url = "udpm://239.255.76.67:7667?ttl=0";
   int urls = 0;
   laserline::cli::Arguments args(argc, argv, "laserline-example-subscriber", kUsage, {});
@@ -96,4 +94,10 @@ int main(int argc, char** argv) {
   while (lcm.handle() == 0) {
   }
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return laserline::cli::run(argc, argv, run_example_subscriber);
 }

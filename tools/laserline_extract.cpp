@@ -6,47 +6,44 @@
 //
 // Single-threaded. Every frame's points are written and flushed before the next frame is read,
 // so an interruption or a bad input never loses what was already extracted.
-#include <unistd.h>
-#include <laserline/calibration_t.hpp>
-#include <laserline/image_t.hpp>
-#include <laserline/profile_t.hpp>
-
+//
+// This file: the command line, the checks of the calibration, configuration and outputs before
+// the first frame, and the summary; the inputs are read in extract_inputs.cpp, each frame
+// detected and written in extractor.cpp.
 #include <algorithm>
 #include <cerrno>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
-#include <map>
 #include <memory>
 #include <opencv2/core.hpp>
 #include <opencv2/core/utils/logger.hpp>
 #include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
-#include <opencv2/videoio.hpp>
 #include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
-#include "daemon/calibration_message.hpp"
 #include "daemon/config.hpp"
 #include "hal/calibration.hpp"
 #include "hal/laser_channel.hpp"
-#include "lcmtypes/checked_decode.hpp"
-#include "lcmtypes/lcm_log.hpp"
 #include "pipeline/detector.hpp"
 #include "tools/cli.hpp"
-#include "tools/frame_channel.hpp"
-#include "tools/natural_order.hpp"
+#include "tools/extract_inputs.hpp"
+#include "tools/extractor.hpp"
 #include "tools/point_cloud.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
 using laserline::hal::ConfigError;
+using laserline::tools::extract::CalibrationInUse;
+using laserline::tools::extract::Extractor;
+using laserline::tools::extract::InputKind;
+using laserline::tools::extract::LogCalibration;
+using laserline::tools::extract::Options;
+using laserline::tools::extract::Region;
 
 constexpr const char* kUsage =
     "usage: laserline-extract [--calib FILE [--override-log-calibration]] [--config FILE]\n"
@@ -111,592 +108,13 @@ constexpr const char* kUsage =
     "were read but no point was accepted, or more than half of the accepted points had no 3-D\n"
     "point for --ply (the laser sheet of the calibration misses them); 3 before 1.\n";
 
-constexpr const char* kImageExtensions[] = {
-    ".png", ".jpg", ".jpeg", ".jpe",  ".tif", ".tiff", ".bmp", ".dib", ".pgm", ".ppm",
-    ".pbm", ".pnm", ".pxm",  ".webp", ".jp2", ".ras",  ".sr",  ".exr", ".hdr", ".pic"};
-constexpr const char* kVideoExtensions[] = {".avi", ".mp4",  ".m4v", ".mov", ".mkv",  ".webm",
-                                            ".mpg", ".mpeg", ".wmv", ".ogv", ".mjpg", ".mjpeg",
-                                            ".flv", ".ts",   ".mts", ".3gp", ".h264", ".h265"};
-
-std::string lower_extension(const fs::path& path) {
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return ext;
-}
-
-template <std::size_t N>
-bool has_extension(const fs::path& path, const char* const (&extensions)[N]) {
-  const std::string ext = lower_extension(path);
-  return std::any_of(std::begin(extensions), std::end(extensions),
-                     [&](const char* e) { return ext == e; });
-}
-
-// LCM log files start every event with this sync word (big-endian), the first at offset 0.
-bool is_lcm_log(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  unsigned char magic[4] = {};
-  if (!in.read(reinterpret_cast<char*>(magic), 4)) return false;
-  return magic[0] == 0xED && magic[1] == 0xA1 && magic[2] == 0xDA && magic[3] == 0x01;
-}
-
-// A progress line on stderr, only when stderr is a terminal (never in logs or pipes).
-class Progress {
- public:
-  Progress() : enabled_(isatty(STDERR_FILENO) == 1) {}
-
-  void update(std::size_t input, std::size_t inputs, const std::string& name, double fraction,
-              std::int64_t frames) {
-    if (!enabled_) return;
-    const auto now = std::chrono::steady_clock::now();
-    if (now - last_ < std::chrono::milliseconds(100) && fraction < 1.0) return;
-    last_ = now;
-    constexpr int kWidth = 30;
-    fraction = std::clamp(fraction, 0.0, 1.0);
-    const int filled = static_cast<int>(fraction * kWidth);
-    std::string bar(static_cast<std::size_t>(filled), '#');
-    bar.resize(kWidth, '.');
-    std::fprintf(stderr, "\r[%s] %3d%% input %zu/%zu %s, %lld frames\033[K", bar.c_str(),
-                 static_cast<int>(fraction * 100.0), input, inputs, name.c_str(),
-                 static_cast<long long>(frames));
-    shown_ = true;
-  }
-  // Prints one line, keeping the progress line out of its way.
-  void message(const std::string& line) {
-    clear();
-    std::fprintf(stderr, "%s\n", line.c_str());
-  }
-  void clear() {
-    if (shown_) std::fputs("\r\033[K", stderr);
-    shown_ = false;
-  }
-
- private:
-  bool enabled_;
-  bool shown_ = false;
-  std::chrono::steady_clock::time_point last_{};
-};
-
-struct Options {
-  bool override_log_calibration = false;
-  std::string calib, config, detector, overlay_dir, output, ply, poses;
-  // As given; checked once the calibration and the detector are known.
-  std::string threshold, roi, mask;
-  laserline::hal::LaserChannel channel;  // the laser's light in colour frames
-  std::string laser_pattern;             // as given, for messages
-  std::vector<bool> laser_on_pattern;    // empty: every frame the input says nothing of is "on"
-  bool all_candidates = false;
-  std::vector<std::string> inputs;
-};
-
-// Where points are kept: a rectangle, a mask image, or both. Points elsewhere are left out of
-// every output; the pixels are not touched (a zeroed border would be a step edge the band-pass
-// filter answers with candidates).
-class Region {
- public:
-  void limit_to(const cv::Rect& rect) { rect_ = rect; }
-  void limit_to(const cv::Mat& mask) { mask_ = mask; }  // CV_8UC1, non-zero = kept
-
-  bool contains(const cv::Point2d& at) const {
-    if (!rect_ && mask_.empty()) return true;
-    if (!std::isfinite(at.x) || !std::isfinite(at.y)) return false;
-    const cv::Point pixel(static_cast<int>(std::lround(at.x)), static_cast<int>(std::lround(at.y)));
-    if (rect_ && !rect_->contains(pixel)) return false;
-    if (mask_.empty()) return true;
-    return pixel.x >= 0 && pixel.y >= 0 && pixel.x < mask_.cols && pixel.y < mask_.rows &&
-           mask_.at<std::uint8_t>(pixel) != 0;
-  }
-
- private:
-  std::optional<cv::Rect> rect_;
-  cv::Mat mask_;
-};
-
-// Where a point lies in the image: x the column, y the row (through the profile's search axes).
-cv::Point2d image_position(const laserline::pipeline::Profile& profile,
-                           const laserline::pipeline::ProfilePoint& p) {
-  const auto [x, y] = profile.image_point(p);
-  return {x, y};
-}
-
-// A CSV field as RFC 4180 has it: quoted when it holds a comma, a quote or a line break.
-std::string csv_field(const std::string& text) {
-  if (text.find_first_of(",\"\r\n") == std::string::npos) return text;
-  std::string quoted = "\"";
-  for (char c : text) {
-    quoted += c;
-    if (c == '"') quoted += '"';
-  }
-  return quoted + "\"";
-}
-
-// Runs the detector on frames and writes what it finds; counts what failed.
-class Extractor {
- public:
-  // csv, ply and poses may be null (not asked for).
-  Extractor(const Options& options, const laserline::hal::Calibration& calibration,
-            std::unique_ptr<laserline::pipeline::Detector> detector, const Region& region,
-            FILE* csv, laserline::tools::PlyWriter* ply, const laserline::tools::PoseLog* poses)
-      : options_(options),
-        width_(calibration.camera.width),
-        height_(calibration.camera.height),
-        detector_(std::move(detector)),
-        profile_(detector_->max_points(width_, height_)),
-        region_(region),
-        csv_(csv),
-        ply_(ply),
-        poses_(poses) {
-    reported_.reserve(profile_.capacity());
-  }
-
-  Progress& progress() { return progress_; }
-
-  // The input that messages are about from now on.
-  void start_input(const std::string& input) {
-    input_ = input;
-    input_failures_ = 0;
-  }
-
-  int width() const { return width_; }
-  int height() const { return height_; }
-
-  // Frames after this are not a continuation of the frames before (another video, log or
-  // folder): detectors that use earlier frames start afresh, and so does the laser pattern.
-  void start_sequence() {
-    detector_->reset(width_, height_);
-    position_ = 0;
-  }
-
-  // One frame, as read (8 or 16 bit; 1 to 4 channels). `where` names it in messages and in the
-  // CSV; `recorded_laser_on` is its laser state where the input records one (else
-  // --laser-pattern says); `utime` is its exposure time (microseconds since the epoch) where the
-  // input has one.
-  void frame(const cv::Mat& raw, const std::string& where,
-             std::optional<bool> recorded_laser_on = std::nullopt,
-             std::optional<std::int64_t> utime = std::nullopt) {
-    const std::int64_t index = next_frame_++;
-    const bool laser_on = recorded_laser_on ? *recorded_laser_on : pattern_laser_on();
-    ++position_;
-    std::string problem;
-    if (!laserline::tools::to_laser_mono8(raw, options_.channel, mono_, problem)) {
-      fail(where + ": " + problem + "; skipped");
-      return;
-    }
-    if (mono_.cols != width_ || mono_.rows != height_) {
-      fail(where + ": image is " + std::to_string(mono_.cols) + "x" + std::to_string(mono_.rows) +
-           " but the calibration " + options_.calib + " is for " + std::to_string(width_) + "x" +
-           std::to_string(height_) + "; skipped");
-      return;
-    }
-    const laserline::pipeline::ImageView view{mono_.data, mono_.cols, mono_.rows,
-                                              static_cast<int>(mono_.step[0])};
-    // Laser-off frames too: a detector that subtracts backgrounds keeps them as the next one's.
-    detector_->detect(view, {static_cast<std::uint64_t>(index), laser_on}, profile_);
-    if (profile_.overflowed()) ++overflowed_frames_;
-    select_reported_points(laser_on);
-    if (csv_ != nullptr) write_csv_points(index, where);
-    if (ply_ != nullptr) add_to_cloud(index, where, utime);
-    ++processed_;
-    if (!laser_on) ++(recorded_laser_on ? laser_off_recorded_ : laser_off_by_pattern_);
-    if (!options_.overlay_dir.empty()) write_overlay(index, where);
-  }
-
-  // A frame that could not be read at all: it keeps its frame number and its place in the
-  // laser pattern.
-  void unreadable_frame(const std::string& message) {
-    ++next_frame_;
-    ++position_;
-    fail(message);
-  }
-
-  // A problem with an input as a whole (or an overlay): reported, counted, processing goes on.
-  // A long video or log with a problem in every frame must not bury the rest: after
-  // kShownPerInput lines for one input the others are only counted.
-  void fail(const std::string& message) {
-    ++failures_;
-    ++input_failures_;
-    if (input_failures_ <= kShownPerInput) progress_.message("laserline-extract: " + message);
-    if (input_failures_ == kShownPerInput + 1) {
-      progress_.message("laserline-extract: " + input_ +
-                        ": further problems in this input are counted, not shown");
-    }
-  }
-
-  std::int64_t frames() const { return next_frame_; }
-  std::int64_t processed() const { return processed_; }
-  std::int64_t laser_off_recorded() const { return laser_off_recorded_; }
-  std::int64_t laser_off_by_pattern() const { return laser_off_by_pattern_; }
-  std::int64_t failures() const { return failures_; }
-  std::int64_t points_written() const { return points_written_; }
-  std::int64_t valid_written() const { return valid_written_; }
-  std::int64_t accepted() const { return accepted_; }
-  // Accepted points of frames that had a pose (or of all frames, without --poses), and how many
-  // of them were triangulated into the cloud.
-  std::int64_t cloud_accepted() const { return cloud_accepted_; }
-  std::int64_t cloud_triangulated() const { return cloud_triangulated_; }
-  std::int64_t overflowed_frames() const { return overflowed_frames_; }
-
- private:
-  bool pattern_laser_on() const {
-    const auto& pattern = options_.laser_on_pattern;
-    return pattern.empty() || pattern[static_cast<std::size_t>(position_) % pattern.size()];
-  }
-
-  // The points every output takes from this frame: none with the laser off (whatever a detector
-  // makes of such a frame is not the laser); those in the region; rejected ones only when asked.
-  void select_reported_points(bool laser_on) {
-    reported_.clear();
-    if (!laser_on) return;
-    for (const auto& p : profile_.points()) {
-      if (!p.valid && !options_.all_candidates) continue;
-      if (!region_.contains(image_position(profile_, p))) continue;
-      reported_.push_back(p);
-      accepted_ += p.valid ? 1 : 0;
-    }
-  }
-
-  // Every CSV row is written here (one place to add columns).
-  void write_csv_points(std::int64_t index, const std::string& where) {
-    const std::string source = csv_field(where);
-    for (const auto& p : reported_) {
-      const cv::Point2d at = image_position(profile_, p);
-      std::fprintf(csv_, "%lld,%s,%d,%.4f,%.4f,%.4f,%.2f,%d,%d\n", static_cast<long long>(index),
-                   source.c_str(), p.u, p.v, at.x, at.y, p.snr_db, p.segment, p.valid ? 1 : 0);
-      ++points_written_;
-      valid_written_ += p.valid ? 1 : 0;
-    }
-    if (std::fflush(csv_) != 0 || std::ferror(csv_) != 0) {
-      progress_.message("laserline-extract: " + options_.output +
-                        ": write failed: " + std::strerror(errno));
-      std::exit(1);
-    }
-  }
-
-  // The frame's triangulated points into the point cloud, moved into the world frame when there
-  // are poses. A frame without a pose is reported and left out of the cloud (not of the CSV).
-  void add_to_cloud(std::int64_t index, const std::string& where,
-                    std::optional<std::int64_t> utime) {
-    laserline::tools::Pose pose;
-    if (poses_ != nullptr) {
-      if (utime) {
-        const double t = static_cast<double>(*utime) * 1e-6;
-        if (!poses_->at_time(t, pose)) {
-          char span[160];
-          std::snprintf(span, sizeof span,
-                        "at t=%.6f s is outside the pose log's time span %.6f .. %.6f s", t,
-                        poses_->first_time(), poses_->last_time());
-          fail(poses_->path() + ": frame " + std::to_string(index) + " (" + where + ") " + span +
-               "; left out of " + options_.ply);
-          return;
-        }
-      } else if (!poses_->at_index(static_cast<std::size_t>(index), pose)) {
-        fail(poses_->path() + ": frame " + std::to_string(index) + " (" + where +
-             ", no timestamp) has no pose: the log has " + std::to_string(poses_->size()) +
-             " rows (frames without a time take the row of their frame number); left out of " +
-             options_.ply);
-        return;
-      }
-    }
-    for (const auto& p : reported_) {
-      if (!p.valid) continue;
-      ++cloud_accepted_;
-      // No 3-D point: the ray misses the laser sheet in front of the camera.
-      if (!std::isfinite(p.xyz[2])) continue;
-      const std::array<double, 3> camera{p.xyz[0], p.xyz[1], p.xyz[2]};
-      ply_->add(poses_ != nullptr ? pose.apply(camera) : camera, p.snr_db);
-      ++cloud_triangulated_;
-    }
-    if (!ply_->commit()) {
-      progress_.message("laserline-extract: " + options_.ply +
-                        ": write failed: " + std::strerror(errno));
-      std::exit(1);
-    }
-  }
-
-  void write_overlay(std::int64_t index, const std::string& where) {
-    cv::cvtColor(mono_, overlay_, cv::COLOR_GRAY2BGR);
-    constexpr int kShift = 4;  // sub-pixel drawing: coordinates in 1/16 px
-    for (const auto& p : reported_) {
-      const cv::Point2d at = image_position(profile_, p);
-      if (!std::isfinite(at.x) || !std::isfinite(at.y)) continue;
-      const cv::Point centre(static_cast<int>(std::lround(at.x * 16.0)),
-                             static_cast<int>(std::lround(at.y * 16.0)));
-      const cv::Scalar colour = p.valid ? cv::Scalar(0, 255, 0) : cv::Scalar(0, 0, 255);
-      // Half a pixel: the point marks the centre and leaves the line's flanks visible.
-      cv::circle(overlay_, centre, 1 << (kShift - 1), colour, cv::FILLED, cv::LINE_AA, kShift);
-    }
-    char name[32];
-    std::snprintf(name, sizeof name, "frame_%06lld.png", static_cast<long long>(index));
-    const std::string path = (fs::path(options_.overlay_dir) / name).string();
-    bool written = false;
-    try {
-      written = cv::imwrite(path, overlay_);
-    } catch (const cv::Exception&) {
-      written = false;
-    }
-    if (!written) fail(path + ": overlay of " + where + " could not be written");
-  }
-
-  const Options& options_;
-  int width_, height_;
-  std::unique_ptr<laserline::pipeline::Detector> detector_;
-  laserline::pipeline::Profile profile_;
-  std::vector<laserline::pipeline::ProfilePoint> reported_;  // this frame's points in the outputs
-  Region region_;
-  FILE* csv_;
-  laserline::tools::PlyWriter* ply_;
-  const laserline::tools::PoseLog* poses_;
-  Progress progress_;
-  cv::Mat mono_, overlay_;
-  std::int64_t next_frame_ = 0, processed_ = 0, failures_ = 0;
-  std::int64_t position_ = 0;  // frames since the sequence started (the laser pattern's place)
-  std::int64_t laser_off_recorded_ = 0, laser_off_by_pattern_ = 0;
-  std::int64_t points_written_ = 0, valid_written_ = 0, accepted_ = 0;
-  std::int64_t cloud_accepted_ = 0, cloud_triangulated_ = 0, overflowed_frames_ = 0;
-  static constexpr int kShownPerInput = 10;
-  std::string input_;
-  int input_failures_ = 0;
-};
-
-// An image file: one frame, counted even when it cannot be read so that frame numbers follow
-// the list of files. A damaged file (cut short, a failed CRC) is skipped whole: its decoder fills
-// what is missing, and lines through the filled part would be false points.
-void extract_image(Extractor& x, const std::string& path) {
-  cv::Mat image;
-  std::string problem;
-  if (!laserline::tools::read_image_file(path, image, problem)) {
-    x.unreadable_frame(path + ": " + problem + "; skipped");
-    return;
-  }
-  x.frame(image, path);
-}
-
-void extract_video(Extractor& x, const std::string& path, std::size_t input, std::size_t inputs) {
-  cv::VideoCapture video;
-  try {
-    video.open(path, cv::CAP_FFMPEG);
-  } catch (const cv::Exception&) {
-  }
-  if (!video.isOpened()) {
-    x.fail(path + ": not a readable video; skipped");
-    return;
-  }
-  // Checked once here rather than once per frame.
-  const int width = static_cast<int>(video.get(cv::CAP_PROP_FRAME_WIDTH));
-  const int height = static_cast<int>(video.get(cv::CAP_PROP_FRAME_HEIGHT));
-  if (width > 0 && height > 0 && (width != x.width() || height != x.height())) {
-    x.fail(path + ": video is " + std::to_string(width) + "x" + std::to_string(height) +
-           " but the calibration is for " + std::to_string(x.width()) + "x" +
-           std::to_string(x.height()) + "; skipped");
-    return;
-  }
-  const double count = video.get(cv::CAP_PROP_FRAME_COUNT);
-  cv::Mat frame;
-  std::int64_t n = 0;
-  const std::string name = fs::path(path).filename().string();
-  while (true) {
-    bool got = false;
-    try {
-      got = video.read(frame);
-    } catch (const cv::Exception&) {
-      got = false;
-    }
-    if (!got) break;
-    x.frame(frame, path + " frame " + std::to_string(n));
-    ++n;
-    x.progress().update(input, inputs, name, count > 0 ? static_cast<double>(n) / count : 0.0,
-                        x.frames());
-  }
-  if (n == 0) {
-    x.fail(path + ": no frame could be decoded");
-  } else if (count > 0 && static_cast<double>(n) < count) {
-    // The container's own count (its header or index) against what decoded: a file cut short or
-    // a decode that failed midway ends the frames early without an error from OpenCV.
-    char announced[32];
-    std::snprintf(announced, sizeof announced, "%.0f", count);
-    x.fail(path + ": only " + std::to_string(n) + " of the " + announced +
-           " frames its container announces could be decoded (cut short or damaged?); those " +
-           std::to_string(n) + " were processed");
-  }
-}
-
-// The calibration the frames are extracted with, and what a log must name to be extracted.
-struct CalibrationInUse {
-  std::uint64_t id = 0;
-  std::string name;            // for messages: the file, or the log it came from
-  bool accept_others = false;  // --override-log-calibration
-};
-
-std::string id_text(std::int64_t id) {
-  return laserline::hal::calibration_id_text(static_cast<std::uint64_t>(id));
-}
-
-// What a log says of its calibration before its frames: its first laserline.calibration_t (the
-// daemon publishes one at start, before any profile, and every few seconds), and the
-// calibration_id of the first profile when that comes first (a logger started after the daemon).
-// Reading stops at the first calibration_t: only a log without one is read to its end.
-struct LogCalibration {
-  std::optional<laserline::hal::Calibration> calibration;
-  std::uint64_t id = 0;
-  std::string where;  // the event that named the id; empty: the log names none
-};
-
-LogCalibration first_log_calibration(const std::string& path) {
-  using laserline::messages::LcmLogReader;
-  LogCalibration found;
-  LcmLogReader log;
-  std::string problem;
-  if (!log.open(path, &problem)) return found;  // reported when the log is extracted
-  const laserline::messages::Limits limits;
-  LcmLogReader::Event event;
-  LcmLogReader::Damage damage;
-  laserline::calibration_t message;
-  laserline::profile_t profile;
-  laserline::hal::Calibration calibration;
-  while (log.next(&event, &damage)) {
-    const std::int64_t hash =
-        laserline::messages::message_hash(event.data.data(), event.data.size());
-    const std::string where =
-        path + " event " + std::to_string(event.number) + " (" + event.channel + ")";
-    if (hash == laserline::calibration_t::getHash() &&
-        laserline::messages::decode(event.data.data(), event.data.size(), &message, limits,
-                                    &problem) &&
-        laserline::daemon::calibration_from_message(message, &calibration, &problem)) {
-      const auto id = static_cast<std::uint64_t>(message.calibration_id);
-      if (found.where.empty()) {
-        found.id = id;
-        found.where = where;
-      }
-      if (found.id == id) found.calibration = calibration;
-      return found;
-    }
-    if (found.where.empty() && hash == laserline::profile_t::getHash() &&
-        laserline::messages::decode(event.data.data(), event.data.size(), &profile, limits,
-                                    &problem)) {
-      found.id = static_cast<std::uint64_t>(profile.calibration_id);
-      found.where = where;
-    }
-  }
-  return found;
-}
-
-// An LCM log: every laserline.image_t message (on any channel) is a frame, in log order. The
-// laser state of a frame comes from the profile_t of the same sequence number in the same log
-// (image_t does not carry it); without one, from --laser-pattern (else on). Damaged records are
-// skipped (reported with their byte offsets) and reading goes on at the next whole event; every
-// message is decoded only after its lengths are checked (messages::decode). A log whose
-// calibration_t or profiles name another calibration than the one in use is skipped whole.
-void extract_log(Extractor& x, const std::string& path, std::size_t input, std::size_t inputs,
-                 const CalibrationInUse& in_use) {
-  using laserline::messages::LcmLogReader;
-  const laserline::messages::Limits limits;
-  std::map<std::int64_t, bool> laser_on_by_sequence;
-  std::int64_t images = 0;
-  LcmLogReader::Event event;
-  LcmLogReader::Damage damage;
-  std::string problem;
-  {
-    LcmLogReader log;
-    if (!log.open(path, &problem)) {
-      x.fail(problem + "; skipped");
-      return;
-    }
-    laserline::profile_t profile;
-    laserline::calibration_t calibration;
-    std::string other_calibration;  // the first event naming another calibration
-    while (log.next(&event, &damage)) {
-      const std::int64_t hash =
-          laserline::messages::message_hash(event.data.data(), event.data.size());
-      std::optional<std::int64_t> named;
-      if (hash == laserline::image_t::getHash()) {
-        ++images;
-      } else if (hash == laserline::profile_t::getHash() &&
-                 laserline::messages::decode(event.data.data(), event.data.size(), &profile, limits,
-                                             &problem)) {
-        laser_on_by_sequence[profile.sequence] = profile.laser_on;
-        named = profile.calibration_id;
-      } else if (hash == laserline::calibration_t::getHash()) {
-        if (laserline::messages::decode(event.data.data(), event.data.size(), &calibration, limits,
-                                        &problem)) {
-          named = calibration.calibration_id;
-        } else {
-          x.fail(path + " event " + std::to_string(event.number) + " (" + event.channel +
-                 "): not a valid laserline.calibration_t: " + problem + "; skipped");
-        }
-      }
-      if (named && static_cast<std::uint64_t>(*named) != in_use.id && other_calibration.empty()) {
-        other_calibration = "event " + std::to_string(event.number) + " (" + event.channel +
-                            ") names calibration " + id_text(*named);
-      }
-    }
-    if (!other_calibration.empty() && !in_use.accept_others) {
-      x.fail(path + ": " + other_calibration + ", not " +
-             laserline::hal::calibration_id_text(in_use.id) + " of " + in_use.name +
-             " in use; skipped (--override-log-calibration extracts it all the same)");
-      return;
-    }
-  }
-  if (images == 0) {
-    x.fail(path + ": the LCM log holds no laserline.image_t message");
-    return;
-  }
-  LcmLogReader log;
-  if (!log.open(path, &problem)) {
-    x.fail(problem + "; skipped");
-    return;
-  }
-  const std::string name = fs::path(path).filename().string();
-  std::int64_t n = 0;
-  laserline::image_t message;
-  cv::Mat image;
-  while (true) {
-    const bool more = log.next(&event, &damage);
-    if (damage.bytes > 0) {
-      const std::string range = "bytes " + std::to_string(damage.offset) + ".." +
-                                std::to_string(damage.offset + damage.bytes - 1);
-      x.fail(path + ": " + range +
-             (more ? " are damaged (" + std::to_string(damage.records) +
-                         " records); skipped, reading resumes at event " +
-                         std::to_string(event.number)
-                   : " are not a complete event (recording cut short?); ignored"));
-    }
-    if (!more) break;
-    if (laserline::messages::message_hash(event.data.data(), event.data.size()) !=
-        laserline::image_t::getHash()) {
-      continue;
-    }
-    const std::string where =
-        path + " event " + std::to_string(event.number) + " (" + event.channel + ")";
-    ++n;
-    if (!laserline::messages::decode(event.data.data(), event.data.size(), &message, limits,
-                                     &problem)) {
-      x.unreadable_frame(where + ": not a valid laserline.image_t: " + problem + "; skipped");
-    } else if (!laserline::messages::unpack_image(message, limits, cv::IMREAD_UNCHANGED, &image,
-                                                  &problem)) {
-      x.unreadable_frame(where + ": " + problem + "; skipped");
-    } else {
-      const auto state = laser_on_by_sequence.find(message.sequence);
-      x.frame(
-          image, where,
-          state != laser_on_by_sequence.end() ? std::optional<bool>(state->second) : std::nullopt,
-          message.utime);
-    }
-    x.progress().update(input, inputs, name, static_cast<double>(n) / static_cast<double>(images),
-                        x.frames());
-  }
-  if (log.totals().damaged_regions > 0) {
-    x.fail(path + ": " + log.damage_summary());
-  }
-}
-
 [[noreturn]] void usage_error(const std::string& line) {
-  std::fprintf(stderr, "laserline-extract: %s (see --help)\n", line.c_str());
-  std::exit(2);
+  laserline::cli::usage_error("laserline-extract", line);
 }
 
 [[noreturn]] void fatal(const std::string& line) {
   std::fprintf(stderr, "laserline-extract: %s\n", line.c_str());
-  std::exit(2);
+  throw laserline::cli::Exit(2);
 }
 
 std::string detector_list() {
@@ -861,58 +279,7 @@ Region region_of(const Options& o, int width, int height) {
   return region;
 }
 
-enum class InputKind : std::uint8_t { kMissing, kFolder, kLog, kVideo, kImage };
-
-InputKind kind_of(const std::string& input) {
-  std::error_code ec;
-  if (!fs::exists(input, ec)) return InputKind::kMissing;
-  if (fs::is_directory(input, ec)) return InputKind::kFolder;
-  if (is_lcm_log(input)) return InputKind::kLog;
-  if (has_extension(input, kVideoExtensions)) return InputKind::kVideo;
-  return InputKind::kImage;
-}
-
-// Image arguments are taken in the order given. When a run of them is not in natural order
-// (a shell glob sorts step_num10.png before step_num2.png), says so once, before it starts.
-void note_unnatural_order(Extractor& x, const std::vector<std::string>& inputs,
-                          const std::vector<InputKind>& kinds, std::size_t first) {
-  std::size_t end = first;
-  while (end < inputs.size() && kinds[end] == InputKind::kImage)
-    ++end;
-  for (std::size_t i = first + 1; i < end; ++i) {
-    if (!laserline::tools::natural_less(inputs[i], inputs[i - 1])) continue;
-    x.progress().message("laserline-extract: note: the " + std::to_string(end - first) +
-                         " image arguments from " + inputs[first] +
-                         " on are not in natural order (" +
-                         fs::path(inputs[i - 1]).filename().string() + " before " +
-                         fs::path(inputs[i]).filename().string() +
-                         "): frames are numbered in the order given; give their folder to read "
-                         "them in natural order");
-    return;
-  }
-}
-
-// The image files of a folder, in natural order (empty with `ec` set when it cannot be listed).
-std::vector<std::string> images_in_folder(const std::string& folder, std::error_code& ec) {
-  std::vector<fs::path> files;
-  for (const auto& entry : fs::directory_iterator(folder, ec)) {
-    if (entry.is_regular_file(ec) && has_extension(entry.path(), kImageExtensions)) {
-      files.push_back(entry.path());
-    }
-  }
-  if (ec) return {};
-  std::sort(files.begin(), files.end(), [](const fs::path& a, const fs::path& b) {
-    return laserline::tools::natural_less(a.filename().string(), b.filename().string());
-  });
-  std::vector<std::string> names;
-  for (const auto& f : files)
-    names.push_back(f.string());
-  return names;
-}
-
-}  // namespace
-
-int main(int argc, char** argv) {
+int run_extract(int argc, char** argv) {
   // OpenCV's own warnings (e.g. a failing decoder) would duplicate our one line per problem.
   cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);
   Options options = parse_arguments(argc, argv);
@@ -924,7 +291,7 @@ int main(int argc, char** argv) {
   }
   std::vector<InputKind> kinds;
   for (const auto& input : options.inputs)
-    kinds.push_back(kind_of(input));
+    kinds.push_back(laserline::tools::extract::kind_of(input));
   laserline::hal::Calibration calibration;
   CalibrationInUse in_use;
   in_use.accept_others = options.override_log_calibration;
@@ -941,7 +308,7 @@ int main(int argc, char** argv) {
   std::optional<LogCalibration> from_log;
   for (std::size_t i = 0; i < options.inputs.size(); ++i) {
     if (kinds[i] != InputKind::kLog) continue;
-    LogCalibration log = first_log_calibration(options.inputs[i]);
+    LogCalibration log = laserline::tools::extract::first_log_calibration(options.inputs[i]);
     if (log.where.empty()) continue;
     if (!options.calib.empty()) {
       if (log.id != in_use.id && !options.override_log_calibration) {
@@ -1039,55 +406,7 @@ int main(int argc, char** argv) {
 
   Extractor x(options, calibration, std::move(detector), region, csv, ply ? &*ply : nullptr,
               poses ? &*poses : nullptr);
-  for (std::size_t i = 0; i < options.inputs.size(); ++i) {
-    const std::string& input = options.inputs[i];
-    const std::size_t number = i + 1, inputs = options.inputs.size();
-    const std::string name = fs::path(input).filename().string();
-    x.start_input(input);
-    switch (kinds[i]) {
-      case InputKind::kMissing:
-        // Not known to be a frame at all: takes no frame number.
-        x.fail(input + ": no such file or folder; skipped");
-        break;
-      case InputKind::kFolder: {
-        std::error_code ec;
-        const std::vector<std::string> files = images_in_folder(input, ec);
-        if (ec) {
-          x.fail(input + ": folder cannot be listed: " + ec.message() + "; skipped");
-          break;
-        }
-        if (files.empty()) {
-          x.fail(input + ": folder holds no image file; skipped");
-          break;
-        }
-        x.start_sequence();
-        for (std::size_t k = 0; k < files.size(); ++k) {
-          extract_image(x, files[k]);
-          x.progress().update(number, inputs, name,
-                              static_cast<double>(k + 1) / static_cast<double>(files.size()),
-                              x.frames());
-        }
-        break;
-      }
-      case InputKind::kLog:
-        x.start_sequence();
-        extract_log(x, input, number, inputs, in_use);
-        break;
-      case InputKind::kVideo:
-        x.start_sequence();
-        extract_video(x, input, number, inputs);
-        break;
-      case InputKind::kImage:
-        // Consecutive image arguments are one sequence (a shell glob).
-        if (i == 0 || kinds[i - 1] != InputKind::kImage) {
-          x.start_sequence();
-          note_unnatural_order(x, options.inputs, kinds, i);
-        }
-        extract_image(x, input);
-        x.progress().update(number, inputs, name, 1.0, x.frames());
-        break;
-    }
-  }
+  laserline::tools::extract::extract_inputs(x, options.inputs, kinds, in_use);
   x.progress().clear();
   if (csv != nullptr) std::fclose(csv);
   const std::string problems =
@@ -1148,4 +467,10 @@ int main(int argc, char** argv) {
   }
   if (empty_result) return 3;
   return x.failures() > 0 ? 1 : 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return laserline::cli::run(argc, argv, run_extract);
 }

@@ -421,9 +421,7 @@ bool read_log(const std::string& path, Listener& listener, const std::string& pr
   return true;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+int run_listen(int argc, char** argv) {
   const char* env_url = std::getenv("LCM_DEFAULT_URL");
   std::string url = env_url != nullptr ? env_url : "udpm://239.255.76.67:7667?ttl=0";
   double duration_s = 0, quiet_s = 2.0;
@@ -449,7 +447,7 @@ int main(int argc, char** argv) {
       if (end == text.c_str() || *end != '\0' || !(s > 0) || !std::isfinite(s)) {
         std::fprintf(stderr, "laserline-listen: %s: expected seconds > 0, got '%s'\n", arg.c_str(),
                      text.c_str());
-        std::exit(2);
+        throw laserline::cli::Exit(2);
       }
       return s;
     };
@@ -521,4 +519,10 @@ int main(int argc, char** argv) {
   report(listener, url, calibration_channel);
   if (!overlay.empty()) write_overlay(listener, overlay);
   return listener.profiles > 0 ? 0 : 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return laserline::cli::run(argc, argv, run_listen);
 }

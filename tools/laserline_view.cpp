@@ -732,9 +732,7 @@ void on_lcm_message(const lcm::ReceiveBuffer* rbuf, const std::string& channel, 
   state->on_message(rbuf, channel);
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+int run_view(int argc, char** argv) {
   const char* env_url = std::getenv("LCM_DEFAULT_URL");
   std::string url = env_url != nullptr ? env_url : "udpm://239.255.76.67:7667?ttl=0";
   std::string profile_channel = "LASERLINE_PROFILE", image_channel = "LASERLINE_IMAGE",
@@ -959,4 +957,10 @@ int main(int argc, char** argv) {
   signal_thread.join();
   lcm_thread.join();
   return served && !lcm_failed ? 0 : 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return laserline::cli::run(argc, argv, run_view);
 }

@@ -52,10 +52,6 @@ std::string number_text(double value) {
   return buffer;
 }
 
-Eigen::Quaterniond quaternion(const std::array<double, 4>& wxyz) {
-  return {wxyz[0], wxyz[1], wxyz[2], wxyz[3]};
-}
-
 void append_le(std::vector<unsigned char>& out, float value) {
   const auto bits = std::bit_cast<std::uint32_t>(value);
   for (int i = 0; i < 4; ++i)
@@ -63,12 +59,6 @@ void append_le(std::vector<unsigned char>& out, float value) {
 }
 
 }  // namespace
-
-std::array<double, 3> Pose::apply(const std::array<double, 3>& p) const {
-  const Eigen::Vector3d world = quaternion(rotation) * Eigen::Vector3d(p[0], p[1], p[2]) +
-                                Eigen::Vector3d(position[0], position[1], position[2]);
-  return {world(0), world(1), world(2)};
-}
 
 PoseLog PoseLog::load(const std::string& path) {
   std::ifstream in(path);
@@ -107,14 +97,13 @@ PoseLog PoseLog::parse(std::istream& in, const std::string& path) {
                               "' is not a finite number");
       }
     }
-    Row row{v[0], Pose{{v[1], v[2], v[3]}, {v[4], v[5], v[6], v[7]}}};
     const double norm = std::sqrt(v[4] * v[4] + v[5] * v[5] + v[6] * v[6] + v[7] * v[7]);
     if (std::abs(norm - 1.0) > kQuaternionNormTolerance) {
       throw PointCloudError(where + "quaternion qw,qx,qy,qz has norm " + number_text(norm) +
                             ", not 1");
     }
-    for (double& c : row.pose.rotation)
-      c /= norm;
+    const Row row{v[0],
+                  Pose{{v[1], v[2], v[3]}, {v[4] / norm, v[5] / norm, v[6] / norm, v[7] / norm}}};
     if (!log.rows_.empty() && !(row.time > log.rows_.back().time)) {
       throw PointCloudError(
           where + "timestamp " + number_text(row.time) + " is not after the previous row's " +
@@ -141,11 +130,9 @@ bool PoseLog::at_time(double t, Pose& pose) const {
   const Row& b = *after;
   const Row& a = *(after - 1);
   const double s = (t - a.time) / (b.time - a.time);
-  for (int i = 0; i < 3; ++i)
-    pose.position[i] = a.pose.position[i] + s * (b.pose.position[i] - a.pose.position[i]);
+  pose.position = a.pose.position + s * (b.pose.position - a.pose.position);
   // The shorter way round (q and -q are the same rotation).
-  const Eigen::Quaterniond q = quaternion(a.pose.rotation).slerp(s, quaternion(b.pose.rotation));
-  pose.rotation = {q.w(), q.x(), q.y(), q.z()};
+  pose.rotation = a.pose.rotation.slerp(s, b.pose.rotation);
   return true;
 }
 
@@ -181,7 +168,7 @@ PlyWriter::~PlyWriter() {
   }
 }
 
-void PlyWriter::add(const std::array<double, 3>& xyz, float snr) {
+void PlyWriter::add(const Eigen::Vector3d& xyz, float snr) {
   for (float value :
        {static_cast<float>(xyz[0]), static_cast<float>(xyz[1]), static_cast<float>(xyz[2]), snr})
     append_le(pending_, value);

@@ -1,6 +1,7 @@
 #pragma once
 
-#include <array>
+#include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <cstdint>
 #include <cstdio>
 #include <istream>
@@ -18,10 +19,12 @@ class PointCloudError : public std::runtime_error {
 
 // Where the camera is in the world: X_world = R(rotation) * X_camera + position.
 struct Pose {
-  std::array<double, 3> position{};
-  std::array<double, 4> rotation{1, 0, 0, 0};  // unit quaternion w x y z
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();  // unit
 
-  std::array<double, 3> apply(const std::array<double, 3>& camera_point) const;
+  Eigen::Vector3d apply(const Eigen::Vector3d& camera_point) const {
+    return rotation * camera_point + position;
+  }
 };
 
 // Camera poses from a navigation log: CSV rows `timestamp,x,y,z,qw,qx,qy,qz` (seconds, metres,
@@ -67,7 +70,7 @@ class PlyWriter {
   PlyWriter(const PlyWriter&) = delete;
   PlyWriter& operator=(const PlyWriter&) = delete;
 
-  void add(const std::array<double, 3>& xyz, float snr);
+  void add(const Eigen::Vector3d& xyz, float snr);
   // Writes the points added since the last commit and the new count; false on a write error.
   bool commit();
   std::int64_t count() const { return committed_; }

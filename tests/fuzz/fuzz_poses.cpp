@@ -16,10 +16,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const double span = log.last_time() - log.first_time();
     for (int k = 0; k <= 8; ++k) {
       if (!log.at_time(log.first_time() + span * k / 8.0, pose)) continue;
-      double norm = 0;
-      for (double c : pose.rotation)
-        norm += c * c;
-      if (!(std::abs(norm - 1.0) < 1e-6)) std::abort();  // a rotation that is not one
+      if (!(std::abs(pose.rotation.squaredNorm() - 1.0) < 1e-6))
+        std::abort();  // a rotation that is not one
     }
     for (std::size_t i = 0; i <= log.size(); ++i)
       log.at_index(i, pose);

@@ -399,6 +399,7 @@ void produce_frames() {
   }
 }
 
+// 0 for a name it does not know.
 std::uint32_t parse_format(const std::string& name) {
   static const std::pair<const char*, std::uint32_t> kFormats[] = {
       {"GREY", V4L2_PIX_FMT_GREY},       {"Y16", V4L2_PIX_FMT_Y16},
@@ -414,8 +415,7 @@ std::uint32_t parse_format(const std::string& name) {
   for (const auto& [known, fourcc] : kFormats) {
     if (name == known) return fourcc;
   }
-  std::fprintf(stderr, "v4l2_fuse_device: --format: unknown format '%s'\n", name.c_str());
-  std::exit(2);
+  return 0;
 }
 
 }  // namespace
@@ -433,6 +433,10 @@ int main(int argc, char** argv) {
     const std::string value = argv[i + 1];
     if (key == "--format") {
       g_device.fourcc = parse_format(value);
+      if (g_device.fourcc == 0) {
+        std::fprintf(stderr, "v4l2_fuse_device: --format: unknown format '%s'\n", value.c_str());
+        return 2;
+      }
     } else if (key == "--width") {
       g_device.width = static_cast<std::uint32_t>(std::stoul(value));
     } else if (key == "--height") {

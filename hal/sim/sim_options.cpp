@@ -1,4 +1,4 @@
-#include "hal/sim_options.hpp"
+#include "hal/sim/sim_options.hpp"
 
 #include <algorithm>
 #include <cmath>
