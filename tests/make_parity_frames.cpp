@@ -52,13 +52,14 @@ parity::ParityScenario render(const tools::Scenario& scenario, int frames) {
   return out;
 }
 
+// 0 (after one line on stderr) when `text` is not a whole number from 1 to 8192.
 int positive(const char* text, const char* what) {
   char* end = nullptr;
   const long value = std::strtol(text, &end, 10);
   if (end == text || *end != 0 || value <= 0 || value > 8192) {
     std::fprintf(stderr, "make_parity_frames: %s '%s' is not a whole number from 1 to 8192\n", what,
                  text);
-    std::exit(2);
+    return 0;
   }
   return static_cast<int>(value);
 }
@@ -73,6 +74,7 @@ int main(int argc, char** argv) {
   const int width = argc == 5 ? positive(argv[2], "WIDTH") : 640;
   const int height = argc == 5 ? positive(argv[3], "HEIGHT") : 512;
   const int frames = argc == 5 ? positive(argv[4], "FRAMES") : 6;
+  if (width == 0 || height == 0 || frames == 0) return 2;
   try {
     parity::FramesWriter writer(argv[1]);
     int scenarios = 0;
