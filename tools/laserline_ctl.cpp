@@ -124,9 +124,7 @@ std::string sender_name() {
   return std::string("laserline-ctl@") + host + "[" + std::to_string(getpid()) + "]";
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+int run_ctl(int argc, char** argv) {
   const Options o = parse_args(argc, argv);
   lcm::LCM lcm(o.url);
   if (!lcm.good()) {
@@ -178,4 +176,10 @@ int main(int argc, char** argv) {
     std::printf("%s = %s (was %s)\n", ack.name.c_str(), ack.value.c_str(), ack.old_value.c_str());
   }
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return laserline::cli::run(argc, argv, run_ctl);
 }
