@@ -256,6 +256,43 @@ TEST(LineValidator, RejectsTheStaticCurveAndKeepsTheLaserOverThreeFrames) {
   }
 }
 
+TEST(LineValidator, AnIsolatedCandidateIsNoiseOnlyWhereParallaxCouldBeTested) {
+  // Three candidates alone (fewer than min_segment_points) beside the curve and the laser: noise
+  // once the motion lets segments be tested by their parallax (a scanning camera, from the third
+  // frame on); with the camera holding still, or before, nothing refutes them and they stay.
+  const ScannerGeometry g;
+  const ValidationOptions options;
+  const int lone_u = g.width - 20;
+  for (const bool moving : {true, false}) {
+    LineValidator validator(g, options);
+    const std::size_t capacity = 4096;
+    validator.reset(g.width, g.height, capacity);
+    std::vector<std::uint8_t> pixels(static_cast<std::size_t>(g.width) * g.height, 0);
+    const ImageView image{pixels.data(), g.width, g.height, g.width};
+    const double step_m = moving ? 0.008 : 0.0, tilt_deg = moving ? 0.3 : 0.0;
+    double length = 0, earlier = 0;
+    for (int k = 0; k < 5; ++k) {
+      const Pose p = pose(k, step_m, tilt_deg);
+      Profile profile(capacity);
+      add_curve(g, p, background_curve, profile);
+      add_laser(profile, k);
+      const std::size_t lone = profile.size();
+      for (int i = 0; i < 3; ++i)
+        profile.add({lone_u + i, 40.0f});
+      PairMotion motion;
+      if (k > 0) motion = relative(pose(k - 1, step_m, tilt_deg), p, length, earlier);
+      earlier = length;
+      validator.validate(profile, motion, image, nullptr);
+      const bool noise = moving && k >= 2;
+      for (std::size_t i = lone; i < profile.size(); ++i) {
+        EXPECT_EQ(profile.points()[i].segment, -1);
+        EXPECT_EQ(profile.points()[i].valid, !noise)
+            << (moving ? "scanning" : "still") << ", frame " << k;
+      }
+    }
+  }
+}
+
 }  // namespace
 
 // The bar, on the simulated pier (relief of 5-30 cm, ambient light as bright as the laser,
