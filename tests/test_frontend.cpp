@@ -443,16 +443,22 @@ TEST(Detectors, AreMadeByNameAndRefuseImpossibleOptions) {
   EXPECT_THROW(fir->reset(640, 480), std::invalid_argument);  // not the calibrated size
 }
 
-TEST(Detectors, DoNotAllocatePerFrame) {
-  ASSERT_TRUE(testing::allocation_counter_works());
-  const tools::Scenario scenario = tools::standard_scenarios(640, 512)[1];  // ambient, scanning
-  hal::SimScene scene(scenario.scene);
+// Detector options whose geometry is a 640x512 scenario's camera.
+DetectorOptions options_for_640x512(const tools::Scenario& scenario) {
   DetectorOptions o;
   o.geometry.width = 640;
   o.geometry.height = 512;
   o.geometry.fx = o.geometry.fy = scenario.scene.calibration.camera.fx;
   o.geometry.cx = scenario.scene.calibration.camera.cx;
   o.geometry.cy = scenario.scene.calibration.camera.cy;
+  return o;
+}
+
+TEST(Detectors, DoNotAllocatePerFrame) {
+  ASSERT_TRUE(testing::allocation_counter_works());
+  const tools::Scenario scenario = tools::standard_scenarios(640, 512)[1];  // ambient, scanning
+  hal::SimScene scene(scenario.scene);
+  const DetectorOptions o = options_for_640x512(scenario);
   std::vector<std::vector<std::uint8_t>> frames(4, std::vector<std::uint8_t>(640 * 512));
   for (int i = 0; i < 4; ++i)
     scene.render(static_cast<std::uint64_t>(i), true, frames[i]);
@@ -478,12 +484,7 @@ TEST(Detectors, GiveNoPointsOnALaserOffFrame) {
   // detector gives nothing, where with the laser on each finds the line.
   const tools::Scenario scenario = tools::standard_scenarios(640, 512)[1];  // ambient, scanning
   hal::SimScene scene(scenario.scene);
-  DetectorOptions o;
-  o.geometry.width = 640;
-  o.geometry.height = 512;
-  o.geometry.fx = o.geometry.fy = scenario.scene.calibration.camera.fx;
-  o.geometry.cx = scenario.scene.calibration.camera.cx;
-  o.geometry.cy = scenario.scene.calibration.camera.cy;
+  const DetectorOptions o = options_for_640x512(scenario);
   std::vector<std::uint8_t> pixels(640 * 512);
   scene.render(0, true, pixels);
   const ImageView view{pixels.data(), 640, 512, 640};
