@@ -143,6 +143,7 @@ void read_detector_options(hal::YamlMap& detector, pipeline::DetectorOptions& op
   hal::YamlMap selection = frontend.map("selection");
   l.enabled = selection.boolean("enabled", l.enabled);
   read(selection, "restart_cost_db", l.restart_cost_db);
+  read(selection, "amplitude_cap_db", l.amplitude_cap_db);
   read(selection, "jump_free_px", l.jump_free_px);
   read(selection, "jump_cost_db_per_px", l.jump_cost_db_per_px);
   read(selection, "gap_cost_db", l.gap_cost_db);

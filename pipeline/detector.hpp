@@ -28,7 +28,7 @@ struct FrontendOptions {
   int noise_rows = 31;
   int noise_columns = 9;
   double snr_threshold_db = 6.0;  // III-E: paper 3 - 6 dB
-  int max_candidates_per_column = 4;
+  int max_candidates_per_column = 8;
   int saturation_level = 255;  // a run at or above this is a clipped core: its centre is the peak
   // Which candidate of each epipolar line is the laser point (the others stay, not valid).
   LineSelectionOptions selection;

@@ -42,6 +42,7 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
   const LineSelectionOptions& o = options_;
   const int k = per_line_;
   const auto restart = static_cast<float>(o.restart_cost_db);
+  const auto cap = static_cast<float>(o.amplitude_cap_db);
   const auto free = static_cast<float>(o.jump_free_px);
   const auto jump_cost = static_cast<float>(o.jump_cost_db_per_px);
   const auto gap_cost = static_cast<float>(o.gap_cost_db);
@@ -72,7 +73,7 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
     for (int i = 0; i < n; ++i) {
       const std::int32_t at = line * k + i;
       const LineCandidate& c = candidates[static_cast<std::size_t>(at)];
-      float unary = c.amplitude_db - threshold_db;
+      float unary = std::min(c.amplitude_db - threshold_db, cap);
       bool persistent = false;
       for (int j = 0; j < previous_count; ++j) {
         if (std::abs(c.position - previous[j]) <= tolerance) {

@@ -48,6 +48,7 @@ void validate_maxvalue_threshold(int threshold) {
 
 void LineSelectionOptions::validate() const {
   within("restart_cost_db", restart_cost_db, 0.0, 10000.0);
+  within("amplitude_cap_db", amplitude_cap_db, 0.1, 1000.0);
   within("jump_free_px", jump_free_px, 0.0, 1000.0);
   within("jump_cost_db_per_px", jump_cost_db_per_px, 0.0, 1000.0);
   within("gap_cost_db", gap_cost_db, 0.0, 1000.0);
