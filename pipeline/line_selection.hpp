@@ -72,6 +72,7 @@ class LineSelector {
   LineSelectionOptions options_;
   int lines_ = 0, per_line_ = 0;
   std::vector<float> score_;             // per candidate: the best total of a path ending there
+  std::vector<float> position_;          // per candidate: its position (contiguous per line)
   std::vector<std::int32_t> from_;       // per candidate: its predecessor on that path, -1 none
   std::vector<float> column_best_;       // per line: the best total of a path ending on it
   std::vector<float> prefix_best_;       // per line: the best total of any path before it (>= 0)
