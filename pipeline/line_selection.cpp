@@ -112,8 +112,8 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
         float best_here = -std::numeric_limits<float>::infinity();
         for (int j = 0; j < m; ++j) {
           const float jump = std::abs(c.position - prior_position[j]);
-          best_here = std::max(best_here,
-                               prior_score[j] - jump_cost * std::max(0.0f, jump - allowed));
+          best_here =
+              std::max(best_here, prior_score[j] - jump_cost * std::max(0.0f, jump - allowed));
         }
         if (best_here - skipped > best) {
           best = best_here - skipped;
