@@ -202,6 +202,12 @@ class Frontend {
   struct RefineStart;
   RefineStart refine_start(float v_guess) const;
   float refine_row(int u, float v_guess) const;
+  // Whether (u, v) lies in a clipped laser core: a run of pixels at or above the saturation level
+  // along column u no longer than kClippedCoreWidths laser widths. A longer run is a bright patch
+  // clipped by the exposure (texture, a lamp's reflection): its ends are edges, not a line.
+  bool in_clipped_core(int u, int v) const;
+  static constexpr double kClippedCoreWidths = 2.5;
+  static constexpr float kClippedCoreRank = 1e6f;  // above any band-pass amplitude
   // refine_row() of the first `count` points waiting for it (refine_columns_, ...): into the
   // profile's points.
   void refine(std::span<ProfilePoint> points, std::size_t count);
@@ -269,6 +275,7 @@ class Frontend {
     float r = 0;     // normalised row of the band-pass peak (sub-row)
     float snr = 0;   // amplitude ratio
     float band = 0;  // band-pass amplitude
+    float rank = 0;  // which candidates a full column keeps: the band-pass, clipped cores first
   };
   std::vector<Peak> column_best_;  // max_candidates_per_column per column
   std::vector<std::uint8_t> column_count_;

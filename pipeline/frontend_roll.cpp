@@ -298,15 +298,20 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
       const float value = static_cast<float>(lane) * pass.unit;
       // Keep the strongest few per column (bounded work and output). Strongest by band-pass
       // amplitude: the laser adds light, while a faint texture edge in a quiet neighbourhood can
-      // have the higher SNR. (Checked first: it is the cheapest test.)
+      // have the higher SNR. But a short clipped run before any: where the laser crosses a bright
+      // patch, clipping leaves it little amplitude, less than the texture's ridges around it.
+      // (Checked first: they are the cheapest tests.)
+      const int source_row = static_cast<int>(rows_.source_row(r) + 0.5f);
+      const bool clipped = in_clipped_core(u, source_row);
+      const float rank = clipped ? value + kClippedCoreRank : value;
       Peak* best = column_best_.data() + static_cast<std::size_t>(u) * pass.per_column;
       const int n = column_count_[u];
       int slot = n;
       if (n == pass.per_column) {
         slot = 0;
         for (int j = 1; j < n; ++j)
-          if (best[j].band < best[slot].band) slot = j;
-        if (best[slot].band >= value) continue;
+          if (best[j].rank < best[slot].rank) slot = j;
+        if (best[slot].rank >= rank) continue;
       }
       // A ridge, not an edge: the band-pass an eighth of the peak below zero on both sides (a
       // line gives a half to three quarters, a line lying on a texture edge less on the edge's
@@ -320,12 +325,13 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
           glowing_ ? (pass.near_down ? lowest_up : lowest_down) : std::max(lowest_up, lowest_down);
       // (A clipped core much wider than the model is flat: the band-pass sees its two flanks as
       // edges. Its run is found and centred by the refinement.)
-      if (8 * needed > -static_cast<int>(lane) &&
-          current_.at(u, static_cast<int>(rows_.source_row(r) + 0.5f)) < pass.saturation) {
+      if (8 * needed > -static_cast<int>(lane) && current_.at(u, source_row) < pass.saturation) {
         continue;
       }
       const float snr = value / noise_at(u);
-      if (!(snr >= pass.threshold)) continue;
+      // (A short clipped run is taken whatever its SNR: texture ridges beside the laser's crossing
+      // of a bright patch raise the noise measured around it far above the light clipping left.)
+      if (!(snr >= pass.threshold) && !clipped) continue;
       if (n < pass.per_column) column_count_[u] = static_cast<std::uint8_t>(n + 1);
       // Sub-row position of the band-pass peak, mapped back to an original row: the guess the
       // refinement starts from.
@@ -334,7 +340,7 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
       const float curvature = above - 2.0f * centre + below;
       const float offset =
           curvature < 0.0f ? std::clamp(0.5f * (above - below) / curvature, -0.5f, 0.5f) : 0.0f;
-      best[slot] = Peak{static_cast<float>(r) + offset, snr, value};
+      best[slot] = Peak{static_cast<float>(r) + offset, snr, value, rank};
     }
   }
 }

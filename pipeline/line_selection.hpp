@@ -23,8 +23,9 @@ namespace laserline::pipeline {
 struct LineSelectionOptions {
   bool enabled = true;  // false: the strongest candidate of each line
   // The laser line is one curve; a new piece (after a jump of the depth, or elsewhere) must earn
-  // this much (about five strong points' worth) to be kept: isolated texture and glints rarely do.
-  double restart_cost_db = 100.0;
+  // this much (about eight points' worth at amplitude_cap_db) to be kept: isolated texture and
+  // glints rarely do.
+  double restart_cost_db = 50.0;
   // A candidate's amplitude counts up to this far above the threshold: beyond it the candidate is
   // surely light, and whether it is the laser's is for the curve's continuity to say. (A texture
   // ridge in daylight can be brighter than the laser where it crosses a bright, nearly clipped

@@ -55,21 +55,21 @@ TEST(LineSelection, FollowsTheContinuousCurveNotTheStrongestCandidate) {
     EXPECT_EQ(chosen[line], 100.0f) << line;
 }
 
-// The line hidden over lines 20..39 (longer than max_gap), a texture edge far from it there: the
-// edge earns more than one restart (20 points of the 6 dB cap), but a new piece far from where the
+// The line hidden over lines 20..31 (longer than max_gap), a texture edge far from it there: the
+// edge earns more than one restart (12 points of the 6 dB cap), but a new piece far from where the
 // line was seen pays the jump too, so the path waits for the line to come back.
 TEST(LineSelection, ANewPieceFarFromTheLineMustEarnMoreThanOneRestart) {
   Lines lines;
   lines.piece(0, 19, 100.0f, 10.0f);
-  lines.piece(20, 39, 400.0f, 10.0f);
-  lines.piece(40, kLines - 1, 101.0f, 10.0f);
+  lines.piece(20, 31, 400.0f, 10.0f);
+  lines.piece(32, kLines - 1, 101.0f, 10.0f);
   LineSelector selector;
   const std::vector<float> chosen = lines.select(selector);
   for (int line = 0; line < 20; ++line)
     EXPECT_EQ(chosen[line], 100.0f) << line;
-  for (int line = 20; line < 40; ++line)
+  for (int line = 20; line < 32; ++line)
     EXPECT_EQ(chosen[line], -1.0f) << line;
-  for (int line = 40; line < kLines; ++line)
+  for (int line = 32; line < kLines; ++line)
     EXPECT_EQ(chosen[line], 101.0f) << line;
 }
 
