@@ -83,7 +83,8 @@ FramePath::FramePath(const DaemonConfig& config, hal::Camera& camera, hal::Laser
       laser_(laser),
       strobe_(laser.strobe()),
       detector_(&detector),
-      lcm_(lcm) {}
+      lcm_(lcm),
+      commands_(camera, counters_.camera_state) {}
 
 FramePath::~FramePath() {
   stop();
@@ -241,7 +242,7 @@ void FramePath::camera_loop() {
   };
 
   while (!stopping_.load(std::memory_order_relaxed)) {
-    run_commands(laser_mode, frames_flowing, grab_index);
+    commands_.run_camera_commands(laser_mode, frames_flowing, grab_index);
     const bool want_laser = frames_flowing && desired_laser(laser_mode, grab_index);
     if (want_laser != laser_.is_on()) switch_recorded(want_laser);
 
@@ -325,106 +326,6 @@ void FramePath::camera_loop() {
   counters_.camera_state.store(CameraState::kStopped, std::memory_order_relaxed);
 }
 
-bool FramePath::submit_command(const Command& command) {
-  SpscRing<Command>& ring = command.kind == CommandKind::kThreshold ? worker_commands_ : commands_;
-  Command* slot = ring.try_claim();
-  if (slot == nullptr) return false;
-  *slot = command;
-  ring.publish();
-  return true;
-}
-
-bool FramePath::submit_detector(const Command& command,
-                                std::unique_ptr<pipeline::Detector> detector) {
-  if (pending_detector_ != nullptr) return false;
-  Command with = command;
-  with.detector = detector.get();
-  if (!submit_command(with)) return false;
-  pending_detector_ = std::move(detector);
-  return true;
-}
-
-bool FramePath::take_command_result(Command* command) {
-  for (SpscRing<Command>* ring : {&command_results_, &worker_results_}) {
-    Command* slot = ring->front();
-    if (slot == nullptr) continue;
-    *command = *slot;
-    ring->pop();
-    if (command->kind == CommandKind::kThreshold) {
-      // The worker put the pending detector in place and no longer touches the one it replaced:
-      // that one is freed here, unless it is the one this path was built with (its owner's).
-      current_detector_ = std::move(pending_detector_);
-      command->detector = nullptr;
-    }
-    return true;
-  }
-  return false;
-}
-
-void FramePath::run_worker_commands() {
-  while (Command* command = worker_commands_.front()) {
-    Command* result = worker_results_.try_claim();
-    if (result == nullptr) return;
-    *result = *command;
-    worker_commands_.pop();
-    // The replacement was built and sized (reset) for this frame size by the command thread.
-    std::swap(detector_, result->detector);
-    result->result.accepted = true;
-    worker_results_.publish();
-  }
-}
-
-void FramePath::run_commands(LaserMode& mode, bool frames_flowing, std::uint64_t grab_index) {
-  // A command stays queued until its result has room to go back.
-  while (Command* command = commands_.front()) {
-    Command* result = command_results_.try_claim();
-    if (result == nullptr) return;
-    *result = *command;
-    commands_.pop();
-    run_command(*result, mode, frames_flowing, grab_index);
-    command_results_.publish();
-  }
-}
-
-void FramePath::run_command(Command& command, LaserMode& mode, bool frames_flowing,
-                            std::uint64_t grab_index) {
-  hal::SettingResult& r = command.result;
-  switch (command.kind) {
-    case CommandKind::kCamera:
-      camera_.apply_setting(command.setting, r);
-      return;
-    case CommandKind::kLaserMode:
-      hal::write_setting_text(r.old_value, to_string(mode));
-      if (command.laser_mode != LaserMode::kOff && (!frames_flowing || grab_index == 0)) {
-        r.accepted = false;
-        hal::write_setting_line(
-            r.reason, "laser.mode: no frames are flowing (camera %s), the laser stays off",
-            to_string(counters_.camera_state.load(std::memory_order_relaxed)));
-        return;
-      }
-      mode = command.laser_mode;
-      hal::write_setting_text(r.in_force, to_string(mode));
-      r.accepted = true;
-      return;
-    case CommandKind::kThreshold:  // the worker's (run_worker_commands)
-      return;
-    case CommandKind::kGet: {
-      // "name=value" for every setting the camera has, then the laser's mode.
-      std::span<char> rest(r.in_force);
-      for (const char* name : {"exposure_us", "gain_db", "frame_rate_hz"}) {
-        char value[hal::CameraSetting::kTextBytes];
-        if (!camera_.read_setting(name, value)) continue;
-        const int written = std::snprintf(rest.data(), rest.size(), "%s=%s ", name, value);
-        if (written < 0 || static_cast<std::size_t>(written) >= rest.size()) break;
-        rest = rest.subspan(static_cast<std::size_t>(written));
-      }
-      hal::write_setting_line(rest, "laser.mode=%s", to_string(mode));
-      r.accepted = true;
-      return;
-    }
-  }
-}
-
 void FramePath::worker_loop() {
   std::int64_t processed = 0;
   const bool lossless = camera_.paced_by_consumer();
@@ -436,7 +337,7 @@ void FramePath::worker_loop() {
           : 0;
   std::int64_t last_image_ns = INT64_MIN / 2;
   while (true) {
-    run_worker_commands();
+    commands_.run_worker_commands(detector_);
     if (!frames_->wait(100 * kMs)) {
       if (stopping_.load(std::memory_order_acquire)) break;
       continue;
