@@ -7,7 +7,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <cstring>
 
 #include "daemon/thread_priorities.hpp"
@@ -223,22 +222,14 @@ void FramePath::camera_loop() {
   std::uint64_t grab_index = 0;
   const bool lossless = camera_.paced_by_consumer();
   bool frames_flowing = true;  // until a grab fails; the laser stays off until frames return
-  // The last switch this thread made: time and the grab it was for. Each frame carries its time,
-  // so a frame whose exposure began before its switch is known (and counted) as uncertain.
-  hal::LaserSwitch last_switch;
   LaserMode laser_mode = config_.laser_mode;
-  // With a strobe line: the last switches, against which each frame's exposure decides its
-  // laser state, and the matching of frames to the strobe's exposures.
-  hal::LaserSwitchHistory switches;
-  hal::ExposureMatcher matcher;
-  const auto match_tolerance_ns = static_cast<std::int64_t>(0.25e9 / config_.frame_rate_hz);
+  hal::FrameLaserDecider laser_decider(strobe_, config_.frame_rate_hz);
   auto switch_recorded = [&](bool on) {
     hal::LaserSwitch record;
     record.mono_ns = 0;
     switch_laser(on, grab_index, &record);
     if (record.mono_ns == 0) return;  // refused: is_on() says on, the next frame tries again
-    last_switch = record;
-    switches.add(record);
+    laser_decider.switched(record);
   };
 
   while (!stopping_.load(std::memory_order_relaxed)) {
@@ -255,33 +246,13 @@ void FramePath::camera_loop() {
     const hal::GrabStatus status = camera_.grab(pixels, info, timeout);
     switch (status) {
       case hal::GrabStatus::kOk: {
-        info.laser_switch_mono_ns = last_switch.mono_ns;
-        info.exposure_start_mono_ns = 0;
-        info.exposure_end_mono_ns = 0;
-        hal::ExposureInterval exposure;
-        const bool own_switch = last_switch.for_frame == grab_index && last_switch.mono_ns != 0;
-        if (strobe_ != nullptr &&
-            matcher.match(strobe_->history(), info.camera_ns, info.arrival_mono_ns,
-                          match_tolerance_ns, &exposure)) {
-          // Exact: the switch times against the exposure's edges. A partly lit frame counts as
-          // lit: it must not serve as a laser-off background.
-          info.exposure_start_mono_ns = exposure.start_mono_ns;
-          info.exposure_end_mono_ns = exposure.end_mono_ns;
-          const hal::LaserExposure lit =
-              switches.during(exposure.start_mono_ns, exposure.end_mono_ns);
-          if (lit != hal::LaserExposure::kUnknown) info.laser_on = lit != hal::LaserExposure::kOff;
-          if (lit == hal::LaserExposure::kMixed ||
-              (own_switch && last_switch.mono_ns > exposure.start_mono_ns)) {
-            counters_.laser_late_switches.fetch_add(1, std::memory_order_relaxed);
-          }
-          counters_.strobe_matched.fetch_add(1, std::memory_order_relaxed);
-        } else {
-          // The estimate: the camera's timestamp mapped to the host clock.
-          if (own_switch && last_switch.mono_ns > info.exposure_mono_ns) {
-            counters_.laser_late_switches.fetch_add(1, std::memory_order_relaxed);
-          }
-          if (strobe_ != nullptr)
-            counters_.strobe_unmatched.fetch_add(1, std::memory_order_relaxed);
+        const hal::FrameLaserDecider::Decision decided = laser_decider.decide(info, grab_index);
+        if (decided.late_switch) {
+          counters_.laser_late_switches.fetch_add(1, std::memory_order_relaxed);
+        }
+        if (strobe_ != nullptr) {
+          (decided.matched ? counters_.strobe_matched : counters_.strobe_unmatched)
+              .fetch_add(1, std::memory_order_relaxed);
         }
         ++grab_index;
         frames_flowing = true;
@@ -297,14 +268,14 @@ void FramePath::camera_loop() {
       }
       case hal::GrabStatus::kTimeout:
         frames_flowing = false;
-        if (strobe_ != nullptr) matcher.restart(strobe_->history());
+        laser_decider.frames_stopped();
         if (laser_.is_on()) switch_recorded(false);
         counters_.grab_timeouts.fetch_add(1, std::memory_order_relaxed);
         counters_.camera_state.store(CameraState::kTimeout, std::memory_order_relaxed);
         break;
       case hal::GrabStatus::kError:
         frames_flowing = false;
-        if (strobe_ != nullptr) matcher.restart(strobe_->history());
+        laser_decider.frames_stopped();
         if (laser_.is_on()) switch_recorded(false);
         counters_.grab_errors.fetch_add(1, std::memory_order_relaxed);
         counters_.camera_state.store(CameraState::kError, std::memory_order_relaxed);
@@ -460,24 +431,8 @@ void FramePath::describe_strobe(std::int64_t now_mono, std::int64_t matched, std
   if (size == 0) return;
   out[0] = '\0';
   if (strobe_ == nullptr) return;
-  const char* what = strobe_->describe().c_str();
-  const std::int64_t last_edge = strobe_->history().last_edge_mono_ns();
-  // Silent: longer without an edge than three frame periods, and at least a second.
-  const auto silent_ns =
-      std::max<std::int64_t>(1'000'000'000, static_cast<std::int64_t>(3e9 / config_.frame_rate_hz));
-  constexpr const char* kFallback = "laser state from the camera's timestamps (estimate)";
-  if (last_edge == 0) {
-    std::snprintf(out, size, "silent: no edge on %s since start; %s", what, kFallback);
-  } else if (now_mono - last_edge > silent_ns) {
-    std::snprintf(out, size, "silent: no edge on %s for %.1f s; %s", what,
-                  static_cast<double>(now_mono - last_edge) * 1e-9, kFallback);
-  } else if (unmatched > 0) {
-    std::snprintf(out, size, "%lld of %lld frames not matched to an exposure on %s; %s",
-                  static_cast<long long>(unmatched), static_cast<long long>(matched + unmatched),
-                  what, kFallback);
-  } else {
-    std::snprintf(out, size, "ok");
-  }
+  hal::describe_strobe_health(*strobe_, config_.frame_rate_hz, now_mono, matched, unmatched, out,
+                              size);
 }
 
 void FramePath::publisher_loop() {
