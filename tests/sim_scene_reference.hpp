@@ -101,6 +101,31 @@ inline Vec3 to_world(const SimCameraPose& pose, const Vec3& x) {
   return out;
 }
 
+// The row at which column `u` sees the laser sheet, by brute force: `side(u, v)` is the signed
+// distance to the sheet of what row v of the column sees; rows 0 .. height - 1 are marched for a
+// change of sign, then the last change is bisected. `crossings`: how many changes there were.
+template <typename Side>
+double sheet_crossing_row(const Side& side, int u, int height, int& crossings) {
+  crossings = 0;
+  double lo = 0, hi = 0;
+  double previous = side(u, 0);
+  for (int v = 1; v < height; ++v) {
+    const double here = side(u, v);
+    if ((here > 0) != (previous > 0)) {
+      ++crossings;
+      lo = v - 1;
+      hi = v;
+    }
+    previous = here;
+  }
+  const bool lo_positive = side(u, lo) > 0;
+  for (int i = 0; i < 40; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    ((side(u, mid) > 0) == lo_positive ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
 // ---- The features' tests ---------------------------------------------------------------
 
 inline constexpr double kPi = std::numbers::pi;

@@ -176,24 +176,8 @@ TEST(SimSceneObjects, TruthOnTheMovingReliefMatchesABruteForceSearchAlongTheCame
   for (int u = 0; u < o.calibration.camera.width; u += 4) {
     if (!std::isfinite(truth.position[u])) continue;
     int crossings = 0;
-    double lo = 0, hi = 0;
-    double previous = sheet_side(u, 0);
-    for (int v = 1; v < o.calibration.camera.height; ++v) {
-      const double side = sheet_side(u, v);
-      if ((side > 0) != (previous > 0)) {
-        ++crossings;
-        lo = v - 1;
-        hi = v;
-      }
-      previous = side;
-    }
+    const double row = sheet_crossing_row(sheet_side, u, o.calibration.camera.height, crossings);
     ASSERT_EQ(crossings, 1) << "column " << u << ": the line must be seen once";
-    const bool lo_positive = sheet_side(u, lo) > 0;
-    for (int i = 0; i < 40; ++i) {
-      const double mid = 0.5 * (lo + hi);
-      ((sheet_side(u, mid) > 0) == lo_positive ? lo : hi) = mid;
-    }
-    const double row = 0.5 * (lo + hi);
     const Vec3 world = ray_hit(scene, pose, u, row, shift);
     const double depth = to_camera(pose, world)[2];
     EXPECT_NEAR(truth.position[u], row, 1e-3) << "column " << u;
