@@ -101,6 +101,24 @@ inline Vec3 to_world(const SimCameraPose& pose, const Vec3& x) {
   return out;
 }
 
+// The first zero of `above` between `lo` and `hi` (positive before it), marched in `step`s, then
+// bisected.
+template <typename Above>
+double first_zero(const Above& above, double lo, double hi, double step) {
+  for (double z = lo + step; z < hi + step; z += step) {
+    if (above(std::min(z, hi)) <= 0) {
+      hi = std::min(z, hi);
+      break;
+    }
+    lo = z;
+  }
+  for (int i = 0; i < 60; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (above(mid) > 0 ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
 // The row at which column `u` sees the laser sheet, by brute force: `side(u, v)` is the signed
 // distance to the sheet of what row v of the column sees; rows 0 .. height - 1 are marched for a
 // change of sign, then the last change is bisected. `crossings`: how many changes there were.

@@ -532,19 +532,7 @@ Vec3 ray_hit(const SimScene& scene, const SimCameraPose& pose, double u, double 
   if (!(h1 < h0)) return {nan, nan, nan};
   const double top = base_plane ? 0.01 : o.relief_height_m + 0.01;
   double lo = (h0 - top) / (h0 - h1), hi = (h0 + 0.01) / (h0 - h1);
-  const double step = 0.001 / std::sqrt(dot3(ray, ray));
-  for (double z = lo + step; z < hi + step; z += step) {
-    if (above(std::min(z, hi)) <= 0) {
-      hi = std::min(z, hi);
-      break;
-    }
-    lo = z;
-  }
-  for (int i = 0; i < 60; ++i) {
-    const double mid = 0.5 * (lo + hi);
-    (above(mid) > 0 ? lo : hi) = mid;
-  }
-  return point(0.5 * (lo + hi));
+  return point(first_zero(above, lo, hi, 0.001 / std::sqrt(dot3(ray, ray))));
 }
 
 TEST(SimSceneRelief, HeightsSlopesAndRepetitionAreAsConfigured) {

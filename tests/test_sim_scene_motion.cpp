@@ -41,19 +41,7 @@ Vec3 ray_hit(const SimScene& scene, const SimCameraPose& pose, double u, double 
   const double h0 = surface_coordinates(f, point(0.0))[2];
   const double h1 = surface_coordinates(f, point(1.0))[2];
   double lo = (h0 - (o.relief_height_m + 0.01)) / (h0 - h1), hi = (h0 + 0.01) / (h0 - h1);
-  const double step = 0.001 / std::sqrt(dot3(ray, ray));
-  for (double z = lo + step; z < hi + step; z += step) {
-    if (above(std::min(z, hi)) <= 0) {
-      hi = std::min(z, hi);
-      break;
-    }
-    lo = z;
-  }
-  for (int i = 0; i < 60; ++i) {
-    const double mid = 0.5 * (lo + hi);
-    (above(mid) > 0 ? lo : hi) = mid;
-  }
-  return point(0.5 * (lo + hi));
+  return point(first_zero(above, lo, hi, 0.001 / std::sqrt(dot3(ray, ray))));
 }
 
 // A pier's piles and bumps sliding past a still camera.

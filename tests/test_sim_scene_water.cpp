@@ -216,6 +216,24 @@ TEST(SimSceneTurbidity, BackscatterStaysOnTheCameraSideOfTheLineForEveryFamily) 
 
 // ---- Caustics ---------------------------------------------------------------------------------
 
+// The mean light of frames 0, 30, ..., 210 without the laser (the mean of their means) and the
+// brightest pixel among them.
+std::pair<double, double> light_without_laser(SimScene& scene) {
+  double mean = 0, brightest = 0;
+  int frames = 0;
+  for (std::uint64_t seq = 0; seq < 240; seq += 30) {
+    const Image img = render(scene, seq, false);
+    double sum = 0;
+    for (std::uint8_t p : img.data) {
+      sum += p;
+      brightest = std::max(brightest, static_cast<double>(p));
+    }
+    mean += sum / static_cast<double>(img.data.size());
+    ++frames;
+  }
+  return {mean / frames, brightest};
+}
+
 TEST(SimSceneCaustics, KeepTheMeanAmbientLightAndPeakAtCausticPeak) {
   // A flat grey surface (albedo 1), noiseless: each pixel is round(ambient * caustic light). Over
   // eight frames a second apart (the pattern drifts by 0.2 m, two cells, between them) and some
@@ -230,19 +248,7 @@ TEST(SimSceneCaustics, KeepTheMeanAmbientLightAndPeakAtCausticPeak) {
   o.caustic_peak = 6;
   o.caustic_scale_m = 0.1;
   SimScene scene(o);
-  double mean = 0, brightest = 0;
-  int frames = 0;
-  for (std::uint64_t seq = 0; seq < 240; seq += 30) {
-    const Image img = render(scene, seq, false);
-    double sum = 0;
-    for (std::uint8_t p : img.data) {
-      sum += p;
-      brightest = std::max(brightest, static_cast<double>(p));
-    }
-    mean += sum / static_cast<double>(img.data.size());
-    ++frames;
-  }
-  mean /= frames;
+  const auto [mean, brightest] = light_without_laser(scene);
   std::printf("  mean light %.2f of ambient %.0f; brightest %.0f = %.2f x the mean (peak %.0f)\n",
               mean, o.ambient, brightest, brightest / mean, o.caustic_peak);
   EXPECT_NEAR(mean, o.ambient, 0.03 * o.ambient);
@@ -272,19 +278,8 @@ TEST(SimSceneCaustics, KeepTheMeanUpToTheHighestPeakAllowed) {
     for (const std::uint64_t seed : {1u, 2u, 3u}) {
       o.seed = seed;
       SimScene scene(o);
-      double mean = 0, brightest = 0;
-      int frames = 0;
-      for (std::uint64_t seq = 0; seq < 240; seq += 30) {
-        const Image img = render(scene, seq, false);
-        double sum = 0;
-        for (std::uint8_t p : img.data) {
-          sum += p;
-          brightest = std::max(brightest, static_cast<double>(p));
-        }
-        mean += sum / static_cast<double>(img.data.size());
-        ++frames;
-      }
-      const double f_mean = (mean / frames - half) / half, f_max = (brightest - half) / half;
+      const auto [mean, brightest] = light_without_laser(scene);
+      const double f_mean = (mean - half) / half, f_max = (brightest - half) / half;
       std::printf("  peak %.0f, seed %d: mean caustic light %.3f, brightest %.1f\n", peak,
                   static_cast<int>(seed), f_mean, f_max);
       EXPECT_NEAR(f_mean, 1.0, 0.04) << "peak " << peak << ", seed " << seed;
