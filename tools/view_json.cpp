@@ -36,7 +36,7 @@ void append_number(std::string& out, double value, int decimals) {
       s.pop_back();
     if (s.back() == '.') s.pop_back();
   }
-  if (s == "-0") s = "0";
+  if (s == "-0") s.erase(0, 1);  // a negative zero as 0
   out += s;
 }
 
