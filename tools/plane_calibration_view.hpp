@@ -13,6 +13,7 @@
 
 namespace laserline::tools {
 
+// K, the intrinsics' camera matrix.
 inline cv::Matx33d camera_matrix(const hal::CameraIntrinsics& c) {
   return {c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1};
 }
@@ -23,6 +24,7 @@ struct ViewImages {
   cv::Mat laser_on, laser_off, board_on, board_off;
 };
 
+// A view whose board was found: its corners and pose, and the laser line's points on it.
 struct BoardView {
   std::size_t index = 0;  // into the views
   std::vector<cv::Point2f> corners;

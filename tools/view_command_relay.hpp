@@ -21,7 +21,6 @@ class CommandRelay {
   CommandRelay(lcm::LCM& lcm, std::string channel, std::string token)
       : lcm_(lcm), channel_(std::move(channel)), token_(std::move(token)) {}
 
-  // The daemon's answer, or none within kCommandTimeout.
   // The daemon's answer, or none within `timeout`.
   std::optional<laserline::command_ack_t> send(const std::string& name, const std::string& value,
                                                std::chrono::milliseconds timeout);
