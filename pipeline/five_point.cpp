@@ -46,13 +46,14 @@ constexpr std::array<std::array<int, 10>, 10> kProduct = [] {
   return table;
 }();
 
-// out += sign * a * b, a using its first na coefficients, b its first 4 (linear) or 10.
-void multiply_add(const Polynomial& a, int na, const Polynomial& b, int nb, double sign,
-                  Polynomial& out) {
+// out += sign * a * b, a using its first na coefficients, b its first nb (4: linear, 10:
+// quadratic). The sizes are constants, so that the loops unroll to fixed indices.
+template <int na, int nb>
+void multiply_add(const Polynomial& a, const Polynomial& b, double sign, Polynomial& out) {
   for (int i = 0; i < na; ++i) {
-    if (a[i] == 0) continue;
+    const double scaled = sign * a[i];
     for (int j = 0; j < nb; ++j)
-      out[kProduct[i][j]] += sign * a[i] * b[j];
+      out[kProduct[i][j]] += scaled * b[j];
   }
 }
 
@@ -254,24 +255,28 @@ int five_point_essentials(const std::array<std::array<double, 2>, 5>& previous,
     Polynomial minor{};
     const auto cofactor = [&](int r1, int c1, int r2, int c2) {
       minor.fill(0);
-      multiply_add(e[r1][c1], 4, e[r2][c2], 4, 1, minor);
-      multiply_add(e[r1][c2], 4, e[r2][c1], 4, -1, minor);
+      multiply_add<4, 4>(e[r1][c1], e[r2][c2], 1, minor);
+      multiply_add<4, 4>(e[r1][c2], e[r2][c1], -1, minor);
     };
     cofactor(1, 1, 2, 2);
-    multiply_add(minor, 10, e[0][0], 4, 1, equations[0]);
+    multiply_add<10, 4>(minor, e[0][0], 1, equations[0]);
     cofactor(1, 0, 2, 2);
-    multiply_add(minor, 10, e[0][1], 4, -1, equations[0]);
+    multiply_add<10, 4>(minor, e[0][1], -1, equations[0]);
     cofactor(1, 0, 2, 1);
-    multiply_add(minor, 10, e[0][2], 4, 1, equations[0]);
+    multiply_add<10, 4>(minor, e[0][2], 1, equations[0]);
   }
   std::array<std::array<Polynomial, 3>, 3> eet{};
   Polynomial trace{};
   trace.fill(0);
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j) {
+      if (j < i) {  // E E^T is symmetric
+        eet[i][j] = eet[j][i];
+        continue;
+      }
       eet[i][j].fill(0);
       for (int k = 0; k < 3; ++k)
-        multiply_add(e[i][k], 4, e[j][k], 4, 1, eet[i][j]);
+        multiply_add<4, 4>(e[i][k], e[j][k], 1, eet[i][j]);
     }
     for (int k = 0; k < 10; ++k)
       trace[k] += eet[i][i][k];
@@ -280,8 +285,8 @@ int five_point_essentials(const std::array<std::array<double, 2>, 5>& previous,
     for (int j = 0; j < 3; ++j) {
       Polynomial& p = equations[1 + 3 * i + j];
       for (int k = 0; k < 3; ++k)
-        multiply_add(eet[i][k], 10, e[k][j], 4, 2, p);
-      multiply_add(trace, 10, e[i][j], 4, -1, p);
+        multiply_add<10, 4>(eet[i][k], e[k][j], 2, p);
+      multiply_add<10, 4>(trace, e[i][j], -1, p);
     }
   }
 
