@@ -8,6 +8,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "pipeline/motion_internal.hpp"
 
@@ -55,6 +56,51 @@ void multiply_add(const Polynomial& a, const Polynomial& b, double sign, Polynom
     for (int j = 0; j < nb; ++j)
       out[kProduct[i][j]] += scaled * b[j];
   }
+}
+
+// Ten equations left * u + right * w = 0, as rows [left | right]: u = -reduced * w, by
+// Gauss-Jordan elimination with full pivoting (as Eigen's FullPivLU, at a fraction of its cost
+// for this size). False when left is singular to working precision.
+using Elimination = std::array<std::array<double, 20>, 10>;
+bool gauss_jordan(Elimination& a, Matrix10& reduced) {
+  std::array<int, 10> unknown;  // the unknown of u column k of left stands for
+  for (int k = 0; k < 10; ++k)
+    unknown[k] = k;
+  double largest_pivot = 0;
+  for (int k = 0; k < 10; ++k) {
+    int pivot_row = k, pivot_column = k;
+    double pivot = -1;
+    for (int row = k; row < 10; ++row) {
+      for (int column = k; column < 10; ++column) {
+        if (std::abs(a[row][column]) > pivot) {
+          pivot = std::abs(a[row][column]);
+          pivot_row = row;
+          pivot_column = column;
+        }
+      }
+    }
+    if (k == 0) largest_pivot = pivot;
+    if (!(pivot > 10 * std::numeric_limits<double>::epsilon() * largest_pivot)) return false;
+    std::swap(a[k], a[pivot_row]);
+    if (pivot_column != k) {
+      for (auto& row : a)
+        std::swap(row[k], row[pivot_column]);
+      std::swap(unknown[k], unknown[pivot_column]);
+    }
+    const double inverse = 1 / a[k][k];
+    for (int column = k; column < 20; ++column)
+      a[k][column] *= inverse;
+    for (int row = 0; row < 10; ++row) {
+      const double factor = a[row][k];
+      if (row == k || factor == 0) continue;
+      for (int column = k; column < 20; ++column)
+        a[row][column] -= factor * a[k][column];
+    }
+  }
+  for (int k = 0; k < 10; ++k)
+    for (int column = 0; column < 10; ++column)
+      reduced(unknown[k], column) = a[k][10 + column];
+  return reduced.allFinite();
 }
 
 // Polynomials in one variable, coefficients from the constant term up, degree <= 10.
@@ -294,17 +340,15 @@ int five_point_essentials(const std::array<std::array<double, 2>, 5>& previous,
   // (xz2 xz x yz2 yz y z3 z2 z 1), which are (x, y, 1) times polynomials in z.
   constexpr std::array<int, 10> kEliminated{12, 4, 17, 7, 14, 5, 10, 16, 11, 13};
   constexpr std::array<int, 10> kRemaining{15, 6, 1, 18, 8, 2, 19, 9, 3, 0};
-  Matrix10 eliminated, rest;
+  Elimination system;
   for (int row = 0; row < 10; ++row) {
     for (int k = 0; k < 10; ++k) {
-      eliminated(row, k) = equations[row][kEliminated[k]];
-      rest(row, k) = equations[row][kRemaining[k]];
+      system[row][k] = equations[row][kEliminated[k]];
+      system[row][10 + k] = equations[row][kRemaining[k]];
     }
   }
-  const Eigen::FullPivLU<Matrix10> lu(eliminated);
-  if (!lu.isInvertible()) return 0;
-  const Matrix10 reduced = lu.solve(rest);  // eliminated monomial i = -reduced.row(i) . remaining
-  if (!reduced.allFinite()) return 0;
+  Matrix10 reduced;  // eliminated monomial i = -reduced.row(i) . remaining
+  if (!gauss_jordan(system, reduced)) return 0;
   // x2z - z x2, y2z - z y2, xyz - z xy vanish: B(z) (x, y, 1)^T = 0 with B's entries of degree
   // 3, 3 and 4 in z, so det B(z) = 0 is of degree 10.
   std::array<std::array<Univariate, 3>, 3> b{};
