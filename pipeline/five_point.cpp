@@ -103,6 +103,47 @@ bool gauss_jordan(Elimination& a, Matrix10& reduced) {
   return reduced.allFinite();
 }
 
+// A Gauss-Newton step on the ten cubic constraints themselves at (x, y, z), kept where it
+// lowers their residual: the steps through the resultant lose accuracy where two roots lie close
+// together.
+void polish(const std::array<Polynomial, 10>& equations, Eigen::Vector3d& solution) {
+  // Column k: the monomials at (x, y, z) and their derivatives by x, y and z.
+  const auto monomials = [](const Eigen::Vector3d& at, Eigen::Matrix<double, 20, 4>& out) {
+    std::array<std::array<double, 4>, 3> power;
+    for (int axis = 0; axis < 3; ++axis) {
+      power[axis][0] = 1;
+      for (int e = 1; e < 4; ++e)
+        power[axis][e] = power[axis][e - 1] * at(axis);
+    }
+    for (int k = 0; k < 20; ++k) {
+      const auto& exponent = kMonomials[k];
+      out(k, 0) = power[0][exponent[0]] * power[1][exponent[1]] * power[2][exponent[2]];
+      for (int axis = 0; axis < 3; ++axis) {
+        double product = exponent[axis];
+        for (int other = 0; other < 3; ++other)
+          product *= power[other][std::max(0, exponent[other] - (other == axis ? 1 : 0))];
+        out(k, 1 + axis) = product;
+      }
+    }
+  };
+  // Column i: the coefficients of equation i.
+  static_assert(sizeof(equations) == 10 * 20 * sizeof(double));
+  const Eigen::Map<const Eigen::Matrix<double, 20, 10>> coefficients(equations[0].data());
+  Eigen::Matrix<double, 20, 4> at;
+  monomials(solution, at);
+  // Residuals (column 0) and their Jacobian.
+  const Eigen::Matrix<double, 10, 4> evaluated = coefficients.transpose() * at;
+  const auto r = evaluated.col(0);
+  const auto jacobian = evaluated.rightCols<3>();
+  const Eigen::Vector3d step =
+      (jacobian.transpose() * jacobian).ldlt().solve(-jacobian.transpose() * r);
+  if (!step.allFinite()) return;
+  const Eigen::Vector3d moved = solution + step;
+  monomials(moved, at);
+  const Eigen::Matrix<double, 10, 1> moved_r = coefficients.transpose() * at.col(0);
+  if (moved_r.squaredNorm() < r.squaredNorm()) solution = moved;
+}
+
 // Polynomials in one variable, coefficients from the constant term up, degree <= 10.
 using Univariate = std::array<double, 11>;
 
@@ -419,7 +460,10 @@ int five_point_essentials(const std::array<std::array<double, 2>, 5>& previous,
       if (other.squaredNorm() > null.squaredNorm()) null = other;
     }
     if (!(std::abs(null(2)) > 1e-14 * null.norm())) continue;
-    const double x = null(0) / null(2), y = null(1) / null(2);
+    Eigen::Vector3d solution(null(0) / null(2), null(1) / null(2), z);
+    polish(equations, solution);
+    const double x = solution(0), y = solution(1);
+    z = solution(2);
     std::array<double, 9>& out = essentials[count];
     double norm = 0;
     for (int i = 0; i < 9; ++i) {
