@@ -326,7 +326,9 @@ void FramePath::camera_loop() {
 }
 
 bool FramePath::submit_command(const Command& command) {
-  SpscRing<Command>& ring = command.kind == CommandKind::kThreshold ? worker_commands_ : commands_;
+  const bool worker =
+      command.kind == CommandKind::kThreshold || command.kind == CommandKind::kRegion;
+  SpscRing<Command>& ring = worker ? worker_commands_ : commands_;
   Command* slot = ring.try_claim();
   if (slot == nullptr) return false;
   *slot = command;
@@ -367,8 +369,14 @@ void FramePath::run_worker_commands() {
     if (result == nullptr) return;
     *result = *command;
     worker_commands_.pop();
-    // The replacement was built and sized (reset) for this frame size by the command thread.
-    std::swap(detector_, result->detector);
+    if (result->kind == CommandKind::kRegion) {
+      // Checked against the frame by the command thread; only bounds change (no allocation).
+      detector_->set_region(result->region);
+      result->region = detector_->region();
+    } else {
+      // The replacement was built and sized (reset) for this frame size by the command thread.
+      std::swap(detector_, result->detector);
+    }
     result->result.accepted = true;
     worker_results_.publish();
   }
@@ -407,6 +415,7 @@ void FramePath::run_command(Command& command, LaserMode& mode, bool frames_flowi
       r.accepted = true;
       return;
     case CommandKind::kThreshold:  // the worker's (run_worker_commands)
+    case CommandKind::kRegion:
       return;
     case CommandKind::kGet: {
       // "name=value" for every setting the camera has, then the laser's mode.

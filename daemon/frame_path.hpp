@@ -80,7 +80,7 @@ class FramePath {
     return images_published_.load(std::memory_order_relaxed);
   }
   // Queues a parsed command for the thread that carries it out (the camera thread; the worker for
-  // kThreshold); false when kCommandSlots are waiting already.
+  // kThreshold and kRegion); false when kCommandSlots are waiting already.
   bool submit_command(const Command& command);
   // kThreshold: `detector` (built with the new threshold and reset() to the camera's frame size)
   // replaces the worker's between two frames; the path owns it from here. False while another
