@@ -358,9 +358,23 @@ TEST_F(CommandTest, RegionLimitsThePointsFoundFromTheNextFrame) {
           << region;
     }
   }
+  // A threshold change builds a new detector: it searches the same region.
+  const auto threshold = ctl("set detector.maxvalue.threshold 55");
+  EXPECT_EQ(threshold.exit_code, 0) << threshold.out;
+  listener.clear();
+  ASSERT_TRUE(listener.wait_for([](const Received& r) { return r.profiles.size() >= 3; }, 5))
+      << daemon.log();
+  for (std::size_t i = 1; i < listener.received().profiles.size(); ++i) {
+    const laserline::profile_t& p = listener.received().profiles[i];
+    EXPECT_GT(p.num_points, width / 2) << p.sequence;
+    for (const auto& point : p.points)
+      EXPECT_TRUE(point.u >= x && point.u < x + width) << p.sequence << ": column " << point.u;
+  }
   const auto get = ctl("get");
   EXPECT_EQ(get.exit_code, 0) << get.out;
-  EXPECT_NE(get.out.find(" detector.roi=" + region + "\n"), std::string::npos) << get.out;
+  EXPECT_NE(get.out.find(" detector.maxvalue.threshold=55 detector.roi=" + region + "\n"),
+            std::string::npos)
+      << get.out;
 
   const auto outside = ctl("set detector.roi 300,0,40,10");
   EXPECT_EQ(outside.exit_code, 1) << outside.out;

@@ -235,6 +235,38 @@ TEST(DetectionRegion, FrontendCandidatesInsideAreThoseOfTheWholeFrame) {
   }
 }
 
+// Epipolar lines at an angle: the detectors search a rotation of the frame, the region's bounds
+// there; what comes out lies in the region of the frame. (A textured frame without a line: the
+// candidates of every detector but maxvalue's bright pixels.)
+TEST(DetectionRegion, ObliqueSearchKeepsOnlyPointsInsideTheFrameRegion) {
+  ScannerGeometry g = columns_geometry();
+  const double turn = 30 * 3.14159265358979 / 180;  // the sheet turned about the optical axis
+  const double b = g.laser_plane[1];
+  g.laser_plane[0] = b * std::sin(turn);
+  g.laser_plane[1] = b * std::cos(turn);
+  const Image frame = columns_frame(false, 5);
+  const DetectionRegion region{60, 40, 150, 120};
+  for (const std::string& name : detector_names()) {
+    SCOPED_TRACE(name);
+    DetectorOptions options;
+    options.geometry = g;
+    options.roi = region;
+    auto detector = make_detector(name, options);
+    detector->reset(g.width, g.height);
+    Profile out(detector->max_points(g.width, g.height));
+    std::size_t found = 0;
+    for (std::uint64_t i = 0; i < 3; ++i) {
+      detector->detect(frame.view(), {i, true}, out);
+      ASSERT_EQ(out.axes().axis, SearchAxis::kOblique);
+      for (const FramePoint& p : frame_points(out)) {
+        EXPECT_TRUE(region.contains(p.x, p.y)) << p.x << ", " << p.y;
+        ++found;
+      }
+    }
+    EXPECT_GT(found, 10u);
+  }
+}
+
 TEST(DetectionRegion, OutsideTheFrameOrEmptyIsRefusedNamingTheOption) {
   auto problem_of = [](const DetectionRegion& region) -> std::string {
     try {
