@@ -6,6 +6,7 @@
 //                      per-column loop for the peaks
 //   frontend_background_detector: the whole `background` detector, homography estimation included
 //   frontend_fir_detector: the `fir` detector (no background subtraction)
+//   frontend_fir_region/<percent>: `fir` searching the middle <percent> of the columns and rows
 //   frontend_validation_stages/<association>: Section IV on the candidates `background` gives on
 //                      the pier scenario (segments, chain codes or image patches, matching,
 //                      back-projection), 0 = chain_code, 1 = image_features
@@ -213,6 +214,24 @@ void BM_frontend_fir_detector(benchmark::State& state) {
   state.counters["points"] = static_cast<double>(profile.size());
 }
 BENCHMARK(BM_frontend_fir_detector)->Unit(benchmark::kMillisecond);
+
+// `fir` searching a region of the frame (DetectionRegion): the middle half of the columns and of
+// the rows (argument 50: a quarter of the frame), or the whole frame (100).
+void BM_frontend_fir_region(benchmark::State& state) {
+  const Frames& f = frames();
+  pipeline::FirDetector detector(bench_options());
+  detector.reset(kWidth, kHeight);
+  const auto percent = static_cast<int>(state.range(0));
+  const int width = kWidth * percent / 100, height = kHeight * percent / 100;
+  detector.set_region({(kWidth - width) / 2, (kHeight - height) / 2, width, height});
+  pipeline::Profile profile(detector.max_points(kWidth, kHeight));
+  for (auto _ : state) {
+    detector.detect(view(f.current), {}, profile);
+    benchmark::DoNotOptimize(profile.points().data());
+  }
+  state.counters["points"] = static_cast<double>(profile.size());
+}
+BENCHMARK(BM_frontend_fir_region)->Arg(100)->Arg(50)->Arg(25)->Unit(benchmark::kMillisecond);
 
 // The search image alone for the mountings below (the frame transposed, or resampled on a grid
 // turned 30 degrees that holds the whole frame), beside OpenCV's transpose and warpAffine

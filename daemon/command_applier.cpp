@@ -7,7 +7,9 @@
 namespace laserline::daemon {
 
 bool CommandApplier::submit(const Command& command) {
-  SpscRing<Command>& ring = command.kind == CommandKind::kThreshold ? worker_commands_ : commands_;
+  const bool worker =
+      command.kind == CommandKind::kThreshold || command.kind == CommandKind::kRegion;
+  SpscRing<Command>& ring = worker ? worker_commands_ : commands_;
   Command* slot = ring.try_claim();
   if (slot == nullptr) return false;
   *slot = command;
@@ -48,8 +50,14 @@ void CommandApplier::run_worker_commands(pipeline::Detector*& detector) {
     if (result == nullptr) return;
     *result = *command;
     worker_commands_.pop();
-    // The replacement was built and sized (reset) for this frame size by the command thread.
-    std::swap(detector, result->detector);
+    if (result->kind == CommandKind::kRegion) {
+      // Checked against the frame by the command thread; only bounds change (no allocation).
+      detector->set_region(result->region);
+      result->region = detector->region();
+    } else {
+      // The replacement was built and sized (reset) for this frame size by the command thread.
+      std::swap(detector, result->detector);
+    }
     result->result.accepted = true;
     worker_results_.publish();
   }
@@ -89,6 +97,7 @@ void CommandApplier::apply(Command& command, LaserMode& mode, bool frames_flowin
       r.accepted = true;
       return;
     case CommandKind::kThreshold:  // the worker's (run_worker_commands)
+    case CommandKind::kRegion:
       return;
     case CommandKind::kGet: {
       // "name=value" for every setting the camera has, then the laser's mode.

@@ -17,7 +17,8 @@ namespace laserline::daemon {
 // Carries parsed commands from the command thread to the thread that owns what they change, and
 // their results back, through lock-free rings: the camera thread carries out camera settings, the
 // laser's mode and get between two grabs; the worker puts a replacement detector (kThreshold) in
-// place between two frames. Neither of those threads allocates or locks here.
+// place, or sets the detector's region (kRegion), between two frames. Neither of those threads
+// allocates or locks here.
 //
 // Thread context: submit(), submit_detector() and take_result() from one command thread;
 // run_camera_commands() from the camera thread; run_worker_commands() from the worker.
@@ -31,8 +32,8 @@ class CommandApplier {
   CommandApplier(const CommandApplier&) = delete;
   CommandApplier& operator=(const CommandApplier&) = delete;
 
-  // Queues a command for the thread that carries it out (the worker for kThreshold, else the
-  // camera thread); false when kSlots are waiting already.
+  // Queues a command for the thread that carries it out (the worker for kThreshold and kRegion,
+  // else the camera thread); false when kSlots are waiting already.
   bool submit(const Command& command);
   // kThreshold: `detector` (built with the new threshold and reset() to the camera's frame size)
   // replaces the worker's between two frames; owned here from now on. False while another
@@ -46,7 +47,7 @@ class CommandApplier {
   // changed from the next frame; a mode that switches the laser on is refused while frames do not
   // flow (before the first frame, after a timeout or an error).
   void run_camera_commands(LaserMode& mode, bool frames_flowing, std::uint64_t grab_index);
-  // Worker, between two frames: puts replacement detectors in place of `detector`.
+  // Worker, between two frames: puts replacement detectors in place of `detector`, sets its region.
   void run_worker_commands(pipeline::Detector*& detector);
 
  private:

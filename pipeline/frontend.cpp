@@ -225,6 +225,49 @@ void Frontend::reset(int width, int height) {
   for (std::vector<float>* field : {&lanes.x0, &lanes.y0, &lanes.dx, &lanes.dy, &lanes.rows})
     field->assign(static_cast<std::size_t>(width), 0.0f);
   lanes.point.assign(static_cast<std::size_t>(width), 0);
+  update_bounds();
+}
+
+Frontend::PassBounds Frontend::whole_bounds() const {
+  return {0, width_, 0, rows_.rows(), 0, width_};
+}
+
+double Frontend::refine_reach(double v) const {
+  // refine_start()'s search reach and the fit's half row, with a row to spare.
+  return std::max(rows_.width_px(v), 1.0) * half_per_normalised_width_ + 4.0;
+}
+
+void Frontend::set_region(const DetectionRegion& region) {
+  region_ = region;
+  update_bounds();
+}
+
+void Frontend::update_bounds() {
+  if (width_ == 0) return;  // (reset() comes back here)
+  const DetectionRegion r = region_.in_frame(width_, height_);
+  candidate_row_begin_ = r.y;
+  candidate_row_end_ = static_cast<double>(r.y) + r.height;
+  if (region_.whole()) {
+    bounds_ = whole_bounds();
+    return;
+  }
+  bounds_ = PassBounds{};
+  if (r.width == 0 || r.height == 0) return;
+  PassBounds& b = bounds_;
+  b.column_begin = r.x;
+  b.column_end = r.x + r.width;
+  // The normalised rows whose band-pass peaks (within half a row) map to the region's rows or
+  // within the refinement's reach of them, and one more on each side for the single-precision map.
+  const double rows = rows_.rows();
+  const double top = r.y - 0.5, bottom = r.y + r.height - 0.5;
+  const double first = std::floor(rows_.to_normalised(top - refine_reach(top))) - 1.0;
+  const double last = std::ceil(rows_.to_normalised(bottom + refine_reach(bottom))) + 1.0;
+  b.row_begin = static_cast<int>(std::clamp(first, 0.0, rows));
+  b.row_end = static_cast<int>(std::clamp(last + 1.0, static_cast<double>(b.row_begin), rows));
+  // The noise window reaches noise_pad_ columns to either side; the warp goes by whole blocks.
+  b.normalise_begin = std::max(0, b.column_begin - noise_pad_) / kWarpBlock * kWarpBlock;
+  b.normalise_end =
+      std::min(width_, (b.column_end + noise_pad_ + kWarpBlock - 1) / kWarpBlock * kWarpBlock);
 }
 
 namespace {
@@ -264,11 +307,12 @@ void Frontend::set_frame_minus_background(const ImageView& current, const ImageV
   subtracting_ = true;
 }
 
-void Frontend::normalise_row(int r, std::uint16_t* out) {
+void Frontend::normalise_row(int r, std::uint16_t* out, int begin, int end) {
   const float v = rows_.source_row(r);
   const SourceRow row(current_, v);
   if (!subtracting_) {
-    kernels::interpolate_row(row.a, row.b, row.fb, normalised_shift_, width_, out);
+    kernels::interpolate_row(row.a + begin, row.b + begin, row.fb, normalised_shift_, end - begin,
+                             out + begin);
     return;
   }
   // The background may be a band of rows of the frame (its own size; the homography says where).
@@ -281,7 +325,8 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
   const auto xn0 = static_cast<float>(g[1] * v + g[2]), xnu = static_cast<float>(g[0]);
   const auto yn0 = static_cast<float>(g[4] * v + g[5]), ynu = static_cast<float>(g[3]);
   const auto wn0 = static_cast<float>(g[7] * v + g[8]), wnu = static_cast<float>(g[6]);
-  const int blocks = (width_ + kWarpBlock - 1) / kWarpBlock;
+  const int first_block = begin / kWarpBlock;
+  const int blocks = (end + kWarpBlock - 1) / kWarpBlock;  // the blocks [first_block, blocks)
   const int width = width_, stride = background.stride, last_column = background.width - 1;
   const int last_row = background.height - 1;
   // Where each block was in the background, for all blocks of the row at once (positions held
@@ -296,18 +341,15 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
   std::int32_t* w11 = warp_weights_[3].data();
   const float far = 2.0f * std::max(bg_width, bg_height);
   const int partial = kernels::warp_blocks(
-      {xn0, xnu, yn0, ynu, wn0, wnu, far, width, stride, last_column, last_row}, 0, blocks,
-      {left, top, whole, offset, w00, w01, w10, w11});
-  kernels::difference_row({row.a,    row.b,
-                           row.fb,   normalised_shift_,
-                           out,      background.data,
-                           stride,   left,
-                           top,      whole,
-                           offset,   w00,
-                           w01,      w10,
-                           w11,      blocks,
-                           width,    last_column,
-                           last_row, partial});
+      {xn0, xnu, yn0, ynu, wn0, wnu, far, width, stride, last_column, last_row}, first_block,
+      blocks, {left, top, whole, offset, w00, w01, w10, w11});
+  // From the first block on (its pixels and per-block values).
+  const int j = first_block;
+  kernels::difference_row({row.a + begin, row.b + begin,   row.fb,     normalised_shift_,
+                           out + begin,   background.data, stride,     left + j,
+                           top + j,       whole + j,       offset + j, w00 + j,
+                           w01 + j,       w10 + j,         w11 + j,    blocks - j,
+                           width - begin, last_column,     last_row,   partial});
 }
 
 bool Frontend::water_glows(const ImageView& frame) const {
@@ -355,6 +397,7 @@ void Frontend::collect_candidates(Profile& out) {
   glowing_ = water_glows(current_);
   roll(nullptr);
   const int per_column = options_.max_candidates_per_column;
+  const bool all_rows = region_.whole();
   for (int u = 0; u < width_; ++u) {
     Peak* best = column_best_.data() + static_cast<std::size_t>(u) * per_column;
     LineCandidate* line = line_candidates_.data() + static_cast<std::size_t>(u) * per_column;
@@ -367,6 +410,14 @@ void Frontend::collect_candidates(Profile& out) {
       line[i].position = rows_.to_source_single(best[i].r);
       line[i].snr_db = kDecibelsPerNeper * std::log(best[i].snr);  // 20 log10 (cheaper)
       line[i].amplitude_db = kDecibelsPerNeper * std::log(std::max(best[i].band, 1e-3f));
+      // Outside the region's rows, those the refinement can bring into them (kept until then).
+      if (!all_rows) {
+        const double v = line[i].position;
+        const double reach = refine_reach(v);
+        if (v < candidate_row_begin_ - 0.5 - reach || v >= candidate_row_end_ - 0.5 + reach) {
+          continue;
+        }
+      }
       ProfilePoint point;
       point.u = u;
       point.v = line[i].position;
@@ -428,6 +479,13 @@ void Frontend::select_line(Profile& out) {
       const ProfilePoint& p = points[refine_points_[k]];
       probes_[probe_count_++] = {static_cast<float>(p.u), p.v};
     }
+  }
+  if (!region_.whole()) {
+    // The region's rows exactly, now that the points are where they are.
+    out.keep_if([&](const ProfilePoint& p) {
+      const double row = std::round(static_cast<double>(p.v));
+      return row >= candidate_row_begin_ && row < candidate_row_end_;
+    });
   }
 }
 

@@ -92,6 +92,16 @@ class Frontend {
   void set_frame_minus_background(const ImageView& current, const ImageView& background,
                                   const Homography& current_to_background);
 
+  // Candidates only in `region` (search coordinates; DetectionRegion::whole(): everywhere), from
+  // the next pass on: only its columns are searched, and only the normalised rows that reach its
+  // rows; the filters read the rows and columns around it as on the whole frame, so that the
+  // candidates inside are those the whole frame gives. No allocation.
+  void set_region(const DetectionRegion& region);
+  DetectionRegion region() const {
+    return region_.in_frame(width_ > 0 ? width_ : geometry_.width,
+                            height_ > 0 ? height_ : geometry_.height);
+  }
+
   // Local maxima of the band-pass along each column whose SNR passes the threshold, at most
   // max_candidates_per_column (the strongest). At most one per column is the valid point, chosen
   // by the line selection (pipeline/line_selection.hpp: SNR, continuity along the line and with
@@ -140,6 +150,17 @@ class Frontend {
   static constexpr int kWarpBlock = 32;
 
  private:
+  // Where a pass goes: candidates in columns [column_begin, column_end) and normalised rows
+  // [row_begin, row_end); normalised rows made over columns [normalise_begin, normalise_end)
+  // (whole warp blocks).
+  struct PassBounds {
+    int column_begin = 0, column_end = 0, row_begin = 0, row_end = 0;
+    int normalise_begin = 0, normalise_end = 0;
+  };
+  PassBounds whole_bounds() const;
+  void update_bounds();
+  // How far (original rows) the refinement can move a candidate at row v.
+  double refine_reach(double v) const;
   struct StageImages;
   // The pass down the rows: candidates into column_best_ / column_count_, and the intermediate
   // rows into `images` where given. In 16- or 32-bit band-pass lanes (see the constructor).
@@ -170,7 +191,7 @@ class Frontend {
   std::uint16_t* normalised_slot(int r);
   const std::uint16_t* normalised_at(int r, int rows);
   void normalise_until(int last, int rows, float normalised_one, int& next,
-                       const StageImages* images);
+                       const PassBounds& bounds, const StageImages* images);
   void place_block_rows(int rows, int band_base, int band_top, int normalised_base,
                         int normalised_top);
   template <class Lane>
@@ -182,8 +203,8 @@ class Frontend {
   template <class Lane>
   void row_candidates(const RollPass<Lane>& pass, const StripRows<Lane>& strip, int r,
                       const StageImages* images);
-  // Normalised row r into out[0, width).
-  void normalise_row(int r, std::uint16_t* out);
+  // Normalised row r into out[begin, end) (begin a multiple of kWarpBlock).
+  void normalise_row(int r, std::uint16_t* out, int begin, int end);
   // The noise window of a row less its guard band: `rows` rows from each of `above` and `below`
   // (offsets of the rows in a strip's band-pass ring).
  public:
@@ -231,6 +252,11 @@ class Frontend {
   float band_unit_ = 1;
   bool narrow_band_ = true;
   int width_ = 0, height_ = 0, stride_ = 0;
+
+  DetectionRegion region_;  // as set (search coordinates)
+  PassBounds bounds_;       // of region_ in frames of the size reset() was given
+  // Original rows whose candidates are kept: [candidate_row_begin_, candidate_row_end_).
+  double candidate_row_begin_ = 0, candidate_row_end_ = 0;
 
   // Inputs of the last set_frame call (views, valid during find_candidates).
   ImageView current_{};

@@ -20,6 +20,8 @@ class FirDetector final : public Detector {
   std::size_t max_points(int width, int height) const override;
   void reset(int width, int height) override;
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override;
+  void set_region(const DetectionRegion& region) override { frontend_.set_region(region); }
+  DetectionRegion region() const override { return frontend_.region(); }
 
   const Frontend& frontend() const { return frontend_; }
 
@@ -48,6 +50,9 @@ class BackgroundDetector final : public Detector {
   std::size_t max_points(int width, int height) const override;
   void reset(int width, int height) override;
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override;
+  // The front-end's search (the motion is estimated over the whole frame).
+  void set_region(const DetectionRegion& region) override { frontend_.set_region(region); }
+  DetectionRegion region() const override { return frontend_.region(); }
   // detect() in two steps, for a validation in between (BackprojectionDetector): the frame's
   // candidates, all eligible (Frontend::collect_candidates()); then the line among those still
   // eligible (Frontend::select_line()).

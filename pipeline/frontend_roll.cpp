@@ -81,6 +81,7 @@ struct Frontend::RollPass {
   int hi = 0, ho = 0;      // half the inner and the outer band-pass box
   int nh = 0, gh = 0;      // half the noise window, its guard band
   int look = 0;            // band-pass rows needed below the row under test
+  int start = 0;           // the first band-pass row of the pass
   int edge = 0;            // rows nearer the ends are outside the depth range: no candidates there
   bool near_down = false;  // glow below the line (see water_glows())
   int saturation = 0;
@@ -160,10 +161,11 @@ LASERLINE_ROW_KERNEL const std::uint16_t* Frontend::normalised_at(int r, int row
 // III-B: the normalised rows from `next` to `last` (at most the last row) into the ring, and into
 // images->normalised where asked; `next` moves on past them.
 LASERLINE_ROW_KERNEL void Frontend::normalise_until(int last, int rows, float normalised_one,
-                                                    int& next, const StageImages* images) {
+                                                    int& next, const PassBounds& bounds,
+                                                    const StageImages* images) {
   for (; next <= std::min(last, rows - 1); ++next) {
     std::uint16_t* out = normalised_slot(next);
-    normalise_row(next, out);
+    normalise_row(next, out, bounds.normalise_begin, bounds.normalise_end);
     if (images != nullptr && !images->normalised.empty()) {
       float* dst = images->normalised.data() + next * static_cast<std::size_t>(stride_);
       for (int u = 0; u < width_; ++u)
@@ -192,8 +194,8 @@ LASERLINE_ROW_KERNEL void Frontend::place_block_rows(int rows, int band_base, in
 
 // III-C: the band-pass rows [first, end) of a strip: box means down the columns; at the ends the
 // boxes are cut short and averaged over what they cover. The sums of row b are those of row b - 1
-// plus the row that enters the box and minus the one that leaves it; they start holding rows
-// 0 .. half - 1.
+// plus the row that enters the box and minus the one that leaves it; they start holding the rows
+// of the boxes of the row before the pass's first (rows 0 .. half - 1 when it starts at row 0).
 template <class Lane>
 LASERLINE_ROW_KERNEL void Frontend::band_pass_rows(const RollPass<Lane>& pass,
                                                    const StripRows<Lane>& strip, int first, int end,
@@ -202,11 +204,12 @@ LASERLINE_ROW_KERNEL void Frontend::band_pass_rows(const RollPass<Lane>& pass,
   const int hi = pass.hi, ho = pass.ho, rows = pass.rows, count = strip.count;
   Sum* inner = strip.inner;
   Sum* outer = strip.outer;
-  if (first == 0) {
-    for (int j = 0; j < std::min(ho, rows); ++j) {
+  if (first == pass.start) {
+    for (int j = std::max(first - ho - 1, 0); j < std::min(first + ho, rows); ++j) {
       const std::uint16_t* row = strip.normalised(j);
+      const bool in_inner = j >= first - hi - 1 && j < first + hi;
       for (int u = 0; u < count; ++u) {
-        if (j < hi) inner[u] = static_cast<Sum>(inner[u] + row[u]);
+        if (in_inner) inner[u] = static_cast<Sum>(inner[u] + row[u]);
         outer[u] = static_cast<Sum>(outer[u] + row[u]);
       }
     }
@@ -347,32 +350,37 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
 
 // Rows go in blocks: the block's normalised rows across the whole image (long runs through the
 // frame), then strip by strip the band-pass, noise and candidates of the block's rows (the
-// strip's rings stay in the first-level cache for the whole block).
+// strip's rings stay in the first-level cache for the whole block). Within a region (bounds_)
+// only its strips, and the rows from those its first row's noise window reaches.
 template <class Lane>
 LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRings<Lane>& rings) {
   using Sum = std::make_unsigned_t<Lane>;
-  const RollPass<Lane> pass = roll_pass<Lane>();
+  RollPass<Lane> pass = roll_pass<Lane>();
   const int rows = pass.rows;
   const auto ring = static_cast<std::size_t>(ring_stride_);
-  const int strips = (width_ + kStripColumns - 1) / kStripColumns;
+  const PassBounds bounds = images != nullptr ? whole_bounds() : bounds_;
+  const int strip_begin = bounds.column_begin / kStripColumns;
+  const int strip_end = (bounds.column_end + kStripColumns - 1) / kStripColumns;
   std::fill(column_count_.begin(), column_count_.end(), 0);
   std::fill(rings.inner.begin(), rings.inner.end(), Sum{0});
   std::fill(rings.outer.begin(), rings.outer.end(), Sum{0});
 
-  int next_normalised = 0;
-  int next_band = 0;
-  for (int r_begin = 0; r_begin < rows; r_begin += kRowBlock) {
-    const int r_end = std::min(r_begin + kRowBlock, rows);
+  pass.start = std::max(bounds.row_begin - pass.look, 0);
+  int next_normalised = std::max(pass.start - pass.ho - 1, 0);
+  int next_band = pass.start;
+  for (int r_begin = pass.start; r_begin < bounds.row_end; r_begin += kRowBlock) {
+    const int r_end = std::min(r_begin + kRowBlock, bounds.row_end);
     const int band_end = std::min(r_end + pass.look, rows);  // band-pass rows [next_band, band_end)
-    normalise_until(band_end - 1 + pass.ho, rows, pass.normalised_one, next_normalised, images);
+    normalise_until(band_end - 1 + pass.ho, rows, pass.normalised_one, next_normalised, bounds,
+                    images);
     const int band_base = r_begin - pass.look;
     const int normalised_base = next_band - pass.ho - 1;
     place_block_rows(rows, band_base, r_end + pass.look, normalised_base, band_end + pass.ho);
-    for (int s = 0; s < strips; ++s) {
+    for (int s = strip_begin; s < strip_end; ++s) {
       StripRows<Lane> strip;
-      strip.c0 = s * kStripColumns;
-      strip.c1 = std::min(strip.c0 + kStripColumns, width_);
-      strip.begin = strip.c0 - noise_pad_;
+      strip.c0 = std::max(s * kStripColumns, bounds.column_begin);
+      strip.c1 = std::min({(s + 1) * kStripColumns, width_, bounds.column_end});
+      strip.begin = s * kStripColumns - noise_pad_;
       strip.count = ring_stride_;
       const std::size_t state = static_cast<std::size_t>(s) * ring;
       strip.most = band_most_.data() + static_cast<std::size_t>(s) * (band_ring_rows_ + 1);
@@ -385,7 +393,7 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
       strip.normalised_rows = normalised_rows_.data();
       strip.normalised_base = normalised_base;
       band_pass_rows(pass, strip, next_band, band_end, images);
-      for (int r = r_begin; r < r_end; ++r)
+      for (int r = std::max(r_begin, bounds.row_begin); r < r_end; ++r)
         row_candidates(pass, strip, r, images);
     }
     next_band = band_end;

@@ -16,7 +16,8 @@ MaxValueDetector::MaxValueDetector(int threshold) : threshold_(threshold) {
 }
 
 void MaxValueDetector::reset(int width, int height) {
-  (void)height;
+  width_ = width;
+  height_ = height;
   max_value_.assign(width, 0);
   first_row_.assign(width, 0);
   last_row_.assign(width, 0);
@@ -28,19 +29,23 @@ void MaxValueDetector::detect(const ImageView& image, const FrameContext& frame,
   const int width = image.width;
   if (!frame.laser_on || static_cast<int>(max_value_.size()) != width || image.height > 65535)
     return;
-  kernels::column_maxima(image.data, image.stride, 0, width, image.height, max_value_.data(),
-                         first_row_.data(), last_row_.data(), sum_.data());
+  const DetectionRegion region = region_.in_frame(width, image.height);
+  if (region.width == 0 || region.height == 0) return;
+  // The region's rows from its top: first_row_ and last_row_ count from there.
+  kernels::column_maxima(image.row(region.y), image.stride, region.x, region.x + region.width,
+                         region.height, max_value_.data(), first_row_.data(), last_row_.data(),
+                         sum_.data());
   const std::uint8_t* max_value = max_value_.data();
   const std::uint16_t* first_row = first_row_.data();
   const std::uint16_t* last_row = last_row_.data();
   const std::uint32_t* sum = sum_.data();
 
-  const float inv_height = 1.0f / static_cast<float>(image.height);
-  for (int u = 0; u < width; ++u) {
+  const float inv_height = 1.0f / static_cast<float>(region.height);
+  for (int u = region.x; u < region.x + region.width; ++u) {
     const int peak = max_value[u];
     if (peak < threshold_ || peak == 0) continue;
-    const int first = first_row[u];
-    const int last = last_row[u];
+    const int first = region.y + first_row[u];
+    const int last = region.y + last_row[u];
     float v = static_cast<float>(first);
     bool plateau = last > first;
     for (int r = first + 1; plateau && r < last; ++r)

@@ -50,6 +50,8 @@ class TriangulatingDetector final : public Detector {
     return detector_->max_points(width, height);
   }
   void reset(int width, int height) override { detector_->reset(width, height); }
+  void set_region(const DetectionRegion& region) override { detector_->set_region(region); }
+  DetectionRegion region() const override { return detector_->region(); }
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override {
     detector_->detect(image, frame, out);
     triangulator_.fill(out);

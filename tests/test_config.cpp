@@ -94,6 +94,26 @@ TEST(Config, OutOfRangeNamesTheLimits) {
             "test.yaml:2: pipeline.frame_slots: must be a power of two, got 6");
   EXPECT_EQ(error_of("detector:\n  maxvalue: {threshold: 300}\n"),
             "test.yaml:2: detector.maxvalue.threshold: must be between 1 and 255, got 300");
+  // The detection region, against the calibration's 1280x1024 frame.
+  EXPECT_EQ(error_of("detector:\n  name: fir\n  roi: [1200, 0, 100, 10]\n"),
+            "test.yaml:3: detector.roi: [1200, 0, 100, 10] reaches beyond the 1280x1024 frame");
+  EXPECT_EQ(error_of("detector:\n  roi: [0, 0, 0, 10]\n"),
+            "test.yaml:2: detector.roi: width and height must be at least 1 pixel, got [0, 0, 0, "
+            "10]");
+  EXPECT_EQ(error_of("detector:\n  roi: [-5, 0, 10, 10]\n"),
+            "test.yaml:2: detector.roi: x and y must be at least 0, got [-5, 0, 10, 10]");
+  EXPECT_EQ(error_of("detector:\n  roi: [0, 0.5, 10, 10]\n"),
+            "test.yaml:2: detector.roi: expected [x, y, width, height] in whole pixels");
+  EXPECT_EQ(error_of("detector:\n  roi: [1e300, 0, 10, 10]\n"),
+            "test.yaml:2: detector.roi: expected [x, y, width, height] in whole pixels");
+  EXPECT_EQ(error_of("detector:\n  roi: [0, 0, 10]\n"),
+            "test.yaml:2: detector.roi: must have 4 numbers, got 3");
+  EXPECT_EQ(error_of("detector:\n  roi: [0, 100, 1280, 924]\n"), "");
+  EXPECT_EQ(parse_config(hal::load_yaml_text("detector: {roi: [8, 100, 640, 480]}\n", "test.yaml"),
+                         "test.yaml")
+                .detector_options.roi,
+            (pipeline::DetectionRegion{8, 100, 640, 480}));
+  EXPECT_TRUE(builtin_config().detector_options.roi.whole());
   EXPECT_EQ(
       error_of("detector:\n  validation: {min_segment_points: 1}\n"),
       "test.yaml:2: detector.validation.min_segment_points: must be between 2 and 1000, got 1");
