@@ -81,7 +81,7 @@ struct Frames {
     const cv::Matx33d r(1, 0, 0, 0, std::cos(a), -std::sin(a), 0, std::sin(a), std::cos(a));
     const cv::Matx33d h = k * r * k.inv();
     for (int i = 0; i < 9; ++i)
-      current_to_previous.h[i] = h.val[i];
+      current_to_previous.h(i) = h.val[i];
   }
 };
 
@@ -128,7 +128,7 @@ void BM_naive_opencv_stages(benchmark::State& state) {
   const cv::Mat current(kHeight, kWidth, CV_8UC1, const_cast<std::uint8_t*>(f.current.data()));
   cv::Matx33d h;
   for (int i = 0; i < 9; ++i)
-    h.val[i] = f.current_to_previous.h[i];
+    h.val[i] = f.current_to_previous.h(i);
   cv::Mat map_x(rows.rows(), kWidth, CV_32FC1), map_y(rows.rows(), kWidth, CV_32FC1);
   for (int r = 0; r < rows.rows(); ++r) {
     for (int u = 0; u < kWidth; ++u) {
@@ -327,7 +327,7 @@ struct ValidationFrames {
   std::vector<std::vector<std::uint8_t>> pixels;
   std::vector<pipeline::Profile> candidates;
   std::vector<pipeline::PairMotion> motion;
-  std::vector<std::array<double, 9>> homography;
+  std::vector<pipeline::Homography> homography;
 
   ValidationFrames() {
     const hal::SimSceneOptions scene = pier_scene();
@@ -353,7 +353,7 @@ struct ValidationFrames {
       m.translation = e.camera.translation;
       m.relative_scale = e.camera.relative_scale;
       motion.push_back(m);
-      homography.push_back(e.previous_to_current.h);
+      homography.push_back(e.previous_to_current);
     }
   }
 };

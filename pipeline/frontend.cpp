@@ -322,9 +322,9 @@ void Frontend::normalise_row(int r, std::uint16_t* out, int begin, int end) {
   // Along the row the background position is a ratio of linear functions of u: numerators and
   // denominator at u = 0, and their steps per pixel.
   const auto& g = to_background_.h;
-  const auto xn0 = static_cast<float>(g[1] * v + g[2]), xnu = static_cast<float>(g[0]);
-  const auto yn0 = static_cast<float>(g[4] * v + g[5]), ynu = static_cast<float>(g[3]);
-  const auto wn0 = static_cast<float>(g[7] * v + g[8]), wnu = static_cast<float>(g[6]);
+  const auto xn0 = static_cast<float>(g(0, 1) * v + g(0, 2)), xnu = static_cast<float>(g(0, 0));
+  const auto yn0 = static_cast<float>(g(1, 1) * v + g(1, 2)), ynu = static_cast<float>(g(1, 0));
+  const auto wn0 = static_cast<float>(g(2, 1) * v + g(2, 2)), wnu = static_cast<float>(g(2, 0));
   const int first_block = begin / kWarpBlock;
   const int blocks = (end + kWarpBlock - 1) / kWarpBlock;  // the blocks [first_block, blocks)
   const int width = width_, stride = background.stride, last_column = background.width - 1;

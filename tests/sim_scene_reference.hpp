@@ -88,7 +88,7 @@ inline SurfaceFrame surface_frame(const SimSceneOptions& o) {
 inline Vec3 to_camera(const SimCameraPose& pose, const Vec3& x) {
   Vec3 out{};
   for (int i = 0; i < 3; ++i)
-    out[i] = dot3({pose.rotation[i * 3], pose.rotation[i * 3 + 1], pose.rotation[i * 3 + 2]}, x) +
+    out[i] = dot3({pose.rotation(i, 0), pose.rotation(i, 1), pose.rotation(i, 2)}, x) +
              pose.translation[i];
   return out;
 }
@@ -97,7 +97,7 @@ inline Vec3 to_world(const SimCameraPose& pose, const Vec3& x) {
   const Vec3 d{x[0] - pose.translation[0], x[1] - pose.translation[1], x[2] - pose.translation[2]};
   Vec3 out{};
   for (int i = 0; i < 3; ++i)
-    out[i] = pose.rotation[i] * d[0] + pose.rotation[3 + i] * d[1] + pose.rotation[6 + i] * d[2];
+    out[i] = pose.rotation(0, i) * d[0] + pose.rotation(1, i) * d[1] + pose.rotation(2, i) * d[2];
   return out;
 }
 

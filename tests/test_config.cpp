@@ -194,10 +194,10 @@ TEST(Config, ChoicesListTheAlternatives) {
   EXPECT_EQ(error_of("laser:\n  mode: blink\n"),
             "test.yaml:2: laser.mode: must be one of on, alternate, off, pattern, got 'blink'");
   EXPECT_EQ(error_of("camera:\n  backend: gige\n"),
-            "test.yaml:2: camera.backend: unknown camera backend 'gige' (available: sim, aravis, "
-            "v4l2, memory, lcm)");
+            "test.yaml:2: camera.backend: unknown camera backend 'gige' (available: aravis, lcm, "
+            "memory, sim, v4l2)");
   EXPECT_EQ(error_of("laser:\n  backend: gpio\n"),
-            "test.yaml:2: laser.backend: unknown laser backend 'gpio' (available: sim, gpiod)");
+            "test.yaml:2: laser.backend: unknown laser backend 'gpio' (available: gpiod, sim)");
 }
 
 TEST(Config, ReplayCameraNeedsAUrl) {

@@ -200,7 +200,7 @@ TEST(DetectionRegion, FrontendCandidatesInsideAreThoseOfTheWholeFrame) {
   options.max_candidates_per_column = 255;  // no column's strongest few depend on the rows
   const Image current = columns_frame(true, 7), background = columns_frame(false, 8);
   Homography h;  // a small roll and shift: warp blocks partly off the background at the edges
-  h.h = {1, 0.004, 2.7, -0.004, 1, -3.2, 0, 0, 1};
+  h.h << 1, 0.004, 2.7, -0.004, 1, -3.2, 0, 0, 1;
   const DetectionRegion regions[] = {{37, 100, 250, 40}, {0, 0, 320, 256}, {300, 3, 20, 250},
                                      {5, 200, 64, 56},   {255, 97, 2, 3},  {0, 0, 1, 1},
                                      {31, 60, 195, 150}, {100, 0, 120, 30}};

@@ -247,7 +247,7 @@ TEST(Frontend, SubtractsTheBackgroundSeenThroughTheHomography) {
   }
   const double roll = 0.3 * M_PI / 180, c = std::cos(roll), s = std::sin(roll);
   Homography h;  // current pixel -> background pixel: a roll about the centre, then a shift
-  h.h = {c, -s, g.cx - c * g.cx + s * g.cy - 7.4, s, c, g.cy - s * g.cx - c * g.cy + 5.3, 0, 0, 1};
+  h.h << c, -s, g.cx - c * g.cx + s * g.cy - 7.4, s, c, g.cy - s * g.cx - c * g.cy + 5.3, 0, 0, 1;
 
   const int rows = frontend.rows().rows(), stride = frontend.stride();
   const std::size_t size = static_cast<std::size_t>(rows) * stride;
@@ -317,7 +317,7 @@ TEST(Frontend, EveryKernelTargetFindsTheSameCandidates) {
   auto clipped = [](int u) { return u < 160 ? -1000.0 : 40.0 + 0.1 * u; };
   current.add_line(clipped, 600.0, 2.5);
   Homography h;
-  h.h = {1, 0.002, 1.7, -0.001, 1, -2.2, 0, 0, 1};
+  h.h << 1, 0.002, 1.7, -0.001, 1, -2.2, 0, 0, 1;
   FrontendOptions narrow, wide, wide_reach;
   wide.normalised_width_px = 5;
   wide.passband_ratio = 3.8;

@@ -569,7 +569,7 @@ TEST(SimSceneRelief, HeightsSlopesAndRepetitionAreAsConfigured) {
   o.tilt_x_deg = 0;
   o.tilt_y_deg = 0;
   SimScene straight(o);
-  const Vec3 p = straight.surface_point(0.3, -0.2);
+  const Eigen::Vector3d p = straight.surface_point(0.3, -0.2);
   EXPECT_NEAR(p[0], 0.3, 1e-12);
   EXPECT_NEAR(p[1], -0.2, 1e-12);
   EXPECT_NEAR(p[2], o.distance_m - straight.relief_height(0.3, -0.2), 1e-12);
@@ -661,8 +661,9 @@ TEST(SimSceneRelief, CameraPoseExplainsTheRenderedTextureWithParallax) {
 
   // Frame 0 is the world frame.
   const SimCameraPose p0 = scene.camera_pose(0);
-  for (int i = 0; i < 9; ++i)
-    EXPECT_NEAR(p0.rotation[i], i % 4 == 0 ? 1.0 : 0.0, 1e-12);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(p0.rotation(r, c), r == c ? 1.0 : 0.0, 1e-12);
   for (double t : p0.translation)
     EXPECT_NEAR(t, 0.0, 1e-12);
 
@@ -721,8 +722,9 @@ TEST(SimSceneRelief, CameraPoseExplainsTheRenderedTextureWithParallax) {
   const Vec3 centre = to_world(later, {0, 0, 0});
   for (int i = 0; i < 3; ++i)
     EXPECT_NEAR(centre[i], o.vehicle_speed_m_s * f.e1[i], 1e-12);
-  for (int i = 0; i < 9; ++i)
-    EXPECT_NEAR(later.rotation[i], i % 4 == 0 ? 1.0 : 0.0, 1e-12);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(later.rotation(r, c), r == c ? 1.0 : 0.0, 1e-12);
 }
 
 TEST(SimSceneRelief, RejectsImpossibleReliefOptions) {

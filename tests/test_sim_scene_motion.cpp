@@ -227,20 +227,20 @@ TEST(SimScenePan, TheCameraTurnsAboutItsYAxisByTheScansTriangleWave) {
         EXPECT_NEAR(t, 0.0, 1e-15);
       if (pan) {
         // The y axis stays; the optical axis turns in the x-z plane.
-        EXPECT_NEAR(r[4], 1.0, 1e-12);
-        EXPECT_NEAR(r[1], 0.0, 1e-12);
-        EXPECT_NEAR(r[7], 0.0, 1e-12);
-        const double angle = std::atan2(r[6], r[8]);
+        EXPECT_NEAR(r(1, 1), 1.0, 1e-12);
+        EXPECT_NEAR(r(0, 1), 0.0, 1e-12);
+        EXPECT_NEAR(r(2, 1), 0.0, 1e-12);
+        const double angle = std::atan2(r(2, 0), r(2, 2));
         if (sign == 0 && std::abs(angle) > 1e-3) sign = angle > 0 ? 1 : -1;
         EXPECT_NEAR(angle, sign * expected, 1e-12) << "frame " << seq;
         largest = std::max(largest, std::abs(angle));
       } else {
         // The x axis stays; the optical axis turns up (toward -y) first.
-        EXPECT_NEAR(r[0], 1.0, 1e-12);
-        EXPECT_NEAR(r[3], 0.0, 1e-12);
-        EXPECT_NEAR(r[6], 0.0, 1e-12);
-        EXPECT_NEAR(std::atan2(-r[7], r[8]), expected, 1e-12) << "frame " << seq;
-        largest = std::max(largest, std::abs(std::atan2(-r[7], r[8])));
+        EXPECT_NEAR(r(0, 0), 1.0, 1e-12);
+        EXPECT_NEAR(r(1, 0), 0.0, 1e-12);
+        EXPECT_NEAR(r(2, 0), 0.0, 1e-12);
+        EXPECT_NEAR(std::atan2(-r(2, 1), r(2, 2)), expected, 1e-12) << "frame " << seq;
+        largest = std::max(largest, std::abs(std::atan2(-r(2, 1), r(2, 2))));
       }
     }
     EXPECT_NEAR(largest, 6 * kDegree, 1e-12);
