@@ -75,8 +75,15 @@ class ColumnSampler {
     const auto k0 = static_cast<float>(first - v0_), k1 = static_cast<float>(last - v0_);
     const float x_first = x0_ + dx_ * k0, x_last = x0_ + dx_ * k1;
     const float gathered = static_cast<float>(background_->width - 4);
-    return u_ + 4 <= current_.width && inside(x_first, y0_ + dy_ * k0) &&
-           inside(x_last, y0_ + dy_ * k1) && x_first < gathered && x_last < gathered;
+    return u_ + 4 <= current_.width && covers(first, last) && x_first < gathered &&
+           x_last < gathered;
+  }
+
+  // Whether the background lies under all of rows [first, last] (a straight segment in it: both
+  // ends inside).
+  bool covers(int first, int last) const {
+    const auto k0 = static_cast<float>(first - v0_), k1 = static_cast<float>(last - v0_);
+    return inside(x0_ + dx_ * k0, y0_ + dy_ * k0) && inside(x0_ + dx_ * k1, y0_ + dy_ * k1);
   }
 
   // The column's path through the background: row v is at (x0 + dx k, y0 + dy k), k = v - v0.
@@ -137,8 +144,14 @@ bool Frontend::in_clipped_core(int u, int v) const {
 float Frontend::refine_row(int u, float v_guess) const {
   const int last = height_ - 1;
   const auto [spacing, edge, centre, lo, hi] = refine_start(v_guess);
-  const ColumnSampler at(current_, subtracting_ ? &background_ : nullptr, to_background_, u,
-                         centre);
+  // Where the background does not lie under every sample the fit may read (at the frame's edge,
+  // after motion), the fit is made on the frame itself: a sample with nothing to subtract is 0, and
+  // a fit through such samples lands on the window's first row, off the line.
+  const ColumnSampler with_background(current_, subtracting_ ? &background_ : nullptr,
+                                      to_background_, u, centre);
+  const bool covered = subtracting_ && with_background.covers(std::max(lo - 2 * edge - 2, 0),
+                                                              std::min(hi + 2 * edge + 2, last));
+  const ColumnSampler at(current_, covered ? &background_ : nullptr, to_background_, u, centre);
 
   // The samples of the search window are kept for the fit below (its inner samples are usually
   // among them).

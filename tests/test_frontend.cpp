@@ -411,6 +411,31 @@ TEST(Frontend, ClippedCoreIsCentredFromItsFlanks) {
   EXPECT_LT(worst, 0.15);
 }
 
+// Where the background ends just beside the line (at the frame's edge, after the camera moved), the
+// fit is made on the frame: samples with no background under them are not taken as dark.
+TEST(Frontend, LineAtTheEdgeOfTheBackgroundStaysSubPixel) {
+  const ScannerGeometry g = small_geometry();
+  Frontend frontend(g, {});
+  frontend.reset(g.width, g.height);
+  auto centre = [](int u) { return 60.3 + 0.013 * u; };  // sweeps the sub-pixel phase
+  Image current(g.width, g.height, 90), background(g.width, g.height, 20);
+  current.add_line(centre, 120.0, frontend.rows().width_px(60.0) / 2.3548);
+  Homography h;  // current pixel -> background pixel: the background begins 1.5 rows above the line
+  h.h << 1, 0, 0, 0, 1, -58.8, 0, 0, 1;
+  frontend.set_frame_minus_background(current.view(), background.view(), h);
+  Profile out(static_cast<std::size_t>(g.width) * 4);
+  frontend.find_candidates(out);
+  double worst = 0;
+  int n = 0;
+  for (const ProfilePoint& p : out.points()) {
+    if (!p.valid) continue;
+    worst = std::max(worst, std::abs(p.v - centre(p.u)));
+    ++n;
+  }
+  ASSERT_GT(n, g.width * 9 / 10);
+  EXPECT_LT(worst, 0.05);  // (taken as dark, they moved it by 0.16 rows)
+}
+
 TEST(Detectors, AreMadeByNameAndRefuseImpossibleOptions) {
   DetectorOptions o;
   o.geometry = small_geometry();
