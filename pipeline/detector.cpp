@@ -46,6 +46,7 @@ class SearchAxesDetector final : public Detector {
     }
     search_.reset(axes_, width, height);
   }
+  void use_parts(PartRunner& runner) override { detector_->use_parts(runner); }
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override {
     detector_->detect(search_.make(image), frame, out);
     out.set_axes(axes_);

@@ -14,6 +14,7 @@
 #include <numeric>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 #include <type_traits>
 
 #include "pipeline/frontend_common.hpp"
@@ -186,7 +187,6 @@ void Frontend::reset(int width, int height) {
   normalised_stride_ = normalised_pad_ + strips * kStripColumns + ring_stride_;
   const auto ring = static_cast<std::size_t>(ring_stride_);
   const auto s = static_cast<std::size_t>(normalised_stride_);
-  normalised_ring_.assign(static_cast<std::size_t>(normalised_ring_rows_) * s, 0);
   band_most_.assign(static_cast<std::size_t>(strips * (band_ring_rows_ + 1)), 0);
   // Each strip's rings end with a row of zeros (the rows beyond the ends); the last, with a
   // register's lanes more for the noise sums to read past it.
@@ -194,18 +194,32 @@ void Frontend::reset(int width, int height) {
       static_cast<std::size_t>(strips * (band_ring_rows_ + 1)) * ring + kernels::kWindowLanes;
   narrow_.assign(narrow_band_ ? band_ring : 0, narrow_band_ ? strips * ring : 0);
   wide_.assign(narrow_band_ ? 0 : band_ring, narrow_band_ ? 0 : strips * ring);
-  band_rows_.assign(static_cast<std::size_t>(kRowBlock + 2 * look), 0);
-  band_slots_.assign(band_rows_.size(), 0);
-  normalised_rows_.assign(static_cast<std::size_t>(kRowBlock + look + outer_ + 3), nullptr);
-  const auto blocks = static_cast<std::size_t>((width + kWarpBlock - 1) / kWarpBlock);
-  warp_left_.assign(blocks, 0);
-  warp_top_.assign(blocks, 0);
-  warp_whole_.assign(blocks, 0);
-  warp_offset_.assign(blocks, 0);
-  for (std::vector<std::int32_t>& weights : warp_weights_)
-    weights.assign(blocks, 0);
+  // Each part: a range of strips, and the warp blocks of the normalised columns they read (their
+  // own and the noise window's reach beyond, up to a strip's ring stride).
+  const int blocks = (width + kWarpBlock - 1) / kWarpBlock;
+  parts_.resize(static_cast<std::size_t>(std::clamp(runner_->parts(), 1, kMaxParts)));
+  for (std::size_t p = 0; p < parts_.size(); ++p) {
+    Part& part = parts_[p];
+    std::tie(part.first_strip, part.end_strip) =
+        part_range(strips, static_cast<int>(p), static_cast<int>(parts_.size()));
+    const int first_column = part.first_strip * kStripColumns - noise_pad_;
+    const int end_column = (part.end_strip - 1) * kStripColumns - noise_pad_ + ring_stride_;
+    part.first_block = std::max(first_column, 0) / kWarpBlock;
+    part.end_block = part.first_strip == part.end_strip
+                         ? part.first_block
+                         : std::min((end_column + kWarpBlock - 1) / kWarpBlock, blocks);
+    part.normalised_ring.assign(static_cast<std::size_t>(normalised_ring_rows_) * s, 0);
+    part.band_rows.assign(static_cast<std::size_t>(kRowBlock + 2 * look), 0);
+    part.band_slots.assign(part.band_rows.size(), 0);
+    part.normalised_rows.assign(static_cast<std::size_t>(kRowBlock + look + outer_ + 3), nullptr);
+    for (std::vector<std::int32_t>* warp :
+         {&part.warp_left, &part.warp_top, &part.warp_whole, &part.warp_offset})
+      warp->assign(static_cast<std::size_t>(blocks), 0);
+    for (std::vector<std::int32_t>& weights : part.warp_weights)
+      weights.assign(static_cast<std::size_t>(blocks), 0);
+    part.peak_bits.assign((ring + 63) / 64, 0u);
+  }
   zero_normalised_.assign(s, 0);
-  peak_bits_.assign((ring + 63) / 64, 0u);
   column_best_.assign(static_cast<std::size_t>(width) * options_.max_candidates_per_column, {});
   column_count_.assign(static_cast<std::size_t>(width), 0);
   line_candidates_.assign(static_cast<std::size_t>(width) * options_.max_candidates_per_column, {});
@@ -264,11 +278,15 @@ void Frontend::set_frame_minus_background(const ImageView& current, const ImageV
   subtracting_ = true;
 }
 
-void Frontend::normalise_row(int r, std::uint16_t* out) {
+void Frontend::normalise_row(Part& part, int r, std::uint16_t* out) {
   const float v = rows_.source_row(r);
   const SourceRow row(current_, v);
+  // The part's columns [u0, u1): whole warp blocks (each is evaluated as in one part: alike).
+  const int u0 = part.first_block * kWarpBlock;
+  const int u1 = std::min(part.end_block * kWarpBlock, width_);
+  if (u0 >= u1) return;
   if (!subtracting_) {
-    kernels::interpolate_row(row.a, row.b, row.fb, normalised_shift_, width_, out);
+    kernels::interpolate_row(row.a + u0, row.b + u0, row.fb, normalised_shift_, u1 - u0, out + u0);
     return;
   }
   // The background may be a band of rows of the frame (its own size; the homography says where).
@@ -281,33 +299,29 @@ void Frontend::normalise_row(int r, std::uint16_t* out) {
   const auto xn0 = static_cast<float>(g[1] * v + g[2]), xnu = static_cast<float>(g[0]);
   const auto yn0 = static_cast<float>(g[4] * v + g[5]), ynu = static_cast<float>(g[3]);
   const auto wn0 = static_cast<float>(g[7] * v + g[8]), wnu = static_cast<float>(g[6]);
-  const int blocks = (width_ + kWarpBlock - 1) / kWarpBlock;
+  const int first_block = part.first_block, blocks = part.end_block - part.first_block;
   const int width = width_, stride = background.stride, last_column = background.width - 1;
   const int last_row = background.height - 1;
   // Where each block was in the background, for all blocks of the row at once (positions held
   // within two background sizes).
-  std::int32_t* left = warp_left_.data();
-  std::int32_t* top = warp_top_.data();
-  std::int32_t* whole = warp_whole_.data();
-  std::int32_t* offset = warp_offset_.data();
-  std::int32_t* w00 = warp_weights_[0].data();
-  std::int32_t* w01 = warp_weights_[1].data();
-  std::int32_t* w10 = warp_weights_[2].data();
-  std::int32_t* w11 = warp_weights_[3].data();
+  // (The kernels index the blocks from the part's first.)
+  std::int32_t* left = part.warp_left.data();
+  std::int32_t* top = part.warp_top.data();
+  std::int32_t* whole = part.warp_whole.data();
+  std::int32_t* offset = part.warp_offset.data();
+  std::int32_t* w00 = part.warp_weights[0].data();
+  std::int32_t* w01 = part.warp_weights[1].data();
+  std::int32_t* w10 = part.warp_weights[2].data();
+  std::int32_t* w11 = part.warp_weights[3].data();
   const float far = 2.0f * std::max(bg_width, bg_height);
   const int partial = kernels::warp_blocks(
-      {xn0, xnu, yn0, ynu, wn0, wnu, far, width, stride, last_column, last_row}, 0, blocks,
-      {left, top, whole, offset, w00, w01, w10, w11});
-  kernels::difference_row({row.a,    row.b,
-                           row.fb,   normalised_shift_,
-                           out,      background.data,
-                           stride,   left,
-                           top,      whole,
-                           offset,   w00,
-                           w01,      w10,
-                           w11,      blocks,
-                           width,    last_column,
-                           last_row, partial});
+      {xn0, xnu, yn0, ynu, wn0, wnu, far, width, stride, last_column, last_row}, first_block,
+      first_block + blocks, {left, top, whole, offset, w00, w01, w10, w11});
+  const auto j = static_cast<std::size_t>(first_block);
+  kernels::difference_row({row.a + u0,      row.b + u0, row.fb,      normalised_shift_, out + u0,
+                           background.data, stride,     left + j,    top + j,           whole + j,
+                           offset + j,      w00 + j,    w01 + j,     w10 + j,           w11 + j,
+                           blocks,          width - u0, last_column, last_row,          partial});
 }
 
 bool Frontend::water_glows(const ImageView& frame) const {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "pipeline/kernels/kernels.hpp"
 #include "pipeline/options.hpp"
@@ -21,6 +22,9 @@ void MaxValueDetector::reset(int width, int height) {
   first_row_.assign(width, 0);
   last_row_.assign(width, 0);
   sum_.assign(width, 0);
+  row_.assign(width, 0.0f);
+  snr_db_.assign(width, 0.0f);
+  parts_ = std::clamp(runner_->parts(), 1, kMaxParts);
 }
 
 void MaxValueDetector::detect(const ImageView& image, const FrameContext& frame, Profile& out) {
@@ -28,7 +32,30 @@ void MaxValueDetector::detect(const ImageView& image, const FrameContext& frame,
   const int width = image.width;
   if (!frame.laser_on || static_cast<int>(max_value_.size()) != width || image.height > 65535)
     return;
-  kernels::column_maxima(image.data, image.stride, 0, width, image.height, max_value_.data(),
+  // (In whole vectors of the widest target's: 64 columns.)
+  constexpr int kColumns = 64;
+  auto part = [&](int p) {
+    const auto [begin, end] = part_range((width + kColumns - 1) / kColumns, p, parts_);
+    if (begin < end) columns(image, begin * kColumns, std::min(end * kColumns, width));
+  };
+  if (parts_ > 1 && runner_->parts() == parts_) {
+    runner_->run(PartWork(part));
+  } else {
+    for (int p = 0; p < parts_; ++p)
+      part(p);
+  }
+  for (int u = 0; u < width; ++u) {
+    if (std::isnan(row_[u])) continue;
+    ProfilePoint point;
+    point.u = u;
+    point.v = row_[u];
+    point.snr_db = snr_db_[u];
+    if (!out.add(point)) break;
+  }
+}
+
+void MaxValueDetector::columns(const ImageView& image, int begin, int end) {
+  kernels::column_maxima(image.data, image.stride, begin, end, image.height, max_value_.data(),
                          first_row_.data(), last_row_.data(), sum_.data());
   const std::uint8_t* max_value = max_value_.data();
   const std::uint16_t* first_row = first_row_.data();
@@ -36,8 +63,9 @@ void MaxValueDetector::detect(const ImageView& image, const FrameContext& frame,
   const std::uint32_t* sum = sum_.data();
 
   const float inv_height = 1.0f / static_cast<float>(image.height);
-  for (int u = 0; u < width; ++u) {
+  for (int u = begin; u < end; ++u) {
     const int peak = max_value[u];
+    row_[u] = std::numeric_limits<float>::quiet_NaN();
     if (peak < threshold_ || peak == 0) continue;
     const int first = first_row[u];
     const int last = last_row[u];
@@ -53,11 +81,8 @@ void MaxValueDetector::detect(const ImageView& image, const FrameContext& frame,
                                      log_lut_[image.at(u, first + 1)]);
     }
     const float mean = std::max(static_cast<float>(sum[u]) * inv_height, 1.0f);
-    ProfilePoint point;
-    point.u = u;
-    point.v = v;
-    point.snr_db = 20.0f * std::log10(static_cast<float>(peak) / mean);
-    if (!out.add(point)) break;
+    row_[u] = v;
+    snr_db_[u] = 20.0f * std::log10(static_cast<float>(peak) / mean);
   }
 }
 

@@ -21,9 +21,14 @@ class MaxValueDetector final : public Detector {
     return static_cast<std::size_t>(width);
   }
   void reset(int width, int height) override;
+  // Parts: ranges of columns.
+  void use_parts(PartRunner& runner) override { runner_ = &runner; }
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override;
 
  private:
+  // Columns [begin, end): their points into row_ and snr_db_.
+  void columns(const ImageView& image, int begin, int end);
+
   int threshold_;
   std::array<float, 256> log_lut_{};
   // Per-column running state of the row-major scan (row-major is what the cache likes).
@@ -31,6 +36,10 @@ class MaxValueDetector final : public Detector {
   std::vector<std::uint16_t> first_row_;
   std::vector<std::uint16_t> last_row_;
   std::vector<std::uint32_t> sum_;
+  // Per column: its point's row and SNR (NaN: none), before they go into the profile in order.
+  std::vector<float> row_, snr_db_;
+  PartRunner* runner_ = &one_part();
+  int parts_ = 1;
 };
 
 }  // namespace laserline::pipeline

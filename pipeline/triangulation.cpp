@@ -50,6 +50,7 @@ class TriangulatingDetector final : public Detector {
     return detector_->max_points(width, height);
   }
   void reset(int width, int height) override { detector_->reset(width, height); }
+  void use_parts(PartRunner& runner) override { detector_->use_parts(runner); }
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override {
     detector_->detect(image, frame, out);
     triangulator_.fill(out);
