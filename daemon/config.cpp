@@ -460,6 +460,7 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
   c.image_slots = power_of_two(pipe, "image_slots", c.image_slots);
   c.frame_memory_limit_mb =
       pipe.integer("frame_memory_limit_mb", c.frame_memory_limit_mb, 16, 1 << 20);
+  c.worker_threads = pipe.integer("worker_threads", c.worker_threads, 1, pipeline::kMaxParts);
   pipe.finish();
 
   hal::YamlMap lcm = root.map("lcm");
