@@ -367,9 +367,26 @@ void Frontend::find_candidates(Profile& out) {
 void Frontend::collect_candidates(Profile& out) {
   out.clear();
   glowing_ = water_glows(current_);
-  roll(nullptr);
+  roll(nullptr);  // (and line_candidates_, see line_candidates())
   const int per_column = options_.max_candidates_per_column;
   for (int u = 0; u < width_; ++u) {
+    const LineCandidate* line = line_candidates_.data() + static_cast<std::size_t>(u) * per_column;
+    const int n = column_count_[u];
+    for (int i = 0; i < n; ++i) {
+      ProfilePoint point;
+      point.u = u;
+      point.v = line[i].position;
+      point.snr_db = line[i].snr_db;
+      point.valid = true;  // eligible, until validation or the line selection says otherwise
+      if (!out.add(point)) break;
+    }
+  }
+  collected_ = out.size();
+}
+
+void Frontend::line_candidates(int first, int end) {
+  const int per_column = options_.max_candidates_per_column;
+  for (int u = first; u < end; ++u) {
     Peak* best = column_best_.data() + static_cast<std::size_t>(u) * per_column;
     LineCandidate* line = line_candidates_.data() + static_cast<std::size_t>(u) * per_column;
     const int n = column_count_[u];
@@ -381,15 +398,8 @@ void Frontend::collect_candidates(Profile& out) {
       line[i].position = rows_.to_source_single(best[i].r);
       line[i].snr_db = kDecibelsPerNeper * std::log(best[i].snr);  // 20 log10 (cheaper)
       line[i].amplitude_db = kDecibelsPerNeper * std::log(std::max(best[i].band, 1e-3f));
-      ProfilePoint point;
-      point.u = u;
-      point.v = line[i].position;
-      point.snr_db = line[i].snr_db;
-      point.valid = true;  // eligible, until validation or the line selection says otherwise
-      if (!out.add(point)) break;
     }
   }
-  collected_ = out.size();
 }
 
 void Frontend::select_line(Profile& out) {

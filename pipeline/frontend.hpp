@@ -147,8 +147,11 @@ class Frontend {
  private:
   struct StageImages;
   // The pass down the rows: candidates into column_best_ / column_count_, and the intermediate
-  // rows into `images` where given. In 16- or 32-bit band-pass lanes (see the constructor).
+  // rows into `images` where given, in 16- or 32-bit band-pass lanes (see the constructor); then
+  // line_candidates() of every column.
   void roll(const StageImages* images);
+  // The candidates of columns [first, end) by row, as the line selection sees them.
+  void line_candidates(int first, int end);
   // work(part) for each part: by the runner, or one after another when the runner does not run
   // the parts reset() sized for (one part, or a runner given after reset()).
   template <class Work>

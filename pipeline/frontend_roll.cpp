@@ -407,6 +407,9 @@ void Frontend::roll(const StageImages* images) {
     } else {
       roll_wide(images, p);
     }
+    const Part& own = parts_[static_cast<std::size_t>(p)];
+    line_candidates(std::min(own.first_strip * kStripColumns, width_),
+                    std::min(own.end_strip * kStripColumns, width_));
   };
   run_parts(part);
 }
