@@ -39,7 +39,7 @@ TEST(WorkerPool, RunsEveryPartOnceEachOnItsOwnThreadAndStops) {
     std::vector<int> runs(static_cast<std::size_t>(parts), 0);  // each part's own counter
     std::vector<pthread_t> threads(static_cast<std::size_t>(parts));
     const pthread_t caller = pthread_self();
-    for (int stage = 0; stage < 2000; ++stage) {
+    for (int stage = 0; stage < 300; ++stage) {
       auto work = [&](int part) {
         ++runs[static_cast<std::size_t>(part)];
         threads[static_cast<std::size_t>(part)] = pthread_self();
