@@ -145,7 +145,8 @@ bool FramePath::start(std::string* error) {
   // Consumers first, so that nothing is produced before someone can take it.
   publisher_thread_ = std::thread([this] { publisher_loop(); });
   image_thread_ = std::thread([this] { image_loop(); });
-  parts_.start();
+  // The CPUs its threads are pinned to, else the process's.
+  parts_.start(config_.realtime ? static_cast<int>(config_.cpus.size()) : 0);
   worker_thread_ = std::thread([this] { worker_loop(); });
   camera_thread_ = std::thread([this] { camera_loop(); });
   for (auto [thread, spec] :

@@ -1,6 +1,7 @@
 #include "daemon/worker_pool.hpp"
 
 #include <linux/futex.h>
+#include <sched.h>
 #include <sys/syscall.h>
 #include <unistd.h>
 
@@ -52,8 +53,14 @@ WorkerPool::~WorkerPool() {
   stop();
 }
 
-void WorkerPool::start() {
+void WorkerPool::start(int cpus) {
   if (!helpers_.empty()) return;
+  if (cpus <= 0) {
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    cpus = sched_getaffinity(0, sizeof set, &set) == 0 ? CPU_COUNT(&set) : 1;
+  }
+  spin_ = parts_ <= cpus;
   stopping_.store(false, std::memory_order_relaxed);
   helpers_.reserve(static_cast<std::size_t>(parts_ - 1));
   // The stage they wait for is the next one from now (a helper that starts late must not take a
@@ -84,11 +91,11 @@ void WorkerPool::run(pipeline::PartWork work) {
   generation_.fetch_add(1, std::memory_order_seq_cst);  // publishes work_ and remaining_
   if (sleepers_.load(std::memory_order_seq_cst) > 0) wake_all(generation_);
   work(0);
-  const std::int64_t spin_until = hal::monotonic_ns() + kSpinNs;
+  const std::int64_t spin_until = spin_ ? hal::monotonic_ns() + kSpinNs : 0;
   for (int spin = 1;; ++spin) {
     const std::int32_t left = remaining_.load(std::memory_order_acquire);
     if (left == 0) break;
-    if (spin % kSpinsPerLook != 0 || hal::monotonic_ns() < spin_until) {
+    if (spin_ && (spin % kSpinsPerLook != 0 || hal::monotonic_ns() < spin_until)) {
       pause();
     } else {
       waiting_.store(true, std::memory_order_seq_cst);
@@ -101,9 +108,9 @@ void WorkerPool::run(pipeline::PartWork work) {
 void WorkerPool::helper_loop(int part, std::uint32_t seen) {
   while (true) {
     std::uint32_t now = seen;
-    const std::int64_t spin_until = hal::monotonic_ns() + kSpinNs;
+    const std::int64_t spin_until = spin_ ? hal::monotonic_ns() + kSpinNs : 0;
     for (int spin = 1; now == seen; ++spin) {
-      if (spin % kSpinsPerLook != 0 || hal::monotonic_ns() < spin_until) {
+      if (spin_ && (spin % kSpinsPerLook != 0 || hal::monotonic_ns() < spin_until)) {
         pause();
       } else {
         sleepers_.fetch_add(1, std::memory_order_seq_cst);

@@ -27,8 +27,10 @@ class WorkerPool final : public pipeline::PartRunner {
 
   int parts() const override { return parts_; }
   void run(pipeline::PartWork work) override;
-  // Makes the helper threads (allocates).
-  void start();
+  // Makes the helper threads (allocates). `cpus`: how many CPUs the threads may run on; with more
+  // threads than that they never spin (a spinning helper would keep a CPU the others need: at
+  // SCHED_FIFO until it sleeps), they sleep at once. 0: this process's CPUs.
+  void start(int cpus = 0);
   // Ends and joins them; run() must not be under way.
   void stop();
   // The helper threads (parts() - 1 once started), for names and priorities.
@@ -39,6 +41,7 @@ class WorkerPool final : public pipeline::PartRunner {
   void helper_loop(int part, std::uint32_t seen);
 
   const int parts_;
+  bool spin_ = true;  // wait by spinning first (enough CPUs for every thread)
   std::vector<std::thread> helpers_;
   // The stage under way (valid while its generation is the current one).
   const pipeline::PartWork* work_ = nullptr;
