@@ -311,6 +311,8 @@ void check_frame_path(const DaemonConfig& config, const hal::FrameFormat& format
                            " MB: fewer slots, a smaller camera or a higher limit");
   }
   // The detector's own refusal (e.g. a frame smaller than its filters), as the start meets it.
+  // (Sized in as many parts as worker_threads, as the frame path will run it.)
+  detector.use_parts(pipeline::sequential_parts(config.worker_threads));
   const std::uint64_t before = heap_in_use();
   try {
     detector.reset(format.width, format.height);

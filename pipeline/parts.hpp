@@ -50,10 +50,19 @@ class SequentialParts final : public PartRunner {
   int parts_;
 };
 
-// One part: sequential, shared by every detector not given a runner (it has no state).
+// `parts` parts one after another (at most kMaxParts), shared (they have no state): e.g. to size a
+// detector as that many threads will run it.
+inline PartRunner& sequential_parts(int parts) {
+  static SequentialParts runners[kMaxParts] = {
+      SequentialParts(1), SequentialParts(2), SequentialParts(3), SequentialParts(4),
+      SequentialParts(5), SequentialParts(6), SequentialParts(7), SequentialParts(8)};
+  static_assert(kMaxParts == 8);
+  return runners[parts < 1 ? 0 : parts > kMaxParts ? kMaxParts - 1 : parts - 1];
+}
+
+// One part: every detector's runner until it is given one.
 inline PartRunner& one_part() {
-  static SequentialParts one;
-  return one;
+  return sequential_parts(1);
 }
 
 // Part `part` of `parts` of the items [0, count): [first, end), as even as can be.
