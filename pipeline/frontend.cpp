@@ -188,10 +188,11 @@ void Frontend::reset(int width, int height) {
   const auto ring = static_cast<std::size_t>(ring_stride_);
   const auto s = static_cast<std::size_t>(normalised_stride_);
   band_most_.assign(static_cast<std::size_t>(strips * (band_ring_rows_ + 1)), 0);
-  // Each strip's rings end with a row of zeros (the rows beyond the ends); the last, with a
-  // register's lanes more for the noise sums to read past it.
-  const auto band_ring =
-      static_cast<std::size_t>(strips * (band_ring_rows_ + 1)) * ring + kernels::kWindowLanes;
+  // Each strip's rings end with a row of zeros (the rows beyond the ends), and a register's lanes
+  // more for the noise sums to read past it (not into the next strip's ring, which another part
+  // may be writing).
+  band_strip_size_ = static_cast<std::size_t>(band_ring_rows_ + 1) * ring + kernels::kWindowLanes;
+  const auto band_ring = static_cast<std::size_t>(strips) * band_strip_size_;
   narrow_.assign(narrow_band_ ? band_ring : 0, narrow_band_ ? strips * ring : 0);
   wide_.assign(narrow_band_ ? 0 : band_ring, narrow_band_ ? 0 : strips * ring);
   // Each part: a range of strips, and the warp blocks of the normalised columns they read (their

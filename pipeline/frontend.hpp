@@ -282,6 +282,7 @@ class Frontend {
   // row), and per strip the band-pass rows (ring_stride_ values per row, and after the last row a
   // row of zeros); the per-strip sums are as wide.
   int normalised_ring_rows_ = 0, band_ring_rows_ = 0, ring_stride_ = 0;
+  std::size_t band_strip_size_ = 0;  // values of a strip's band-pass ring
   // Normalised rows: zeros on either side of the image's columns, `normalised_pad_` on the left.
   int normalised_pad_ = 0, normalised_stride_ = 0;
   PartRunner* runner_ = &one_part();

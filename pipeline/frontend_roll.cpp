@@ -385,7 +385,7 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
       strip.most = band_most_.data() + static_cast<std::size_t>(s) * (band_ring_rows_ + 1);
       strip.inner = rings.inner.data() + state;
       strip.outer = rings.outer.data() + state;
-      strip.band_ring = rings.band.data() + state * static_cast<std::size_t>(band_ring_rows_ + 1);
+      strip.band_ring = rings.band.data() + static_cast<std::size_t>(s) * band_strip_size_;
       strip.band_rows = part.band_rows.data();
       strip.band_slots = part.band_slots.data();
       strip.band_base = band_base;

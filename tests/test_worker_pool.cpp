@@ -1,8 +1,8 @@
 // The threads sharing a frame's detection (daemon/worker_pool.hpp, pipeline.worker_threads): every
-// part run once per stage, on its own thread, the same profiles as one thread, a clean stop; and
-// the daemon's frame path with worker_threads 2 on the simulator's frames (the memory camera,
-// paced by the frame path so that no frame is lost): every frame processed, the profiles those of
-// one thread to the bit, the laser off at the end.
+// part run once per stage, on its own thread, every detector's profiles those of one thread, a
+// clean stop; and the daemon's frame path with worker_threads 2 on the simulator's frames (the
+// memory camera, paced by the frame path so that no frame is lost): every frame processed, the
+// profiles those of one thread to the bit, the laser off at the end.
 #include "daemon/worker_pool.hpp"
 
 #include <gtest/gtest.h>
@@ -75,7 +75,7 @@ TEST(WorkerPool, StopsWhileItsHelpersSleep) {
   EXPECT_TRUE(pool.helpers().empty());
 }
 
-TEST(WorkerPool, BackgroundGivesTheProfilesOfOneThread) {
+TEST(WorkerPool, EveryDetectorGivesTheProfilesOfOneThread) {
   for (const tools::Scenario& s : tools::standard_scenarios(640, 480)) {
     if (s.name != "ambient") continue;
     hal::SimScene scene(s.scene);
@@ -87,33 +87,37 @@ TEST(WorkerPool, BackgroundGivesTheProfilesOfOneThread) {
     }
     pipeline::DetectorOptions options;
     options.geometry = daemon::scanner_geometry(s.scene.calibration);
-    auto detect_all = [&](pipeline::PartRunner& runner) {
-      const auto detector = pipeline::make_detector("background", options);
-      detector->use_parts(runner);
-      detector->reset(format.width, format.height);
-      std::vector<pipeline::Profile> profiles;
-      for (std::size_t i = 0; i < frames.size(); ++i) {
-        profiles.emplace_back(detector->max_points(format.width, format.height));
-        detector->detect({frames[i].data(), format.width, format.height, format.stride}, {i, true},
-                         profiles.back());
-      }
-      return profiles;
-    };
-    pipeline::SequentialParts one;
-    const std::vector<pipeline::Profile> reference = detect_all(one);
-    for (int parts : {2, 3}) {
-      daemon::WorkerPool pool(parts);
-      pool.start();
-      const std::vector<pipeline::Profile> split = detect_all(pool);
-      pool.stop();
-      for (std::size_t i = 0; i < reference.size(); ++i) {
-        ASSERT_EQ(split[i].size(), reference[i].size()) << parts << " threads, frame " << i;
-        ASSERT_GT(reference[i].size(), 0u);
-        for (std::size_t k = 0; k < reference[i].size(); ++k) {
-          const pipeline::ProfilePoint& p = reference[i].points()[k];
-          const pipeline::ProfilePoint& q = split[i].points()[k];
-          ASSERT_TRUE(p.u == q.u && std::memcmp(&p.v, &q.v, sizeof p.v) == 0 && p.valid == q.valid)
-              << parts << " threads, frame " << i << " point " << k;
+    for (const std::string& name : pipeline::detector_names()) {
+      auto detect_all = [&](pipeline::PartRunner& runner) {
+        const auto detector = pipeline::make_detector(name, options);
+        detector->use_parts(runner);
+        detector->reset(format.width, format.height);
+        std::vector<pipeline::Profile> profiles;
+        for (std::size_t i = 0; i < frames.size(); ++i) {
+          profiles.emplace_back(detector->max_points(format.width, format.height));
+          detector->detect({frames[i].data(), format.width, format.height, format.stride},
+                           {i, true}, profiles.back());
+        }
+        return profiles;
+      };
+      pipeline::SequentialParts one;
+      const std::vector<pipeline::Profile> reference = detect_all(one);
+      for (int parts : {2, 3}) {
+        daemon::WorkerPool pool(parts);
+        pool.start();
+        const std::vector<pipeline::Profile> split = detect_all(pool);
+        pool.stop();
+        for (std::size_t i = 0; i < reference.size(); ++i) {
+          ASSERT_EQ(split[i].size(), reference[i].size())
+              << name << ", " << parts << " threads, frame " << i;
+          ASSERT_GT(reference[i].size(), 0u) << name;
+          for (std::size_t k = 0; k < reference[i].size(); ++k) {
+            const pipeline::ProfilePoint& p = reference[i].points()[k];
+            const pipeline::ProfilePoint& q = split[i].points()[k];
+            ASSERT_TRUE(p.u == q.u && std::memcmp(&p.v, &q.v, sizeof p.v) == 0 &&
+                        p.valid == q.valid)
+                << name << ", " << parts << " threads, frame " << i << " point " << k;
+          }
         }
       }
     }
