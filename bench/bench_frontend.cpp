@@ -12,6 +12,7 @@
 //                      (parallel_ms) and outside (serial_ms), and what Amdahl's law makes of them
 //                      for 2, 4 and 8 threads (speedup_<n>)
 //   frontend_fir_detector: the `fir` detector (no background subtraction)
+//   frontend_fir_region/<percent>: `fir` searching the middle <percent> of the columns and rows
 //   frontend_validation_stages/<association>: Section IV on the candidates `background` gives on
 //                      the pier scenario (segments, chain codes or image patches, matching,
 //                      back-projection), 0 = chain_code, 1 = image_features
@@ -90,7 +91,7 @@ struct Frames {
     const cv::Matx33d r(1, 0, 0, 0, std::cos(a), -std::sin(a), 0, std::sin(a), std::cos(a));
     const cv::Matx33d h = k * r * k.inv();
     for (int i = 0; i < 9; ++i)
-      current_to_previous.h[i] = h.val[i];
+      current_to_previous.h(i) = h.val[i];
   }
 };
 
@@ -137,7 +138,7 @@ void BM_naive_opencv_stages(benchmark::State& state) {
   const cv::Mat current(kHeight, kWidth, CV_8UC1, const_cast<std::uint8_t*>(f.current.data()));
   cv::Matx33d h;
   for (int i = 0; i < 9; ++i)
-    h.val[i] = f.current_to_previous.h[i];
+    h.val[i] = f.current_to_previous.h(i);
   cv::Mat map_x(rows.rows(), kWidth, CV_32FC1), map_y(rows.rows(), kWidth, CV_32FC1);
   for (int r = 0; r < rows.rows(); ++r) {
     for (int u = 0; u < kWidth; ++u) {
@@ -340,6 +341,24 @@ void BM_frontend_fir_detector(benchmark::State& state) {
 }
 BENCHMARK(BM_frontend_fir_detector)->Unit(benchmark::kMillisecond);
 
+// `fir` searching a region of the frame (DetectionRegion): the middle half of the columns and of
+// the rows (argument 50: a quarter of the frame), or the whole frame (100).
+void BM_frontend_fir_region(benchmark::State& state) {
+  const Frames& f = frames();
+  pipeline::FirDetector detector(bench_options());
+  detector.reset(kWidth, kHeight);
+  const auto percent = static_cast<int>(state.range(0));
+  const int width = kWidth * percent / 100, height = kHeight * percent / 100;
+  detector.set_region({(kWidth - width) / 2, (kHeight - height) / 2, width, height});
+  pipeline::Profile profile(detector.max_points(kWidth, kHeight));
+  for (auto _ : state) {
+    detector.detect(view(f.current), {}, profile);
+    benchmark::DoNotOptimize(profile.points().data());
+  }
+  state.counters["points"] = static_cast<double>(profile.size());
+}
+BENCHMARK(BM_frontend_fir_region)->Arg(100)->Arg(50)->Arg(25)->Unit(benchmark::kMillisecond);
+
 // The search image alone for the mountings below (the frame transposed, or resampled on a grid
 // turned 30 degrees that holds the whole frame), beside OpenCV's transpose and warpAffine
 // (bilinear, edge replicated) making the same image.
@@ -434,7 +453,7 @@ struct ValidationFrames {
   std::vector<std::vector<std::uint8_t>> pixels;
   std::vector<pipeline::Profile> candidates;
   std::vector<pipeline::PairMotion> motion;
-  std::vector<std::array<double, 9>> homography;
+  std::vector<pipeline::Homography> homography;
 
   ValidationFrames() {
     const hal::SimSceneOptions scene = pier_scene();
@@ -460,7 +479,7 @@ struct ValidationFrames {
       m.translation = e.camera.translation;
       m.relative_scale = e.camera.relative_scale;
       motion.push_back(m);
-      homography.push_back(e.previous_to_current.h);
+      homography.push_back(e.previous_to_current);
     }
   }
 };

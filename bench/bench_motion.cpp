@@ -201,13 +201,11 @@ std::vector<laserline::pipeline::FeatureTrack> pier_tracks(
   return {estimator.tracks().begin(), estimator.tracks().end()};
 }
 
-void BM_frontend_essential_ransac(benchmark::State& state) {
-  const int width = static_cast<int>(state.range(0)), height = static_cast<int>(state.range(1));
-  const laserline::hal::SimSceneOptions options = pier_options(width, height);
-  // Argument 2: percent of the tracks made outliers (moved anywhere): at 50 %, RANSAC needs more
-  // samples than essential_ransac_iterations and runs them all, the worst case.
+// The pier tracks with the first `outlier_percent` % of them made outliers (moved anywhere).
+std::vector<laserline::pipeline::FeatureTrack> pier_tracks_with_outliers(
+    const laserline::hal::SimSceneOptions& options, std::int64_t outlier_percent) {
+  const int width = options.calibration.camera.width, height = options.calibration.camera.height;
   std::vector<laserline::pipeline::FeatureTrack> tracks = pier_tracks(options);
-  const std::int64_t outlier_percent = state.range(2);
   std::uint64_t random = 12345;
   for (std::size_t i = 0; i < tracks.size(); ++i) {
     if (static_cast<std::int64_t>(i * 100 / tracks.size()) >= outlier_percent) continue;
@@ -215,6 +213,16 @@ void BM_frontend_essential_ransac(benchmark::State& state) {
     tracks[i].u = static_cast<float>((random >> 33) % static_cast<std::uint64_t>(width));
     tracks[i].v = static_cast<float>((random >> 13) % static_cast<std::uint64_t>(height));
   }
+  return tracks;
+}
+
+// Argument 2 of both essential benchmarks: percent of the tracks made outliers. At 50 %, RANSAC
+// needs more samples than essential_ransac_iterations and runs them all, the worst case.
+void BM_frontend_essential_ransac(benchmark::State& state) {
+  const int width = static_cast<int>(state.range(0)), height = static_cast<int>(state.range(1));
+  const laserline::hal::SimSceneOptions options = pier_options(width, height);
+  const std::vector<laserline::pipeline::FeatureTrack> tracks =
+      pier_tracks_with_outliers(options, state.range(2));
   laserline::pipeline::CameraMotionEstimator estimator;
   estimator.reset(geometry_of(options), static_cast<int>(tracks.size()));
   laserline::pipeline::CameraMotion motion;
@@ -231,6 +239,7 @@ void BM_frontend_essential_ransac(benchmark::State& state) {
 }
 BENCHMARK(BM_frontend_essential_ransac)
     ->Args({2048, 1536, 0})
+    ->Args({2048, 1536, 25})
     ->Args({2048, 1536, 50})
     ->Unit(benchmark::kMillisecond);
 
@@ -239,7 +248,8 @@ BENCHMARK(BM_frontend_essential_ransac)
 void BM_naive_essential_ransac(benchmark::State& state) {
   const int width = static_cast<int>(state.range(0)), height = static_cast<int>(state.range(1));
   const laserline::hal::SimSceneOptions options = pier_options(width, height);
-  const std::vector<laserline::pipeline::FeatureTrack> tracks = pier_tracks(options);
+  const std::vector<laserline::pipeline::FeatureTrack> tracks =
+      pier_tracks_with_outliers(options, state.range(2));
   const laserline::hal::CameraIntrinsics& cam = options.calibration.camera;
   const cv::Matx33d k(cam.fx, 0, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1);
   std::vector<cv::Point2d> from, to;
@@ -267,6 +277,10 @@ void BM_naive_essential_ransac(benchmark::State& state) {
   state.counters["inliers"] = inliers;
   state.counters["tracks"] = static_cast<double>(tracks.size());
 }
-BENCHMARK(BM_naive_essential_ransac)->Args({2048, 1536})->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_naive_essential_ransac)
+    ->Args({2048, 1536, 0})
+    ->Args({2048, 1536, 25})
+    ->Args({2048, 1536, 50})
+    ->Unit(benchmark::kMillisecond);
 
 }  // namespace

@@ -1,6 +1,5 @@
 #include "daemon/backends.hpp"
 
-#include "daemon/lcm_camera.hpp"
 #include "hal/registry.hpp"
 
 namespace laserline::daemon {
@@ -17,7 +16,6 @@ std::string join(const std::vector<std::string>& names) {
 }  // namespace
 
 Backends create_backends(DaemonConfig& config) {
-  register_lcm_camera();
   Backends b;
   b.laser = hal::make_laser(config.laser_backend, config.laser_options);
   if (!b.laser) {

@@ -1,5 +1,7 @@
 #include "daemon/command.hpp"
 
+#include <cerrno>
+#include <climits>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -31,6 +33,24 @@ double number_of(const std::string& text) {
   const double value = std::strtod(text.c_str(), &end);
   if (end != text.c_str() + text.size() || !std::isfinite(value)) return NAN;
   return value;
+}
+
+// "x,y,width,height" (whole numbers) into *region; false when the text is not that.
+bool region_of(const std::string& text, pipeline::DetectionRegion* region) {
+  int values[4] = {};
+  const char* at = text.c_str();
+  for (int i = 0; i < 4; ++i) {
+    char* end = nullptr;
+    errno = 0;
+    const long value = std::strtol(at, &end, 10);
+    if (end == at || errno != 0 || value < INT_MIN || value > INT_MAX) return false;
+    values[i] = static_cast<int>(value);
+    at = end;
+    if (i < 3 && *at++ != ',') return false;
+  }
+  if (*at != '\0') return false;
+  *region = {values[0], values[1], values[2], values[3]};
+  return true;
 }
 
 }  // namespace
@@ -126,17 +146,34 @@ bool parse_command(const laserline::command_t& message, const DaemonConfig& conf
     }
     return true;
   }
+  if (name == "detector.roi") {
+    c.kind = CommandKind::kRegion;
+    if (message.value.empty() || message.value == "full") {
+      c.region = {};
+      return true;
+    }
+    if (!region_of(message.value, &c.region)) {
+      return refuse(name + ": expected x,y,width,height in pixels (or full), got '" +
+                    printable(message.value) + "'");
+    }
+    const hal::FrameFormat format = camera.format();
+    try {
+      c.region.validate(format.width, format.height);
+    } catch (const pipeline::OptionError& e) {
+      return refuse(name + ": " + e.problem());
+    }
+    return true;
+  }
   if (is_camera_setting(name)) {
     c.kind = CommandKind::kCamera;
     const std::string problem = camera.check_setting(c.setting);
     if (!problem.empty()) return refuse(problem);
     return true;
   }
-  return refuse(
-      "'" + printable(name) +
-      "' is not a setting (exposure_us, gain_db, frame_rate_hz, laser.mode, "
-      "detector.maxvalue.threshold, detector.frontend.snr_threshold_db, genicam:<Feature>, "
-      "v4l2:<control>, get)");
+  return refuse("'" + printable(name) +
+                "' is not a setting (exposure_us, gain_db, frame_rate_hz, laser.mode, "
+                "detector.maxvalue.threshold, detector.frontend.snr_threshold_db, detector.roi, "
+                "genicam:<Feature>, v4l2:<control>, get)");
 }
 
 }  // namespace laserline::daemon

@@ -18,6 +18,7 @@ enum class CommandKind : std::uint8_t {
   kLaserMode,  // laser.mode
   kThreshold,  // detector.maxvalue.threshold, detector.frontend.snr_threshold_db
   kGet,        // every value in force
+  kRegion,     // detector.roi: the worker sets it on its detector
 };
 
 // One command on its way to the thread that carries it out and back with its result. Fixed
@@ -31,6 +32,9 @@ struct Command {
   // kThreshold: the detector with the new threshold, built and sized by the command thread; the
   // worker puts it in place and hands back the one it replaced here.
   pipeline::Detector* detector = nullptr;
+  // kRegion: the region to search (whole(): the whole frame); back from the worker, the region
+  // its detector searches now.
+  pipeline::DetectionRegion region;
   hal::SettingResult result;
 };
 
@@ -40,7 +44,8 @@ struct Command {
 // takes. Camera settings are checked by `camera` against the ranges its configuration takes
 // (Camera::check_setting); laser.mode "pattern" needs the configuration's laser.pattern; a
 // threshold must be the configured detector's and is checked by the pipeline's own validation,
-// *options being `detector_options` (those in force) with it changed.
+// *options being `detector_options` (those in force) with it changed; detector.roi is
+// "x,y,width,height" inside the camera's frame, or "full" (or empty) for the whole frame.
 bool parse_command(const laserline::command_t& message, const DaemonConfig& config,
                    const hal::Camera& camera, const pipeline::DetectorOptions& detector_options,
                    Command* out, pipeline::DetectorOptions* options, std::string* reason);

@@ -25,6 +25,7 @@ CommandServer::CommandServer(const DaemonConfig& config, lcm::LCM& lcm, FramePat
       path_(path),
       camera_(camera),
       detector_options_(config.detector_options),
+      submitted_roi_(config.detector_options.roi),
       problems_("laserlined: " + config.command_channel + ": "),
       refusals_("laserlined: ") {}
 
@@ -71,6 +72,8 @@ void CommandServer::receive(const lcm::ReceiveBuffer& buffer) {
     return;
   }
   if (command.kind == CommandKind::kThreshold) {
+    // The region last sent to the worker: it reaches the detector in place before this one.
+    options.roi = submitted_roi_;
     std::unique_ptr<pipeline::Detector> detector;
     try {
       detector = pipeline::make_detector(config_.detector, options);
@@ -97,7 +100,9 @@ void CommandServer::receive(const lcm::ReceiveBuffer& buffer) {
                             FramePath::kCommandSlots);
     command.result.accepted = false;
     answer(command);
+    return;
   }
+  if (command.kind == CommandKind::kRegion) submitted_roi_ = command.region;
 }
 
 void CommandServer::run() {
@@ -114,6 +119,11 @@ void CommandServer::run() {
   }
 }
 
+std::string CommandServer::region_in_force() const {
+  const hal::FrameFormat format = camera_.format();
+  return detector_options_.roi.in_frame(format.width, format.height).text();
+}
+
 void CommandServer::answer(const Command& given) {
   Command command = given;
   hal::SettingResult& r = command.result;
@@ -126,11 +136,18 @@ void CommandServer::answer(const Command& given) {
       hal::write_setting_text(r.in_force,
                               threshold_value(config_.detector, detector_options_).c_str());
     }
+  } else if (command.kind == CommandKind::kRegion) {
+    hal::write_setting_text(r.old_value, region_in_force().c_str());
+    if (r.accepted) {
+      detector_options_.roi = command.region;  // as the worker read it back
+      hal::write_setting_text(r.in_force, command.region.text().c_str());
+    }
   } else if (command.kind == CommandKind::kGet && r.accepted) {
     const std::size_t used = std::strlen(r.in_force);
-    hal::write_setting_line(std::span<char>(r.in_force).subspan(used), " %s=%s",
+    hal::write_setting_line(std::span<char>(r.in_force).subspan(used), " %s=%s detector.roi=%s",
                             threshold_name(config_.detector),
-                            threshold_value(config_.detector, detector_options_).c_str());
+                            threshold_value(config_.detector, detector_options_).c_str(),
+                            region_in_force().c_str());
   }
   if (r.accepted && command.kind != CommandKind::kGet) {
     log(LogLevel::kInfo, "laserlined: command %lld from '%s': %s %s -> %s",

@@ -20,10 +20,11 @@ namespace laserline::daemon {
 // its reason; any other once the camera thread carried it out (FramePath::submit_command), with
 // the value read back from the device. A threshold change builds a new detector here (sized for
 // the camera's frames, which allocates) and hands it to the worker (FramePath::submit_detector);
-// it starts without the history of earlier frames the old one kept. Every change is logged with its
-// old and new values, every refusal with its reason (at a limited rate per setting); a message
-// that is no command_t is counted (status_t.bad_messages), reported at a limited rate and
-// otherwise ignored.
+// it starts without the history of earlier frames the old one kept. A change of detector.roi goes
+// to the worker, which sets it on the detector in place (only bounds: it keeps its history). Every
+// change is logged with its old and new values, every refusal with its reason (at a limited rate
+// per setting); a message that is no command_t is counted (status_t.bad_messages), reported at a
+// limited rate and otherwise ignored.
 //
 // Its own thread receives (lcm handle) and answers; the instance is the daemon's, which the
 // publisher thread publishes on meanwhile (LCM allows that). A file:// URL (the daemon writing a
@@ -48,6 +49,8 @@ class CommandServer {
   void receive(const lcm::ReceiveBuffer& buffer);
   void run();
   void answer(const Command& given);
+  // detector.roi in force, resolved to the camera's frame: "x,y,width,height".
+  std::string region_in_force() const;
 
   const DaemonConfig& config_;
   lcm::LCM& lcm_;
@@ -55,6 +58,7 @@ class CommandServer {
   const hal::Camera& camera_;
   pipeline::DetectorOptions detector_options_;  // in force
   pipeline::DetectorOptions pending_options_;   // of the threshold change under way
+  pipeline::DetectionRegion submitted_roi_;     // the last detector.roi sent to the worker
   lcm::Subscription* subscription_ = nullptr;
   messages::ProblemLog problems_;  // messages that are no command_t
   messages::ProblemLog refusals_;  // commands refused, by setting

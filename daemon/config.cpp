@@ -123,6 +123,18 @@ std::string describe_sheet(const hal::LaserMount& laser) {
 }  // namespace
 
 void read_detector_options(hal::YamlMap& detector, pipeline::DetectorOptions& options) {
+  // Checked against the frame by the pipeline once the calibration is known (parse_config()).
+  const std::vector<double> roi = detector.numbers("roi", {4});
+  if (!roi.empty()) {
+    for (double v : roi) {
+      if (v != std::floor(v) || std::fabs(v) > 1e9) {
+        detector.fail("roi", "expected [x, y, width, height] in whole pixels");
+      }
+    }
+    options.roi = {static_cast<int>(roi[0]), static_cast<int>(roi[1]), static_cast<int>(roi[2]),
+                   static_cast<int>(roi[3])};
+  }
+
   hal::YamlMap maxvalue = detector.map("maxvalue");
   read(maxvalue, "threshold", options.maxvalue_threshold);
   checked(maxvalue, [&] { pipeline::validate_maxvalue_threshold(options.maxvalue_threshold); });
@@ -143,6 +155,7 @@ void read_detector_options(hal::YamlMap& detector, pipeline::DetectorOptions& op
   hal::YamlMap selection = frontend.map("selection");
   l.enabled = selection.boolean("enabled", l.enabled);
   read(selection, "restart_cost_db", l.restart_cost_db);
+  read(selection, "amplitude_cap_db", l.amplitude_cap_db);
   read(selection, "jump_free_px", l.jump_free_px);
   read(selection, "jump_cost_db_per_px", l.jump_cost_db_per_px);
   read(selection, "gap_cost_db", l.gap_cost_db);
@@ -443,8 +456,11 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
   hal::YamlMap detector = root.map("detector");
   c.detector = detector.choice("name", c.detector, pipeline::detector_names());
   read_detector_options(detector, c.detector_options);
-  detector.finish();
   c.detector_options.geometry = scanner_geometry(c.calibration);
+  checked(detector, [&] {
+    c.detector_options.roi.validate(c.calibration.camera.width, c.calibration.camera.height);
+  });
+  detector.finish();
 
   hal::YamlMap realtime = root.map("realtime");
   c.realtime = realtime.boolean("enabled", c.realtime);

@@ -7,7 +7,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <cstring>
 
 #include "daemon/thread_priorities.hpp"
@@ -84,6 +83,7 @@ FramePath::FramePath(const DaemonConfig& config, hal::Camera& camera, hal::Laser
       strobe_(laser.strobe()),
       detector_(&detector),
       lcm_(lcm),
+      commands_(camera, counters_.camera_state),
       parts_(config.worker_threads) {}
 
 FramePath::~FramePath() {
@@ -238,26 +238,18 @@ void FramePath::camera_loop() {
   std::uint64_t grab_index = 0;
   const bool lossless = camera_.paced_by_consumer();
   bool frames_flowing = true;  // until a grab fails; the laser stays off until frames return
-  // The last switch this thread made: time and the grab it was for. Each frame carries its time,
-  // so a frame whose exposure began before its switch is known (and counted) as uncertain.
-  hal::LaserSwitch last_switch;
   LaserMode laser_mode = config_.laser_mode;
-  // With a strobe line: the last switches, against which each frame's exposure decides its
-  // laser state, and the matching of frames to the strobe's exposures.
-  hal::LaserSwitchHistory switches;
-  hal::ExposureMatcher matcher;
-  const auto match_tolerance_ns = static_cast<std::int64_t>(0.25e9 / config_.frame_rate_hz);
+  hal::FrameLaserDecider laser_decider(strobe_, config_.frame_rate_hz);
   auto switch_recorded = [&](bool on) {
     hal::LaserSwitch record;
     record.mono_ns = 0;
     switch_laser(on, grab_index, &record);
     if (record.mono_ns == 0) return;  // refused: is_on() says on, the next frame tries again
-    last_switch = record;
-    switches.add(record);
+    laser_decider.switched(record);
   };
 
   while (!stopping_.load(std::memory_order_relaxed)) {
-    run_commands(laser_mode, frames_flowing, grab_index);
+    commands_.run_camera_commands(laser_mode, frames_flowing, grab_index);
     const bool want_laser = frames_flowing && desired_laser(laser_mode, grab_index);
     if (want_laser != laser_.is_on()) switch_recorded(want_laser);
 
@@ -270,33 +262,13 @@ void FramePath::camera_loop() {
     const hal::GrabStatus status = camera_.grab(pixels, info, timeout);
     switch (status) {
       case hal::GrabStatus::kOk: {
-        info.laser_switch_mono_ns = last_switch.mono_ns;
-        info.exposure_start_mono_ns = 0;
-        info.exposure_end_mono_ns = 0;
-        hal::ExposureInterval exposure;
-        const bool own_switch = last_switch.for_frame == grab_index && last_switch.mono_ns != 0;
-        if (strobe_ != nullptr &&
-            matcher.match(strobe_->history(), info.camera_ns, info.arrival_mono_ns,
-                          match_tolerance_ns, &exposure)) {
-          // Exact: the switch times against the exposure's edges. A partly lit frame counts as
-          // lit: it must not serve as a laser-off background.
-          info.exposure_start_mono_ns = exposure.start_mono_ns;
-          info.exposure_end_mono_ns = exposure.end_mono_ns;
-          const hal::LaserExposure lit =
-              switches.during(exposure.start_mono_ns, exposure.end_mono_ns);
-          if (lit != hal::LaserExposure::kUnknown) info.laser_on = lit != hal::LaserExposure::kOff;
-          if (lit == hal::LaserExposure::kMixed ||
-              (own_switch && last_switch.mono_ns > exposure.start_mono_ns)) {
-            counters_.laser_late_switches.fetch_add(1, std::memory_order_relaxed);
-          }
-          counters_.strobe_matched.fetch_add(1, std::memory_order_relaxed);
-        } else {
-          // The estimate: the camera's timestamp mapped to the host clock.
-          if (own_switch && last_switch.mono_ns > info.exposure_mono_ns) {
-            counters_.laser_late_switches.fetch_add(1, std::memory_order_relaxed);
-          }
-          if (strobe_ != nullptr)
-            counters_.strobe_unmatched.fetch_add(1, std::memory_order_relaxed);
+        const hal::FrameLaserDecider::Decision decided = laser_decider.decide(info, grab_index);
+        if (decided.late_switch) {
+          counters_.laser_late_switches.fetch_add(1, std::memory_order_relaxed);
+        }
+        if (strobe_ != nullptr) {
+          (decided.matched ? counters_.strobe_matched : counters_.strobe_unmatched)
+              .fetch_add(1, std::memory_order_relaxed);
         }
         ++grab_index;
         frames_flowing = true;
@@ -312,14 +284,14 @@ void FramePath::camera_loop() {
       }
       case hal::GrabStatus::kTimeout:
         frames_flowing = false;
-        if (strobe_ != nullptr) matcher.restart(strobe_->history());
+        laser_decider.frames_stopped();
         if (laser_.is_on()) switch_recorded(false);
         counters_.grab_timeouts.fetch_add(1, std::memory_order_relaxed);
         counters_.camera_state.store(CameraState::kTimeout, std::memory_order_relaxed);
         break;
       case hal::GrabStatus::kError:
         frames_flowing = false;
-        if (strobe_ != nullptr) matcher.restart(strobe_->history());
+        laser_decider.frames_stopped();
         if (laser_.is_on()) switch_recorded(false);
         counters_.grab_errors.fetch_add(1, std::memory_order_relaxed);
         counters_.camera_state.store(CameraState::kError, std::memory_order_relaxed);
@@ -341,106 +313,6 @@ void FramePath::camera_loop() {
   counters_.camera_state.store(CameraState::kStopped, std::memory_order_relaxed);
 }
 
-bool FramePath::submit_command(const Command& command) {
-  SpscRing<Command>& ring = command.kind == CommandKind::kThreshold ? worker_commands_ : commands_;
-  Command* slot = ring.try_claim();
-  if (slot == nullptr) return false;
-  *slot = command;
-  ring.publish();
-  return true;
-}
-
-bool FramePath::submit_detector(const Command& command,
-                                std::unique_ptr<pipeline::Detector> detector) {
-  if (pending_detector_ != nullptr) return false;
-  Command with = command;
-  with.detector = detector.get();
-  if (!submit_command(with)) return false;
-  pending_detector_ = std::move(detector);
-  return true;
-}
-
-bool FramePath::take_command_result(Command* command) {
-  for (SpscRing<Command>* ring : {&command_results_, &worker_results_}) {
-    Command* slot = ring->front();
-    if (slot == nullptr) continue;
-    *command = *slot;
-    ring->pop();
-    if (command->kind == CommandKind::kThreshold) {
-      // The worker put the pending detector in place and no longer touches the one it replaced:
-      // that one is freed here, unless it is the one this path was built with (its owner's).
-      current_detector_ = std::move(pending_detector_);
-      command->detector = nullptr;
-    }
-    return true;
-  }
-  return false;
-}
-
-void FramePath::run_worker_commands() {
-  while (Command* command = worker_commands_.front()) {
-    Command* result = worker_results_.try_claim();
-    if (result == nullptr) return;
-    *result = *command;
-    worker_commands_.pop();
-    // The replacement was built and sized (reset) for this frame size by the command thread.
-    std::swap(detector_, result->detector);
-    result->result.accepted = true;
-    worker_results_.publish();
-  }
-}
-
-void FramePath::run_commands(LaserMode& mode, bool frames_flowing, std::uint64_t grab_index) {
-  // A command stays queued until its result has room to go back.
-  while (Command* command = commands_.front()) {
-    Command* result = command_results_.try_claim();
-    if (result == nullptr) return;
-    *result = *command;
-    commands_.pop();
-    run_command(*result, mode, frames_flowing, grab_index);
-    command_results_.publish();
-  }
-}
-
-void FramePath::run_command(Command& command, LaserMode& mode, bool frames_flowing,
-                            std::uint64_t grab_index) {
-  hal::SettingResult& r = command.result;
-  switch (command.kind) {
-    case CommandKind::kCamera:
-      camera_.apply_setting(command.setting, r);
-      return;
-    case CommandKind::kLaserMode:
-      hal::write_setting_text(r.old_value, to_string(mode));
-      if (command.laser_mode != LaserMode::kOff && (!frames_flowing || grab_index == 0)) {
-        r.accepted = false;
-        hal::write_setting_line(
-            r.reason, "laser.mode: no frames are flowing (camera %s), the laser stays off",
-            to_string(counters_.camera_state.load(std::memory_order_relaxed)));
-        return;
-      }
-      mode = command.laser_mode;
-      hal::write_setting_text(r.in_force, to_string(mode));
-      r.accepted = true;
-      return;
-    case CommandKind::kThreshold:  // the worker's (run_worker_commands)
-      return;
-    case CommandKind::kGet: {
-      // "name=value" for every setting the camera has, then the laser's mode.
-      std::span<char> rest(r.in_force);
-      for (const char* name : {"exposure_us", "gain_db", "frame_rate_hz"}) {
-        char value[hal::CameraSetting::kTextBytes];
-        if (!camera_.read_setting(name, value)) continue;
-        const int written = std::snprintf(rest.data(), rest.size(), "%s=%s ", name, value);
-        if (written < 0 || static_cast<std::size_t>(written) >= rest.size()) break;
-        rest = rest.subspan(static_cast<std::size_t>(written));
-      }
-      hal::write_setting_line(rest, "laser.mode=%s", to_string(mode));
-      r.accepted = true;
-      return;
-    }
-  }
-}
-
 void FramePath::worker_loop() {
   std::int64_t processed = 0;
   const bool lossless = camera_.paced_by_consumer();
@@ -452,7 +324,7 @@ void FramePath::worker_loop() {
           : 0;
   std::int64_t last_image_ns = INT64_MIN / 2;
   while (true) {
-    run_worker_commands();
+    commands_.run_worker_commands(detector_);
     if (!frames_->wait(100 * kMs)) {
       if (stopping_.load(std::memory_order_acquire)) break;
       continue;
@@ -575,24 +447,8 @@ void FramePath::describe_strobe(std::int64_t now_mono, std::int64_t matched, std
   if (size == 0) return;
   out[0] = '\0';
   if (strobe_ == nullptr) return;
-  const char* what = strobe_->describe().c_str();
-  const std::int64_t last_edge = strobe_->history().last_edge_mono_ns();
-  // Silent: longer without an edge than three frame periods, and at least a second.
-  const auto silent_ns =
-      std::max<std::int64_t>(1'000'000'000, static_cast<std::int64_t>(3e9 / config_.frame_rate_hz));
-  constexpr const char* kFallback = "laser state from the camera's timestamps (estimate)";
-  if (last_edge == 0) {
-    std::snprintf(out, size, "silent: no edge on %s since start; %s", what, kFallback);
-  } else if (now_mono - last_edge > silent_ns) {
-    std::snprintf(out, size, "silent: no edge on %s for %.1f s; %s", what,
-                  static_cast<double>(now_mono - last_edge) * 1e-9, kFallback);
-  } else if (unmatched > 0) {
-    std::snprintf(out, size, "%lld of %lld frames not matched to an exposure on %s; %s",
-                  static_cast<long long>(unmatched), static_cast<long long>(matched + unmatched),
-                  what, kFallback);
-  } else {
-    std::snprintf(out, size, "ok");
-  }
+  hal::describe_strobe_health(*strobe_, config_.frame_rate_hz, now_mono, matched, unmatched, out,
+                              size);
 }
 
 void FramePath::publisher_loop() {

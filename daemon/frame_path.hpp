@@ -8,6 +8,7 @@
 #include <thread>
 
 #include "daemon/command.hpp"
+#include "daemon/command_applier.hpp"
 #include "daemon/config.hpp"
 #include "daemon/cpu_usage.hpp"
 #include "daemon/frame_slots.hpp"
@@ -54,10 +55,8 @@ struct FramePathSummary {
 // enforce_laser_safety() periodically from another thread so that the laser goes off even when
 // the camera thread is stuck inside the driver. stop() and the destructor switch it off.
 //
-// Commands (settings changed while running) go to the camera thread through a ring and come back
-// through another, carried out between two grabs: the laser's mode takes effect from the next
-// frame, and a mode that switches the laser on is refused while frames do not flow (before the
-// first frame, after a timeout or an error).
+// Commands (settings changed while running) are carried out by the camera thread between two
+// grabs and by the worker between two frames (CommandApplier).
 //
 // Thread context: construct, start(), stop(), enforce_laser_safety() and summary() from the
 // owning (main) thread; submit_command() and take_command_result() from one command thread.
@@ -80,19 +79,15 @@ class FramePath {
   std::int64_t images_published() const {
     return images_published_.load(std::memory_order_relaxed);
   }
-  // Queues a parsed command for the thread that carries it out (the camera thread; the worker for
-  // kThreshold); false when kCommandSlots are waiting already.
-  bool submit_command(const Command& command);
-  // kThreshold: `detector` (built with the new threshold and reset() to the camera's frame size)
-  // replaces the worker's between two frames; the path owns it from here. False while another
-  // replacement is under way.
-  bool submit_detector(const Command& command, std::unique_ptr<pipeline::Detector> detector);
-  // The next command carried out, with its result; false when none is back yet. A detector
-  // replaced by a threshold command is freed here, on the command thread.
-  bool take_command_result(Command* command);
+  // The command thread's side of CommandApplier (command_applier.hpp).
+  bool submit_command(const Command& command) { return commands_.submit(command); }
+  bool submit_detector(const Command& command, std::unique_ptr<pipeline::Detector> detector) {
+    return commands_.submit_detector(command, std::move(detector));
+  }
+  bool take_command_result(Command* command) { return commands_.take_result(command); }
   // A message on the command channel that is not a command (status_t.bad_messages).
   void count_bad_command() { counters_.bad_commands.fetch_add(1, std::memory_order_relaxed); }
-  static constexpr std::size_t kCommandSlots = 8;
+  static constexpr std::size_t kCommandSlots = CommandApplier::kSlots;
 
   // The threads sharing each frame's detection (pipeline.worker_threads): a replacement detector
   // is given them (Detector::use_parts()) before its reset().
@@ -112,12 +107,6 @@ class FramePath {
   void publisher_loop();
   void image_loop();
   bool desired_laser(LaserMode mode, std::uint64_t grab_index) const;
-  // Worker thread: puts replacement detectors in place, between two frames.
-  void run_worker_commands();
-  // Camera thread: carries out the commands waiting, between two grabs.
-  void run_commands(LaserMode& mode, bool frames_flowing, std::uint64_t grab_index);
-  void run_command(Command& command, LaserMode& mode, bool frames_flowing,
-                   std::uint64_t grab_index);
   // `record` receives the switch's time and frame (camera thread only; others pass nullptr).
   void switch_laser(bool on, std::uint64_t for_frame, hal::LaserSwitch* record = nullptr);
   void fill_status(std::int64_t now_mono, std::int64_t period_ns);
@@ -135,20 +124,13 @@ class FramePath {
   std::unique_ptr<SpscRing<ProfileSlot>> profiles_;
   pipeline::Profile unpublished_profile_;  // detector output when the profile ring is full
   std::unique_ptr<SpscRing<ImageSlot>> images_;
-  SpscRing<Command> commands_{kCommandSlots, Command{}};         // command thread -> camera thread
-  SpscRing<Command> command_results_{kCommandSlots, Command{}};  // and back
-  SpscRing<Command> worker_commands_{kCommandSlots, Command{}};  // command thread -> worker
-  SpscRing<Command> worker_results_{kCommandSlots, Command{}};   // and back
-  // Command-thread state: the detector submitted and not yet answered, and the replacement in
-  // force (null while the original is).
-  std::unique_ptr<pipeline::Detector> pending_detector_;
-  std::unique_ptr<pipeline::Detector> current_detector_;
   std::unique_ptr<LcmPublisher> publisher_;
   std::unique_ptr<RawFrameEncoder> encoder_;
   std::unique_ptr<LatencyStats> latency_;   // exposure -> published
   std::unique_ptr<LatencyStats> pipeline_;  // arrival -> published
 
   FramePathCounters counters_;
+  CommandApplier commands_;
   std::atomic<std::int64_t> profiles_published_{0};
   std::atomic<std::int64_t> images_published_{0};
   std::atomic<std::int64_t> publish_errors_{0};

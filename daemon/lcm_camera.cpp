@@ -326,27 +326,32 @@ void LcmCamera::report_end() {
   }
 }
 
-void register_lcm_camera() {
-  hal::register_camera_backend("lcm", [](const hal::CameraRequest& request) {
-    hal::YamlMap lcm = request.options->map("lcm");
-    LcmCamera::Options o;
-    o.url = lcm.string("url", "");
-    if (o.url.empty()) {
-      lcm.fail("url", "required: file:///path/to/dive.lcmlog (offline) or an LCM URL (live)");
-    }
-    if (o.url.rfind("file://", 0) == 0 && o.url.size() == 7) {
-      lcm.fail("url", "file:// needs the path of a log file");
-    }
-    o.channel = lcm.string("channel", o.channel);
-    if (o.channel.empty()) lcm.fail("channel", "must not be empty");
-    o.calibration_channel = lcm.string("calibration_channel", o.calibration_channel);
-    if (o.calibration_channel.empty()) lcm.fail("calibration_channel", "must not be empty");
-    o.calibration_id = hal::calibration_id(*request.calibration);
-    lcm.finish();
-    o.width = request.calibration->camera.width;
-    o.height = request.calibration->camera.height;
-    return std::make_unique<LcmCamera>(std::move(o));
-  });
+namespace {
+
+// The `lcm` backend: options under `camera.lcm`: url, channel, calibration_channel.
+std::unique_ptr<hal::Camera> create_lcm_camera(const hal::CameraRequest& request) {
+  hal::YamlMap lcm = request.options->map("lcm");
+  LcmCamera::Options o;
+  o.url = lcm.string("url", "");
+  if (o.url.empty()) {
+    lcm.fail("url", "required: file:///path/to/dive.lcmlog (offline) or an LCM URL (live)");
+  }
+  if (o.url.rfind("file://", 0) == 0 && o.url.size() == 7) {
+    lcm.fail("url", "file:// needs the path of a log file");
+  }
+  o.channel = lcm.string("channel", o.channel);
+  if (o.channel.empty()) lcm.fail("channel", "must not be empty");
+  o.calibration_channel = lcm.string("calibration_channel", o.calibration_channel);
+  if (o.calibration_channel.empty()) lcm.fail("calibration_channel", "must not be empty");
+  o.calibration_id = hal::calibration_id(*request.calibration);
+  lcm.finish();
+  o.width = request.calibration->camera.width;
+  o.height = request.calibration->camera.height;
+  return std::make_unique<LcmCamera>(std::move(o));
 }
+
+const hal::CameraBackendRegistration kLcm{"lcm", create_lcm_camera};
+
+}  // namespace
 
 }  // namespace laserline::daemon

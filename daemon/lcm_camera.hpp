@@ -32,9 +32,10 @@ namespace laserline::daemon {
 // frame's size (messages::decode); bad messages and unusable frames are counted by kind in
 // health() (status_t.bad_messages, bad_frames) and reported at a limited rate.
 //
-// It lives in daemon/ rather than hal/ because it needs LCM; it registers itself into the same
-// camera factory (register_lcm_camera()). It is a desk tool: reading and decoding allocate, which
-// the real-time rule allows only because no laser or live camera depends on its timing.
+// It lives in daemon/ rather than hal/ because it needs LCM; it registers itself as the `lcm`
+// camera backend (hal/registry.hpp; options under `camera.lcm`: url, channel,
+// calibration_channel). It is a desk tool: reading and decoding allocate, which the real-time rule
+// allows only because no laser or live camera depends on its timing.
 //
 // Thread context: open()/format() from the setup thread; grab() from the camera thread; stop()
 // from any thread.
@@ -128,9 +129,5 @@ class LcmCamera : public hal::Camera {
   std::atomic<std::int64_t> damaged_regions_{0};
   std::atomic<std::int64_t> damaged_bytes_{0};
 };
-
-// Adds the `lcm` backend to hal's camera factory (idempotent). Options under `camera.lcm`:
-// url, channel.
-void register_lcm_camera();
 
 }  // namespace laserline::daemon

@@ -124,7 +124,7 @@ class AravisCamera final : public Camera {
   AravisCameraOptions options_;
   FrameFormat format_;
   std::size_t payload_bytes_ = 0;
-  int pixel_format_index_ = -1;  // in the table of aravis_camera.cpp; -1: unknown name
+  int pixel_format_index_ = -1;  // in the table of aravis_genicam.cpp; -1: unknown name
   PixelConverter converter_;
   std::vector<std::vector<std::uint8_t>> memory_;  // the pixel memory of every buffer
 

@@ -1,6 +1,7 @@
 #include "hal/aravis_camera.hpp"
 
 #include "hal/calibration.hpp"
+#include "hal/registry.hpp"
 #include "hal/yaml_reader.hpp"
 
 namespace laserline::hal {
@@ -47,5 +48,9 @@ std::unique_ptr<Camera> create_aravis_camera(const CameraRequest& request) {
       c.integer("reconnect_max_ms", o.reconnect_max_ms, o.reconnect_min_ms, 600000));
   return std::make_unique<AravisCamera>(o);
 }
+
+namespace {
+const CameraBackendRegistration kAravis{"aravis", create_aravis_camera};
+}  // namespace
 
 }  // namespace laserline::hal

@@ -1,6 +1,7 @@
 #include "hal/exposure_strobe.hpp"
 
 #include <algorithm>
+#include <cstdio>
 #include <cstdlib>
 #include <stdexcept>
 
@@ -123,6 +124,63 @@ LaserExposure LaserSwitchHistory::during(std::int64_t start_mono_ns,
   if (!known) return LaserExposure::kUnknown;
   if (changed) return LaserExposure::kMixed;
   return on ? LaserExposure::kOn : LaserExposure::kOff;
+}
+
+FrameLaserDecider::FrameLaserDecider(const ExposureStrobe* strobe, double frame_rate_hz)
+    : strobe_(strobe), tolerance_ns_(static_cast<std::int64_t>(0.25e9 / frame_rate_hz)) {}
+
+void FrameLaserDecider::switched(const LaserSwitch& record) {
+  last_switch_ = record;
+  switches_.add(record);
+}
+
+FrameLaserDecider::Decision FrameLaserDecider::decide(FrameInfo& info, std::uint64_t grab_index) {
+  Decision decision;
+  info.laser_switch_mono_ns = last_switch_.mono_ns;
+  info.exposure_start_mono_ns = 0;
+  info.exposure_end_mono_ns = 0;
+  const bool own_switch = last_switch_.for_frame == grab_index && last_switch_.mono_ns != 0;
+  ExposureInterval exposure;
+  if (strobe_ != nullptr && matcher_.match(strobe_->history(), info.camera_ns, info.arrival_mono_ns,
+                                           tolerance_ns_, &exposure)) {
+    info.exposure_start_mono_ns = exposure.start_mono_ns;
+    info.exposure_end_mono_ns = exposure.end_mono_ns;
+    const LaserExposure lit = switches_.during(exposure.start_mono_ns, exposure.end_mono_ns);
+    if (lit != LaserExposure::kUnknown) info.laser_on = lit != LaserExposure::kOff;
+    decision.matched = true;
+    decision.late_switch = lit == LaserExposure::kMixed ||
+                           (own_switch && last_switch_.mono_ns > exposure.start_mono_ns);
+  } else {
+    decision.late_switch = own_switch && last_switch_.mono_ns > info.exposure_mono_ns;
+  }
+  return decision;
+}
+
+void FrameLaserDecider::frames_stopped() {
+  if (strobe_ != nullptr) matcher_.restart(strobe_->history());
+}
+
+void describe_strobe_health(const ExposureStrobe& strobe, double frame_rate_hz,
+                            std::int64_t now_mono, std::int64_t matched, std::int64_t unmatched,
+                            char* out, std::size_t size) {
+  if (size == 0) return;
+  const char* what = strobe.describe().c_str();
+  const std::int64_t last_edge = strobe.history().last_edge_mono_ns();
+  const auto silent_ns =
+      std::max<std::int64_t>(1'000'000'000, static_cast<std::int64_t>(3e9 / frame_rate_hz));
+  constexpr const char* kFallback = "laser state from the camera's timestamps (estimate)";
+  if (last_edge == 0) {
+    std::snprintf(out, size, "silent: no edge on %s since start; %s", what, kFallback);
+  } else if (now_mono - last_edge > silent_ns) {
+    std::snprintf(out, size, "silent: no edge on %s for %.1f s; %s", what,
+                  static_cast<double>(now_mono - last_edge) * 1e-9, kFallback);
+  } else if (unmatched > 0) {
+    std::snprintf(out, size, "%lld of %lld frames not matched to an exposure on %s; %s",
+                  static_cast<long long>(unmatched), static_cast<long long>(matched + unmatched),
+                  what, kFallback);
+  } else {
+    std::snprintf(out, size, "ok");
+  }
 }
 
 }  // namespace laserline::hal

@@ -8,6 +8,7 @@
 #include <memory>
 #include <string>
 
+#include "hal/frame.hpp"
 #include "hal/laser.hpp"
 
 namespace laserline::hal {
@@ -120,5 +121,43 @@ class ExposureStrobe {
   // The reader thread, for the owner to give it its priority; pthread_t{} when not open.
   virtual pthread_t native_thread() = 0;
 };
+
+// Each grabbed frame's exposure and laser state, decided on the camera thread that switches the
+// laser and grabs. With a strobe and a frame matched to one of its exposures: exact, the switch
+// times against the exposure's edges; a partly lit frame counts as lit, so that it never serves as
+// a laser-off background. Otherwise the estimate: the camera's timestamp mapped to the host clock,
+// against the last switch. Camera thread only.
+class FrameLaserDecider {
+ public:
+  // `strobe`: nullptr without laser.strobe_line. Frames are matched within a quarter period.
+  FrameLaserDecider(const ExposureStrobe* strobe, double frame_rate_hz);
+
+  // A switch this thread made (LaserSwitch::for_frame: the grab it is for).
+  void switched(const LaserSwitch& record);
+
+  struct Decision {
+    bool matched = false;      // to an exposure on the strobe
+    bool late_switch = false;  // the frame's own switch came after its exposure began
+  };
+  // Grab `grab_index` arrived: sets info.laser_switch_mono_ns, exposure_start_mono_ns and
+  // exposure_end_mono_ns (0 when not matched), and laser_on where the strobe decides it.
+  Decision decide(FrameInfo& info, std::uint64_t grab_index);
+  // Frames stopped (a timeout, an error): the next one is matched by order again.
+  void frames_stopped();
+
+ private:
+  const ExposureStrobe* strobe_;
+  std::int64_t tolerance_ns_;
+  LaserSwitch last_switch_;
+  LaserSwitchHistory switches_;
+  ExposureMatcher matcher_;
+};
+
+// The strobe's health in one line into `out` (no allocation): "ok", or why frames fall back to
+// the estimate (silent since start or for longer than three frame periods and a second, or
+// `unmatched` of the `matched` + `unmatched` frames looked at not matched). Any thread.
+void describe_strobe_health(const ExposureStrobe& strobe, double frame_rate_hz,
+                            std::int64_t now_mono, std::int64_t matched, std::int64_t unmatched,
+                            char* out, std::size_t size);
 
 }  // namespace laserline::hal

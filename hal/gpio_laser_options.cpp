@@ -1,6 +1,7 @@
 #include <cstdlib>
 
 #include "hal/gpio_laser.hpp"
+#include "hal/registry.hpp"
 #include "hal/yaml_reader.hpp"
 
 namespace laserline::hal {
@@ -53,5 +54,9 @@ std::unique_ptr<Laser> create_gpio_laser(YamlMap& options) {
   }
   return std::make_unique<GpioLaser>(o);
 }
+
+namespace {
+const LaserBackendRegistration kGpiod{"gpiod", create_gpio_laser};
+}  // namespace
 
 }  // namespace laserline::hal

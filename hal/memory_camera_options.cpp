@@ -1,4 +1,5 @@
 #include "hal/memory_camera.hpp"
+#include "hal/registry.hpp"
 #include "hal/sim/sim_camera.hpp"
 #include "hal/sim/sim_options.hpp"
 #include "hal/yaml_reader.hpp"
@@ -43,5 +44,9 @@ std::unique_ptr<Camera> create_memory_camera(const CameraRequest& request) {
   }
   return std::make_unique<MemoryCamera>(o, std::move(recording));
 }
+
+namespace {
+const CameraBackendRegistration kMemory{"memory", create_memory_camera};
+}  // namespace
 
 }  // namespace laserline::hal

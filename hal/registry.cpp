@@ -1,76 +1,59 @@
 #include "hal/registry.hpp"
 
+#include <cstdio>
+#include <cstdlib>
+#include <map>
 #include <utility>
-
-#include "hal/aravis_camera.hpp"
-#include "hal/gpio_laser.hpp"
-#include "hal/memory_camera.hpp"
-#include "hal/sim/sim_options.hpp"
-#include "hal/v4l2_camera.hpp"
 
 namespace laserline::hal {
 
 namespace {
 
 template <typename Factory>
-struct Entry {
-  std::string name;
-  Factory create;
-};
+using Table = std::map<std::string, Factory>;
 
-template <typename Factory>
-using Table = std::vector<Entry<Factory>>;
-
+// Function-local statics: built on first use, so registrations from static constructors of other
+// files find them whatever the order in which the files are initialised.
 Table<CameraFactory>& camera_table() {
-  static Table<CameraFactory> table = {
-      {"sim", create_sim_camera},
-      {"aravis", create_aravis_camera},
-      {"v4l2", create_v4l2_camera},
-      {"memory", create_memory_camera},
-  };
+  static Table<CameraFactory> table;
   return table;
 }
 
 Table<LaserFactory>& laser_table() {
-  static Table<LaserFactory> table = {
-      {"sim", create_sim_laser},
-      {"gpiod", create_gpio_laser},
-  };
+  static Table<LaserFactory> table;
   return table;
 }
 
 template <typename Factory>
-void add(Table<Factory>& table, const std::string& name, Factory create) {
-  for (const auto& e : table) {
-    if (e.name == name) return;
+void add(Table<Factory>& table, const char* kind, const char* name, Factory create) {
+  if (!table.emplace(name, std::move(create)).second) {
+    std::fprintf(stderr, "laserline: two %s backends are registered as '%s'\n", kind, name);
+    std::abort();
   }
-  table.push_back({name, std::move(create)});
 }
 
 template <typename Factory>
 std::vector<std::string> names(const Table<Factory>& table) {
   std::vector<std::string> list;
-  for (const auto& e : table)
-    list.push_back(e.name);
+  for (const auto& entry : table)
+    list.push_back(entry.first);
   return list;
 }
 
 template <typename Factory>
 const Factory* find(const Table<Factory>& table, const std::string& name) {
-  for (const auto& e : table) {
-    if (e.name == name) return &e.create;
-  }
-  return nullptr;
+  const auto it = table.find(name);
+  return it != table.end() ? &it->second : nullptr;
 }
 
 }  // namespace
 
-void register_camera_backend(const std::string& name, CameraFactory create) {
-  add(camera_table(), name, std::move(create));
+CameraBackendRegistration::CameraBackendRegistration(const char* name, CameraFactory create) {
+  add(camera_table(), "camera", name, std::move(create));
 }
 
-void register_laser_backend(const std::string& name, LaserFactory create) {
-  add(laser_table(), name, std::move(create));
+LaserBackendRegistration::LaserBackendRegistration(const char* name, LaserFactory create) {
+  add(laser_table(), "laser", name, std::move(create));
 }
 
 std::vector<std::string> camera_backends() {

@@ -17,9 +17,16 @@ class YamlMap;
 // Backends are chosen by name from the configuration through these two registries, as libcamera
 // chooses its pipeline handlers. Each backend owns its options: its factory (declared beside the
 // backend) reads and validates them from `options` and throws ConfigError for a bad one; it does
-// not touch hardware, which happens in open(). The backends in hal/ are listed in registry.cpp
-// (a static library drops files nothing refers to, so a backend cannot register itself from a
-// static constructor there); backends outside hal/ register with register_*_backend().
+// not touch hardware, which happens in open().
+//
+// Each backend registers itself at the end of its own .cpp with a registration object of static
+// storage duration (libcamera's REGISTER_PIPELINE_HANDLER):
+//
+//   const CameraBackendRegistration kAravis{"aravis", create_aravis_camera};
+//
+// so the registry knows no backend. Nothing refers to those objects, and a linker drops the
+// members of a static library nothing refers to: the libraries that hold backends (laserline_hal,
+// daemon/'s replay camera) are linked whole (WHOLE_ARCHIVE, see hal/CMakeLists.txt).
 
 struct CameraRequest {
   YamlMap* options = nullptr;  // the `camera:` section
@@ -35,12 +42,16 @@ using CameraFactory = std::function<std::unique_ptr<Camera>(const CameraRequest&
 // Reads the `laser:` section's backend options.
 using LaserFactory = std::function<std::unique_ptr<Laser>(YamlMap& options)>;
 
-// Adds a backend that lives outside hal/ to the same registry: the LCM log replay is chosen by
-// name like any camera, but it needs LCM, which hal/ must not know (it registers from daemon/).
-// Call from the setup thread before make_camera(); a second call for a name is ignored.
-void register_camera_backend(const std::string& name, CameraFactory create);
-void register_laser_backend(const std::string& name, LaserFactory create);
+// Constructed before main(), on one thread; the registry is only read after. A second backend under
+// a name already taken is a programming error: it aborts, naming the backend.
+struct CameraBackendRegistration {
+  CameraBackendRegistration(const char* name, CameraFactory create);
+};
+struct LaserBackendRegistration {
+  LaserBackendRegistration(const char* name, LaserFactory create);
+};
 
+// The names registered, sorted.
 std::vector<std::string> camera_backends();
 std::vector<std::string> laser_backends();
 

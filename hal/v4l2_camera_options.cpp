@@ -1,6 +1,7 @@
 #include "hal/v4l2_camera.hpp"
 
 #include "hal/calibration.hpp"
+#include "hal/registry.hpp"
 #include "hal/yaml_reader.hpp"
 
 namespace laserline::hal {
@@ -25,5 +26,9 @@ std::unique_ptr<Camera> create_v4l2_camera(const CameraRequest& request) {
       c.integer("reconnect_max_ms", o.reconnect_max_ms, o.reconnect_min_ms, 600000));
   return std::make_unique<V4l2Camera>(o);
 }
+
+namespace {
+const CameraBackendRegistration kV4l2{"v4l2", create_v4l2_camera};
+}  // namespace
 
 }  // namespace laserline::hal

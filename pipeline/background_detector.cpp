@@ -133,7 +133,7 @@ void BackgroundDetector::collect_candidates(const ImageView& image, const FrameC
       // Current pixel -> the background frame -> row within the kept band.
       Homography to_band = background->to_history;
       for (int i = 0; i < 3; ++i)
-        to_band.h[3 + i] -= band_first_ * to_band.h[6 + i];
+        to_band.h(1, i) -= band_first_ * to_band.h(2, i);
       frontend_.set_frame_minus_background(image, rows, to_band);
     } else {
       frontend_.set_frame(image);

@@ -23,6 +23,9 @@ class BackprojectionDetector final : public Detector {
   void reset(int width, int height) override;
   void use_parts(PartRunner& runner) override { background_.use_parts(runner); }
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override;
+  // The candidates' region: a segment that leaves it is validated on its part inside.
+  void set_region(const DetectionRegion& region) override { background_.set_region(region); }
+  DetectionRegion region() const override { return background_.region(); }
 
   const BackgroundDetector& background() const { return background_; }
   const LineValidator& validator() const { return validator_; }

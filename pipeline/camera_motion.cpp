@@ -4,6 +4,7 @@
 // scale from points followed over three frames.
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -225,17 +226,29 @@ CameraMotion CameraMotionEstimator::estimate(std::span<const FeatureTrack> track
   const double threshold = o.essential_inlier_px / focal_;
   const double threshold_squared = threshold * threshold;
   // Stops early (flags and count then incomplete) once the cost reaches `limit`: most hypotheses
-  // of a sample are wrong, and a wrong one is out after a few outliers.
+  // of a sample are wrong, and a wrong one is out after a few outliers. The distances of a block
+  // of tracks at a time (a loop the compiler vectorises), then their sum in track order, the
+  // limit tested after each block: the same cost as one track at a time, where it is below the
+  // limit.
   constexpr double kNoLimit = std::numeric_limits<double>::infinity();
+  constexpr int kBlock = 16;
   const auto score = [&](const Matrix3& e, std::uint8_t* flags, int& count, double limit) {
     double cost = 0;
     count = 0;
-    for (int i = 0; i < n && cost < limit; ++i) {
-      const double d = sampson_squared(e, x1_[i], y1_[i], x2_[i], y2_[i]);
-      const bool inlier = d < threshold_squared;
-      flags[i] = inlier ? 1 : 0;
-      count += inlier ? 1 : 0;
-      cost += inlier ? d : threshold_squared;
+    std::array<double, kBlock> distances;
+    for (int start = 0; start < n && cost < limit; start += kBlock) {
+      const int size = std::min(kBlock, n - start);
+      for (int k = 0; k < size; ++k) {
+        const int i = start + k;
+        distances[k] = sampson_squared(e, x1_[i], y1_[i], x2_[i], y2_[i]);
+      }
+      for (int k = 0; k < size; ++k) {
+        const double d = distances[k];
+        const bool inlier = d < threshold_squared;
+        flags[start + k] = inlier ? 1 : 0;
+        count += inlier ? 1 : 0;
+        cost += inlier ? d : threshold_squared;
+      }
     }
     return cost;
   };

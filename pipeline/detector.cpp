@@ -1,11 +1,14 @@
 #include "pipeline/detector.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
 #include "pipeline/backprojection_detector.hpp"
 #include "pipeline/frontend_detectors.hpp"
 #include "pipeline/maxvalue_detector.hpp"
+#include "pipeline/options.hpp"
 #include "pipeline/search_axes.hpp"
 #include "pipeline/triangulation.hpp"
 
@@ -45,8 +48,16 @@ class SearchAxesDetector final : public Detector {
       detector_->reset(axes_.lines, axes_.length);
     }
     search_.reset(axes_, width, height);
+    frame_width_ = width;
+    frame_height_ = height;
+    set_region(region_);
   }
   void use_parts(PartRunner& runner) override { detector_->use_parts(runner); }
+  void set_region(const DetectionRegion& region) override {
+    region_ = region;
+    detector_->set_region(search_region());
+  }
+  DetectionRegion region() const override { return region_.in_frame(frame_width_, frame_height_); }
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override {
     detector_->detect(search_.make(image), frame, out);
     out.set_axes(axes_);
@@ -61,12 +72,51 @@ class SearchAxesDetector final : public Detector {
         return x >= kEdge && x <= last_x && y >= kEdge && y <= last_y;
       });
     }
+    if (!region_.whole()) {
+      // The search region holds the frame's; its sub-pixel points may stray out of it by a
+      // little (and an oblique one holds more).
+      const DetectionRegion in_frame = region();
+      out.keep_if([&](const ProfilePoint& p) {
+        const auto [x, y] = axes_.to_image(p.u, p.v);
+        return in_frame.contains(x, y);
+      });
+    }
   }
 
  private:
+  // The region in search coordinates: the search image's pixels whose square meets the frame
+  // region's (the same rectangle transposed for rows; for oblique axes the rotated one's bounds).
+  DetectionRegion search_region() const {
+    if (region_.whole()) return region_;
+    if (axes_.identity()) return region_.in_frame(frame_width_, frame_height_);
+    const DetectionRegion r = region_.in_frame(frame_width_, frame_height_);
+    double lo[2] = {HUGE_VAL, HUGE_VAL}, hi[2] = {-HUGE_VAL, -HUGE_VAL};
+    for (const double x : {r.x - 0.5, r.x + r.width - 0.5}) {
+      for (const double y : {r.y - 0.5, r.y + r.height - 0.5}) {
+        const auto corner = axes_.to_search(x, y);
+        for (int i = 0; i < 2; ++i) {
+          lo[i] = std::min(lo[i], corner[i]);
+          hi[i] = std::max(hi[i], corner[i]);
+        }
+      }
+    }
+    // A pixel's square meets [lo, hi] from ceil(lo) to floor(hi) when the corners are on half
+    // pixels (rows); one more on each side where they are not (oblique).
+    const double slack = axes_.axis == SearchAxis::kRows ? 0.0 : 1.0;
+    const int limits[2] = {axes_.lines, axes_.length};
+    int first[2], last[2];
+    for (int i = 0; i < 2; ++i) {
+      first[i] = static_cast<int>(std::clamp(std::ceil(lo[i] - slack), 0.0, limits[i] - 1.0));
+      last[i] = static_cast<int>(std::clamp(std::floor(hi[i] + slack), 0.0, limits[i] - 1.0));
+    }
+    return {first[0], first[1], last[0] - first[0] + 1, last[1] - first[1] + 1};
+  }
+
   std::unique_ptr<Detector> detector_;
   SearchAxes axes_;
   int width_, height_;
+  int frame_width_ = width_, frame_height_ = height_;  // of the last reset()
+  DetectionRegion region_;                             // in the frame's pixels
   SearchImage search_;
 };
 
@@ -87,14 +137,16 @@ static std::unique_ptr<Detector> make_image_detector(const std::string& name,
 }
 
 std::unique_ptr<Detector> make_detector(const std::string& name, const DetectorOptions& options) {
+  options.roi.validate(options.geometry.width, options.geometry.height);
   const SearchAxes axes = choose_search_axes(options.geometry);
   DetectorOptions search_options = options;
   search_options.geometry = search_geometry(options.geometry, axes);
   std::unique_ptr<Detector> detector = make_image_detector(name, search_options);
   if (!detector) return nullptr;
-  return with_triangulation(
-      std::make_unique<SearchAxesDetector>(std::move(detector), axes, options.geometry),
-      options.geometry);
+  auto searching =
+      std::make_unique<SearchAxesDetector>(std::move(detector), axes, options.geometry);
+  searching->set_region(options.roi);
+  return with_triangulation(std::move(searching), options.geometry);
 }
 
 }  // namespace laserline::pipeline

@@ -29,7 +29,7 @@ struct FrontendOptions {
   int noise_rows = 31;
   int noise_columns = 9;
   double snr_threshold_db = 6.0;  // III-E: paper 3 - 6 dB
-  int max_candidates_per_column = 4;
+  int max_candidates_per_column = 8;
   int saturation_level = 255;  // a run at or above this is a clipped core: its centre is the peak
   // Which candidate of each epipolar line is the laser point (the others stay, not valid).
   LineSelectionOptions selection;
@@ -56,6 +56,31 @@ struct BackgroundOptions {
   void validate() const;
 };
 
+// Where a detector looks for the laser: a rectangle of the frame's pixels, (x, y) its top left
+// pixel, width x height pixels. Points and candidates outside it are not produced: its epipolar
+// lines alone are searched, and along them only its stretch; the filters still read the pixels
+// around it (band-pass, noise window, background warp), so that inside it a detector finds what
+// it finds on the whole frame. All four 0 (the default): the whole frame.
+struct DetectionRegion {
+  int x = 0;
+  int y = 0;
+  int width = 0;
+  int height = 0;
+
+  bool whole() const { return x == 0 && y == 0 && width == 0 && height == 0; }
+  // The region in a frame of this size: the whole frame for whole(), else its part inside the
+  // frame (empty, width or height 0, where none is).
+  DetectionRegion in_frame(int frame_width, int frame_height) const;
+  // Whether the pixel nearest (px, py) lies inside (a region resolved by in_frame()).
+  bool contains(double px, double py) const;
+  // Throws OptionError (pipeline/options.hpp) with field "roi" unless the region is whole() or
+  // non-empty and inside a frame of this size.
+  void validate(int frame_width, int frame_height) const;
+  // "x,y,width,height", the form commands and the configuration give.
+  std::string text() const;
+  bool operator==(const DetectionRegion&) const = default;
+};
+
 // Options of every detector, filled from the configuration. Each detector reads its own part.
 struct DetectorOptions {
   // maxvalue: a column's maximum is a laser point when it is at least this bright (grey level).
@@ -65,8 +90,12 @@ struct DetectorOptions {
   BackgroundOptions background;
   MotionOptions motion;
   ValidationOptions validation;  // `backprojection` (Section IV)
+  // Where the laser is searched, in the frame's pixels (checked against the geometry's frame by
+  // make_detector()).
+  DetectionRegion roi;
 
-  // Every part above but the geometry: throws OptionError naming the first field outside what
+  // Every part above but the geometry and the roi: throws OptionError naming the first field
+  // outside what
   // the pipeline supports.
   void validate() const;
 };
@@ -97,6 +126,13 @@ class Detector {
   // outlive the detector's use of it. Default: one part.
   virtual void use_parts(PartRunner& runner) { (void)runner; }
   virtual void detect(const ImageView& image, const FrameContext& frame, Profile& out) = 0;
+  // Searches only `region` from the next detect() on, in the coordinates of the image detect() is
+  // given (make_detector()'s detectors: the frame's pixels); it must be whole() or inside the
+  // frame (DetectionRegion::validate()). Does not allocate: may change between any two frames.
+  virtual void set_region(const DetectionRegion& region) = 0;
+  // The region searched, resolved to the frame (DetectionRegion::in_frame()) of the last reset(),
+  // before the first one to the geometry's.
+  virtual DetectionRegion region() const = 0;
 };
 
 std::vector<std::string> detector_names();
@@ -104,7 +140,7 @@ std::vector<std::string> detector_names();
 // gives (columns, rows or at an angle: choose_search_axes()); every detector's valid points come
 // out triangulated (xyz in metres in the camera frame; NaN where not on the laser sheet). Throws
 // std::invalid_argument when the options cannot work (e.g. a laser plane through the camera
-// centre), naming the option.
+// centre, a roi beyond the geometry's frame), naming the option. It searches options.roi.
 std::unique_ptr<Detector> make_detector(const std::string& name, const DetectorOptions& options);
 
 }  // namespace laserline::pipeline

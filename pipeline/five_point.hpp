@@ -6,9 +6,9 @@
 
 namespace laserline::pipeline {
 
-// Solutions of the five-point relative orientation problem (Nister; Stewenius' Groebner basis
-// form): essential matrices E (row-major) with current^T E previous = 0 for the five normalised
-// image points (x, y, 1) given. Returns how many (0 .. 10); no allocation.
+// Solutions of the five-point relative orientation problem (Nister): essential matrices E
+// (row-major) with current^T E previous = 0 for the five normalised image points (x, y, 1) given.
+// Returns how many (0 .. 10); no allocation.
 int five_point_essentials(const std::array<std::array<double, 2>, 5>& previous,
                           const std::array<std::array<double, 2>, 5>& current,
                           std::array<std::array<double, 9>, 10>& essentials);

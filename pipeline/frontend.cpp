@@ -195,20 +195,10 @@ void Frontend::reset(int width, int height) {
   const auto band_ring = static_cast<std::size_t>(strips) * band_strip_size_;
   narrow_.assign(narrow_band_ ? band_ring : 0, narrow_band_ ? strips * ring : 0);
   wide_.assign(narrow_band_ ? 0 : band_ring, narrow_band_ ? 0 : strips * ring);
-  // Each part: a range of strips, and the warp blocks of the normalised columns they read (their
-  // own and the noise window's reach beyond, up to a strip's ring stride).
+  // Each part's buffers (its strips and warp blocks are placed for each pass: place_parts()).
   const int blocks = (width + kWarpBlock - 1) / kWarpBlock;
   parts_.resize(static_cast<std::size_t>(std::clamp(runner_->parts(), 1, kMaxParts)));
-  for (std::size_t p = 0; p < parts_.size(); ++p) {
-    Part& part = parts_[p];
-    std::tie(part.first_strip, part.end_strip) =
-        part_range(strips, static_cast<int>(p), static_cast<int>(parts_.size()));
-    const int first_column = part.first_strip * kStripColumns - noise_pad_;
-    const int end_column = (part.end_strip - 1) * kStripColumns - noise_pad_ + ring_stride_;
-    part.first_block = std::max(first_column, 0) / kWarpBlock;
-    part.end_block = part.first_strip == part.end_strip
-                         ? part.first_block
-                         : std::min((end_column + kWarpBlock - 1) / kWarpBlock, blocks);
+  for (Part& part : parts_) {
     part.normalised_ring.assign(static_cast<std::size_t>(normalised_ring_rows_) * s, 0);
     part.band_rows.assign(static_cast<std::size_t>(kRowBlock + 2 * look), 0);
     part.band_slots.assign(part.band_rows.size(), 0);
@@ -240,6 +230,73 @@ void Frontend::reset(int width, int height) {
   for (std::vector<float>* field : {&lanes.x0, &lanes.y0, &lanes.dx, &lanes.dy, &lanes.rows})
     field->assign(static_cast<std::size_t>(width), 0.0f);
   lanes.point.assign(static_cast<std::size_t>(width), 0);
+  update_bounds();
+}
+
+Frontend::PassBounds Frontend::whole_bounds() const {
+  return {0, width_, 0, rows_.rows(), 0, width_};
+}
+
+double Frontend::refine_reach(double v) const {
+  // refine_start()'s search reach and the fit's half row, with a row to spare.
+  return std::max(rows_.width_px(v), 1.0) * half_per_normalised_width_ + 4.0;
+}
+
+void Frontend::set_region(const DetectionRegion& region) {
+  region_ = region;
+  update_bounds();
+}
+
+void Frontend::update_bounds() {
+  if (width_ == 0) return;  // (reset() comes back here)
+  const DetectionRegion r = region_.in_frame(width_, height_);
+  candidate_row_begin_ = r.y;
+  candidate_row_end_ = static_cast<double>(r.y) + r.height;
+  if (region_.whole()) {
+    bounds_ = whole_bounds();
+    return;
+  }
+  bounds_ = PassBounds{};
+  if (r.width == 0 || r.height == 0) return;
+  PassBounds& b = bounds_;
+  b.column_begin = r.x;
+  b.column_end = r.x + r.width;
+  // The normalised rows whose band-pass peaks (within half a row) map to the region's rows or
+  // within the refinement's reach of them, and one more on each side for the single-precision map.
+  const double rows = rows_.rows();
+  const double top = r.y - 0.5, bottom = r.y + r.height - 0.5;
+  const double first = std::floor(rows_.to_normalised(top - refine_reach(top))) - 1.0;
+  const double last = std::ceil(rows_.to_normalised(bottom + refine_reach(bottom))) + 1.0;
+  b.row_begin = static_cast<int>(std::clamp(first, 0.0, rows));
+  b.row_end = static_cast<int>(std::clamp(last + 1.0, static_cast<double>(b.row_begin), rows));
+  // The noise window reaches noise_pad_ columns to either side; the warp goes by whole blocks.
+  b.normalise_begin = std::max(0, b.column_begin - noise_pad_) / kWarpBlock * kWarpBlock;
+  b.normalise_end =
+      std::min(width_, (b.column_end + noise_pad_ + kWarpBlock - 1) / kWarpBlock * kWarpBlock);
+}
+
+void Frontend::place_parts(const PassBounds& bounds) {
+  const int strip_begin = bounds.column_begin / kStripColumns;
+  const int strip_end = (bounds.column_end + kStripColumns - 1) / kStripColumns;
+  const int blocks = (width_ + kWarpBlock - 1) / kWarpBlock;
+  const int normalise_begin = bounds.normalise_begin / kWarpBlock;
+  const int normalise_end = std::min((bounds.normalise_end + kWarpBlock - 1) / kWarpBlock, blocks);
+  for (std::size_t p = 0; p < parts_.size(); ++p) {
+    Part& part = parts_[p];
+    const auto [first, end] =
+        part_range(strip_end - strip_begin, static_cast<int>(p), static_cast<int>(parts_.size()));
+    part.first_strip = strip_begin + first;
+    part.end_strip = strip_begin + end;
+    part.first_block = part.end_block = 0;
+    if (first == end) continue;
+    // The normalised columns its strips read: their own and the noise window's reach beyond (up
+    // to a strip's ring stride), within those the pass makes.
+    const int first_column = part.first_strip * kStripColumns - noise_pad_;
+    const int end_column = (part.end_strip - 1) * kStripColumns - noise_pad_ + ring_stride_;
+    part.first_block = std::max(std::max(first_column, 0) / kWarpBlock, normalise_begin);
+    part.end_block = std::max(std::min((end_column + kWarpBlock - 1) / kWarpBlock, normalise_end),
+                              part.first_block);
+  }
 }
 
 namespace {
@@ -297,9 +354,9 @@ void Frontend::normalise_row(Part& part, int r, std::uint16_t* out) {
   // Along the row the background position is a ratio of linear functions of u: numerators and
   // denominator at u = 0, and their steps per pixel.
   const auto& g = to_background_.h;
-  const auto xn0 = static_cast<float>(g[1] * v + g[2]), xnu = static_cast<float>(g[0]);
-  const auto yn0 = static_cast<float>(g[4] * v + g[5]), ynu = static_cast<float>(g[3]);
-  const auto wn0 = static_cast<float>(g[7] * v + g[8]), wnu = static_cast<float>(g[6]);
+  const auto xn0 = static_cast<float>(g(0, 1) * v + g(0, 2)), xnu = static_cast<float>(g(0, 0));
+  const auto yn0 = static_cast<float>(g(1, 1) * v + g(1, 2)), ynu = static_cast<float>(g(1, 0));
+  const auto wn0 = static_cast<float>(g(2, 1) * v + g(2, 2)), wnu = static_cast<float>(g(2, 0));
   const int first_block = part.first_block, blocks = part.end_block - part.first_block;
   const int width = width_, stride = background.stride, last_column = background.width - 1;
   const int last_row = background.height - 1;
@@ -370,10 +427,19 @@ void Frontend::collect_candidates(Profile& out) {
   glowing_ = water_glows(current_);
   roll(nullptr);  // (and line_candidates_, see line_candidates())
   const int per_column = options_.max_candidates_per_column;
+  const bool all_rows = region_.whole();
   for (int u = 0; u < width_; ++u) {
     const LineCandidate* line = line_candidates_.data() + static_cast<std::size_t>(u) * per_column;
     const int n = column_count_[u];
     for (int i = 0; i < n; ++i) {
+      // Outside the region's rows, those the refinement can bring into them (kept until then).
+      if (!all_rows) {
+        const double v = line[i].position;
+        const double reach = refine_reach(v);
+        if (v < candidate_row_begin_ - 0.5 - reach || v >= candidate_row_end_ - 0.5 + reach) {
+          continue;
+        }
+      }
       ProfilePoint point;
       point.u = u;
       point.v = line[i].position;
@@ -453,6 +519,13 @@ void Frontend::select_line(Profile& out) {
       const ProfilePoint& p = points[refine_points_[k]];
       probes_[probe_count_++] = {static_cast<float>(p.u), p.v};
     }
+  }
+  if (!region_.whole()) {
+    // The region's rows exactly, now that the points are where they are.
+    out.keep_if([&](const ProfilePoint& p) {
+      const double row = std::round(static_cast<double>(p.v));
+      return row >= candidate_row_begin_ && row < candidate_row_end_;
+    });
   }
 }
 

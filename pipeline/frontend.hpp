@@ -97,6 +97,16 @@ class Frontend {
   void set_frame_minus_background(const ImageView& current, const ImageView& background,
                                   const Homography& current_to_background);
 
+  // Candidates only in `region` (search coordinates; DetectionRegion::whole(): everywhere), from
+  // the next pass on: only its columns are searched, and only the normalised rows that reach its
+  // rows; the filters read the rows and columns around it as on the whole frame, so that the
+  // candidates inside are those the whole frame gives. No allocation.
+  void set_region(const DetectionRegion& region);
+  DetectionRegion region() const {
+    return region_.in_frame(width_ > 0 ? width_ : geometry_.width,
+                            height_ > 0 ? height_ : geometry_.height);
+  }
+
   // Local maxima of the band-pass along each column whose SNR passes the threshold, at most
   // max_candidates_per_column (the strongest). At most one per column is the valid point, chosen
   // by the line selection (pipeline/line_selection.hpp: SNR, continuity along the line and with
@@ -145,6 +155,17 @@ class Frontend {
   static constexpr int kWarpBlock = 32;
 
  private:
+  // Where a pass goes: candidates in columns [column_begin, column_end) and normalised rows
+  // [row_begin, row_end); normalised rows made over columns [normalise_begin, normalise_end)
+  // (whole warp blocks).
+  struct PassBounds {
+    int column_begin = 0, column_end = 0, row_begin = 0, row_end = 0;
+    int normalise_begin = 0, normalise_end = 0;
+  };
+  PassBounds whole_bounds() const;
+  void update_bounds();
+  // How far (original rows) the refinement can move a candidate at row v.
+  double refine_reach(double v) const;
   struct StageImages;
   // The pass down the rows: candidates into column_best_ / column_count_, and the intermediate
   // rows into `images` where given, in 16- or 32-bit band-pass lanes (see the constructor); then
@@ -163,11 +184,12 @@ class Frontend {
         work(static_cast<int>(p));
     }
   }
-  void roll_narrow(const StageImages* images, int part);
-  void roll_wide(const StageImages* images, int part);
-  // What one part of the pass owns: its strips [first_strip, end_strip) (its columns), the warp
-  // blocks [first_block, end_block) whose normalised columns its strips read, and its own rings
-  // and scratch rows (the columns it reads beyond its own are made again by each part).
+  void roll_narrow(const StageImages* images, const PassBounds& bounds, int part);
+  void roll_wide(const StageImages* images, const PassBounds& bounds, int part);
+  // What one part of the pass owns: its strips [first_strip, end_strip) (its columns; the pass's
+  // strips split between the parts, place_parts()), the warp blocks [first_block, end_block)
+  // whose normalised columns its strips read (within the pass's), and its own rings and scratch
+  // rows (the columns it reads beyond its own are made again by each part).
   struct Part {
     int first_strip = 0, end_strip = 0, first_block = 0, end_block = 0;
     std::vector<std::uint16_t> normalised_ring;  // 8 - normalised_shift_ fractional bits
@@ -184,6 +206,8 @@ class Frontend {
     std::vector<const std::uint16_t*> normalised_rows;
     std::vector<std::uint64_t> peak_bits;  // one row of a strip's candidates, as bits
   };
+  // Each part's strips and warp blocks for a pass within `bounds` (no allocation).
+  void place_parts(const PassBounds& bounds);
   // The strips' band-pass rows and running box sums (modulo 2^bits).
   template <class Lane>
   struct BandRings {
@@ -196,7 +220,8 @@ class Frontend {
     }
   };
   template <class Lane>
-  void roll_with(const StageImages* images, BandRings<Lane>& rings, Part& part);
+  void roll_with(const StageImages* images, const PassBounds& bounds, BandRings<Lane>& rings,
+                 Part& part);
   // Its stages (see frontend.cpp): the pass's settings, the normalised rows (III-B), where a
   // block's rows are, a strip's band-pass rows (III-C), a row's candidates (III-D/E).
   template <class Lane>
@@ -240,6 +265,12 @@ class Frontend {
   struct RefineStart;
   RefineStart refine_start(float v_guess) const;
   float refine_row(int u, float v_guess) const;
+  // Whether (u, v) lies in a clipped laser core: a run of pixels at or above the saturation level
+  // along column u no longer than kClippedCoreWidths laser widths. A longer run is a bright patch
+  // clipped by the exposure (texture, a lamp's reflection): its ends are edges, not a line.
+  bool in_clipped_core(int u, int v) const;
+  static constexpr double kClippedCoreWidths = 2.5;
+  static constexpr float kClippedCoreRank = 1e6f;  // above any band-pass amplitude
   // refine_row() of the first `count` points waiting for it (refine_columns_, ...): into the
   // profile's points.
   void refine(std::span<ProfilePoint> points, std::size_t count);
@@ -264,6 +295,11 @@ class Frontend {
   float band_unit_ = 1;
   bool narrow_band_ = true;
   int width_ = 0, height_ = 0, stride_ = 0;
+
+  DetectionRegion region_;  // as set (search coordinates)
+  PassBounds bounds_;       // of region_ in frames of the size reset() was given
+  // Original rows whose candidates are kept: [candidate_row_begin_, candidate_row_end_).
+  double candidate_row_begin_ = 0, candidate_row_end_ = 0;
 
   // Inputs of the last set_frame call (views, valid during find_candidates).
   ImageView current_{};
@@ -295,6 +331,7 @@ class Frontend {
     float r = 0;     // normalised row of the band-pass peak (sub-row)
     float snr = 0;   // amplitude ratio
     float band = 0;  // band-pass amplitude
+    float rank = 0;  // which candidates a full column keeps: the band-pass, clipped cores first
   };
   std::vector<Peak> column_best_;  // max_candidates_per_column per column
   std::vector<std::uint8_t> column_count_;

@@ -21,6 +21,8 @@ class FirDetector final : public Detector {
   void reset(int width, int height) override;
   void use_parts(PartRunner& runner) override { frontend_.use_parts(runner); }
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override;
+  void set_region(const DetectionRegion& region) override { frontend_.set_region(region); }
+  DetectionRegion region() const override { return frontend_.region(); }
 
   const Frontend& frontend() const { return frontend_; }
 
@@ -50,6 +52,9 @@ class BackgroundDetector final : public Detector {
   void reset(int width, int height) override;
   void use_parts(PartRunner& runner) override;
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override;
+  // The front-end's search (the motion is estimated over the whole frame).
+  void set_region(const DetectionRegion& region) override { frontend_.set_region(region); }
+  DetectionRegion region() const override { return frontend_.region(); }
   // detect() in two steps, for a validation in between (BackprojectionDetector): the frame's
   // candidates, all eligible (Frontend::collect_candidates()); then the line among those still
   // eligible (Frontend::select_line()).

@@ -121,6 +121,19 @@ Frontend::RefineStart Frontend::refine_start(float v_guess) const {
   return start;
 }
 
+bool Frontend::in_clipped_core(int u, int v) const {
+  const int saturation = options_.saturation_level;
+  if (current_.at(u, v) < saturation) return false;
+  const int longest = std::max(
+      1, static_cast<int>(kClippedCoreWidths * rows_.width_px(static_cast<double>(v)) + 0.5));
+  int run = 1;
+  for (int t = v - 1; t >= 0 && current_.at(u, t) >= saturation; --t)
+    if (++run > longest) return false;
+  for (int t = v + 1; t < current_.height && current_.at(u, t) >= saturation; ++t)
+    if (++run > longest) return false;
+  return true;
+}
+
 float Frontend::refine_row(int u, float v_guess) const {
   const int last = height_ - 1;
   const auto [spacing, edge, centre, lo, hi] = refine_start(v_guess);

@@ -81,6 +81,7 @@ struct Frontend::RollPass {
   int hi = 0, ho = 0;      // half the inner and the outer band-pass box
   int nh = 0, gh = 0;      // half the noise window, its guard band
   int look = 0;            // band-pass rows needed below the row under test
+  int start = 0;           // the first band-pass row of the pass
   int edge = 0;            // rows nearer the ends are outside the depth range: no candidates there
   bool near_down = false;  // glow below the line (see water_glows())
   int saturation = 0;
@@ -197,8 +198,8 @@ LASERLINE_ROW_KERNEL void Frontend::place_block_rows(Part& part, int rows, int b
 
 // III-C: the band-pass rows [first, end) of a strip: box means down the columns; at the ends the
 // boxes are cut short and averaged over what they cover. The sums of row b are those of row b - 1
-// plus the row that enters the box and minus the one that leaves it; they start holding rows
-// 0 .. half - 1.
+// plus the row that enters the box and minus the one that leaves it; they start holding the rows
+// of the boxes of the row before the pass's first (rows 0 .. half - 1 when it starts at row 0).
 template <class Lane>
 LASERLINE_ROW_KERNEL void Frontend::band_pass_rows(const RollPass<Lane>& pass,
                                                    const StripRows<Lane>& strip, int first, int end,
@@ -207,11 +208,12 @@ LASERLINE_ROW_KERNEL void Frontend::band_pass_rows(const RollPass<Lane>& pass,
   const int hi = pass.hi, ho = pass.ho, rows = pass.rows, count = strip.count;
   Sum* inner = strip.inner;
   Sum* outer = strip.outer;
-  if (first == 0) {
-    for (int j = 0; j < std::min(ho, rows); ++j) {
+  if (first == pass.start) {
+    for (int j = std::max(first - ho - 1, 0); j < std::min(first + ho, rows); ++j) {
       const std::uint16_t* row = strip.normalised(j);
+      const bool in_inner = j >= first - hi - 1 && j < first + hi;
       for (int u = 0; u < count; ++u) {
-        if (j < hi) inner[u] = static_cast<Sum>(inner[u] + row[u]);
+        if (in_inner) inner[u] = static_cast<Sum>(inner[u] + row[u]);
         outer[u] = static_cast<Sum>(outer[u] + row[u]);
       }
     }
@@ -303,15 +305,20 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
       const float value = static_cast<float>(lane) * pass.unit;
       // Keep the strongest few per column (bounded work and output). Strongest by band-pass
       // amplitude: the laser adds light, while a faint texture edge in a quiet neighbourhood can
-      // have the higher SNR. (Checked first: it is the cheapest test.)
+      // have the higher SNR. But a short clipped run before any: where the laser crosses a bright
+      // patch, clipping leaves it little amplitude, less than the texture's ridges around it.
+      // (Checked first: they are the cheapest tests.)
+      const int source_row = static_cast<int>(rows_.source_row(r) + 0.5f);
+      const bool clipped = in_clipped_core(u, source_row);
+      const float rank = clipped ? value + kClippedCoreRank : value;
       Peak* best = column_best_.data() + static_cast<std::size_t>(u) * pass.per_column;
       const int n = column_count_[u];
       int slot = n;
       if (n == pass.per_column) {
         slot = 0;
         for (int j = 1; j < n; ++j)
-          if (best[j].band < best[slot].band) slot = j;
-        if (best[slot].band >= value) continue;
+          if (best[j].rank < best[slot].rank) slot = j;
+        if (best[slot].rank >= rank) continue;
       }
       // A ridge, not an edge: the band-pass an eighth of the peak below zero on both sides (a
       // line gives a half to three quarters, a line lying on a texture edge less on the edge's
@@ -325,12 +332,13 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
           glowing_ ? (pass.near_down ? lowest_up : lowest_down) : std::max(lowest_up, lowest_down);
       // (A clipped core much wider than the model is flat: the band-pass sees its two flanks as
       // edges. Its run is found and centred by the refinement.)
-      if (8 * needed > -static_cast<int>(lane) &&
-          current_.at(u, static_cast<int>(rows_.source_row(r) + 0.5f)) < pass.saturation) {
+      if (8 * needed > -static_cast<int>(lane) && current_.at(u, source_row) < pass.saturation) {
         continue;
       }
       const float snr = value / noise_at(u);
-      if (!(snr >= pass.threshold)) continue;
+      // (A short clipped run is taken whatever its SNR: texture ridges beside the laser's crossing
+      // of a bright patch raise the noise measured around it far above the light clipping left.)
+      if (!(snr >= pass.threshold) && !clipped) continue;
       if (n < pass.per_column) column_count_[u] = static_cast<std::uint8_t>(n + 1);
       // Sub-row position of the band-pass peak, mapped back to an original row: the guess the
       // refinement starts from.
@@ -339,36 +347,35 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
       const float curvature = above - 2.0f * centre + below;
       const float offset =
           curvature < 0.0f ? std::clamp(0.5f * (above - below) / curvature, -0.5f, 0.5f) : 0.0f;
-      best[slot] = Peak{static_cast<float>(r) + offset, snr, value};
+      best[slot] = Peak{static_cast<float>(r) + offset, snr, value, rank};
     }
   }
 }
 
 // Rows go in blocks: the block's normalised rows across the part's columns (long runs through the
 // frame), then strip by strip the band-pass, noise and candidates of the block's rows (the
-// strip's rings stay in the first-level cache for the whole block). A part does its own strips
-// and writes only their columns' candidates and sums.
+// strip's rings stay in the first-level cache for the whole block). Within a region (bounds)
+// only its strips, and the rows from those its first row's noise window reaches. A part does its
+// own strips and writes only their sums and their columns' candidates.
 template <class Lane>
-LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRings<Lane>& rings,
-                                              Part& part) {
+LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, const PassBounds& bounds,
+                                              BandRings<Lane>& rings, Part& part) {
   using Sum = std::make_unsigned_t<Lane>;
   if (part.first_strip == part.end_strip) return;
-  const RollPass<Lane> pass = roll_pass<Lane>();
+  RollPass<Lane> pass = roll_pass<Lane>();
   const int rows = pass.rows;
   const auto ring = static_cast<std::size_t>(ring_stride_);
-  const int first_column = part.first_strip * kStripColumns;
-  std::fill(column_count_.begin() + first_column,
-            column_count_.begin() + std::min(part.end_strip * kStripColumns, width_), 0);
   const auto sums = rings.inner.begin() + static_cast<std::ptrdiff_t>(part.first_strip * ring);
   const auto sums_end = rings.inner.begin() + static_cast<std::ptrdiff_t>(part.end_strip * ring);
   std::fill(sums, sums_end, Sum{0});
   std::fill(rings.outer.begin() + (sums - rings.inner.begin()),
             rings.outer.begin() + (sums_end - rings.inner.begin()), Sum{0});
 
-  int next_normalised = 0;
-  int next_band = 0;
-  for (int r_begin = 0; r_begin < rows; r_begin += kRowBlock) {
-    const int r_end = std::min(r_begin + kRowBlock, rows);
+  pass.start = std::max(bounds.row_begin - pass.look, 0);
+  int next_normalised = std::max(pass.start - pass.ho - 1, 0);
+  int next_band = pass.start;
+  for (int r_begin = pass.start; r_begin < bounds.row_end; r_begin += kRowBlock) {
+    const int r_end = std::min(r_begin + kRowBlock, bounds.row_end);
     const int band_end = std::min(r_end + pass.look, rows);  // band-pass rows [next_band, band_end)
     normalise_until(part, band_end - 1 + pass.ho, rows, pass.normalised_one, next_normalised,
                     images);
@@ -377,9 +384,9 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
     place_block_rows(part, rows, band_base, r_end + pass.look, normalised_base, band_end + pass.ho);
     for (int s = part.first_strip; s < part.end_strip; ++s) {
       StripRows<Lane> strip;
-      strip.c0 = s * kStripColumns;
-      strip.c1 = std::min(strip.c0 + kStripColumns, width_);
-      strip.begin = strip.c0 - noise_pad_;
+      strip.c0 = std::max(s * kStripColumns, bounds.column_begin);
+      strip.c1 = std::min({(s + 1) * kStripColumns, width_, bounds.column_end});
+      strip.begin = s * kStripColumns - noise_pad_;
       strip.count = ring_stride_;
       const std::size_t state = static_cast<std::size_t>(s) * ring;
       strip.most = band_most_.data() + static_cast<std::size_t>(s) * (band_ring_rows_ + 1);
@@ -393,7 +400,7 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
       strip.normalised_base = normalised_base;
       strip.peak_bits = part.peak_bits.data();
       band_pass_rows(pass, strip, next_band, band_end, images);
-      for (int r = r_begin; r < r_end; ++r)
+      for (int r = std::max(r_begin, bounds.row_begin); r < r_end; ++r)
         row_candidates(pass, strip, r, images);
     }
     next_band = band_end;
@@ -401,11 +408,15 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
 }
 
 void Frontend::roll(const StageImages* images) {
+  // The stage images are of the whole frame.
+  const PassBounds bounds = images != nullptr ? whole_bounds() : bounds_;
+  place_parts(bounds);
+  std::fill(column_count_.begin(), column_count_.end(), 0);  // (the columns no part searches)
   auto part = [&](int p) {
     if (narrow_band_) {
-      roll_narrow(images, p);
+      roll_narrow(images, bounds, p);
     } else {
-      roll_wide(images, p);
+      roll_wide(images, bounds, p);
     }
     const Part& own = parts_[static_cast<std::size_t>(p)];
     line_candidates(std::min(own.first_strip * kStripColumns, width_),
@@ -414,12 +425,12 @@ void Frontend::roll(const StageImages* images) {
   run_parts(part);
 }
 
-void Frontend::roll_narrow(const StageImages* images, int part) {
-  roll_with(images, narrow_, parts_[static_cast<std::size_t>(part)]);
+void Frontend::roll_narrow(const StageImages* images, const PassBounds& bounds, int part) {
+  roll_with(images, bounds, narrow_, parts_[static_cast<std::size_t>(part)]);
 }
 
-void Frontend::roll_wide(const StageImages* images, int part) {
-  roll_with(images, wide_, parts_[static_cast<std::size_t>(part)]);
+void Frontend::roll_wide(const StageImages* images, const PassBounds& bounds, int part) {
+  roll_with(images, bounds, wide_, parts_[static_cast<std::size_t>(part)]);
 }
 
 void Frontend::stage_images(std::span<float> normalised, std::span<float> band_pass,

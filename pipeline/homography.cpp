@@ -43,9 +43,7 @@ Homography to_homography(const Matrix3& m_in) {
     m /= m.norm();
   }
   Homography h;
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c)
-      h.h[r * 3 + c] = m(r, c);
+  h.h = m;
   return h;
 }
 
@@ -83,9 +81,7 @@ bool minimal_homography(const double* x, const double* y, const double* xp, cons
 namespace motion_detail {
 
 Matrix3 to_matrix(const Homography& h) {
-  Matrix3 m;
-  m << h.h[0], h.h[1], h.h[2], h.h[3], h.h[4], h.h[5], h.h[6], h.h[7], h.h[8];
-  return m;
+  return h.h;
 }
 
 }  // namespace motion_detail
@@ -93,7 +89,7 @@ Matrix3 to_matrix(const Homography& h) {
 Homography Homography::inverse() const {
   const Matrix3 m = to_matrix(*this);
   const double det = m.determinant();
-  if (!(std::abs(det) > 0)) return Homography{{0, 0, 0, 0, 0, 0, 0, 0, 0}};
+  if (!(std::abs(det) > 0)) return Homography{Homography::Matrix::Zero()};
   // The adjugate is the inverse up to scale, and a homography is defined up to scale only.
   Matrix3 adjugate;
   adjugate(0, 0) = m(1, 1) * m(2, 2) - m(1, 2) * m(2, 1);

@@ -22,6 +22,7 @@ void LineSelector::reset(int lines, int per_line) {
   per_line_ = per_line;
   const auto candidates = static_cast<std::size_t>(lines) * static_cast<std::size_t>(per_line);
   score_.assign(candidates, 0.0f);
+  position_.assign(candidates, 0.0f);
   from_.assign(candidates, -1);
   prefix_best_.assign(static_cast<std::size_t>(lines), 0.0f);
   column_best_.assign(static_cast<std::size_t>(lines), 0.0f);
@@ -42,6 +43,7 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
   const LineSelectionOptions& o = options_;
   const int k = per_line_;
   const auto restart = static_cast<float>(o.restart_cost_db);
+  const auto cap = static_cast<float>(o.amplitude_cap_db);
   const auto free = static_cast<float>(o.jump_free_px);
   const auto jump_cost = static_cast<float>(o.jump_cost_db_per_px);
   const auto gap_cost = static_cast<float>(o.gap_cost_db);
@@ -67,12 +69,16 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
     prefix_best_[static_cast<std::size_t>(line)] = running_best;
     prefix_at_[static_cast<std::size_t>(line)] = running_at;
     const int n = counts[static_cast<std::size_t>(line)];
+    for (int i = 0; i < n; ++i) {
+      position_[static_cast<std::size_t>(line * k + i)] =
+          candidates[static_cast<std::size_t>(line * k + i)].position;
+    }
     const float* previous = previous_.data() + static_cast<std::ptrdiff_t>(line) * k;
     const int previous_count = previous_count_[static_cast<std::size_t>(line)];
     for (int i = 0; i < n; ++i) {
       const std::int32_t at = line * k + i;
       const LineCandidate& c = candidates[static_cast<std::size_t>(at)];
-      float unary = c.amplitude_db - threshold_db;
+      float unary = std::min(c.amplitude_db - threshold_db, cap);
       bool persistent = false;
       for (int j = 0; j < previous_count; ++j) {
         if (std::abs(c.position - previous[j]) <= tolerance) {
@@ -100,15 +106,23 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
         if (column_best_[static_cast<std::size_t>(before)] - skipped <= best) continue;
         const int m = counts[static_cast<std::size_t>(before)];
         const float allowed = free * static_cast<float>(gap + 1);
+        const float* prior_score = score_.data() + static_cast<std::ptrdiff_t>(before) * k;
+        const float* prior_position = position_.data() + static_cast<std::ptrdiff_t>(before) * k;
+        // The best prior first (a branch-free reduction), its index only when it improves.
+        float best_here = -std::numeric_limits<float>::infinity();
         for (int j = 0; j < m; ++j) {
-          const std::int32_t prior = before * k + j;
-          const float jump =
-              std::abs(c.position - candidates[static_cast<std::size_t>(prior)].position);
-          const float total = score_[static_cast<std::size_t>(prior)] -
-                              jump_cost * std::max(0.0f, jump - allowed) - skipped;
-          if (total > best) {
-            best = total;
-            from = prior;
+          const float jump = std::abs(c.position - prior_position[j]);
+          best_here =
+              std::max(best_here, prior_score[j] - jump_cost * std::max(0.0f, jump - allowed));
+        }
+        if (best_here - skipped > best) {
+          best = best_here - skipped;
+          for (int j = 0; j < m; ++j) {
+            const float jump = std::abs(c.position - prior_position[j]);
+            if (prior_score[j] - jump_cost * std::max(0.0f, jump - allowed) == best_here) {
+              from = before * k + j;
+              break;
+            }
           }
         }
       }

@@ -13,8 +13,8 @@ namespace laserline::pipeline {
 // continuous except where the depth jumps, and it stays where it was in the previous frame while
 // texture moves with the scene. So the choice maximises, over all ways of picking at most one
 // candidate per line,
-//   sum of (amplitude in dB - threshold, + previous_bonus_db where the previous frame had a
-//           candidate within previous_tolerance_px on that line)
+//   sum of (amplitude in dB - threshold, at most amplitude_cap_db, + previous_bonus_db where the
+//           previous frame had a candidate within previous_tolerance_px on that line)
 //   - (jump beyond jump_free_px per line step) * jump_cost_db_per_px - skipped lines * gap_cost_db
 //   - restart_cost_db for every new piece of curve, plus the jump cost from where the best path
 //     before it ended (at most restart_cost_db more),
@@ -23,8 +23,14 @@ namespace laserline::pipeline {
 struct LineSelectionOptions {
   bool enabled = true;  // false: the strongest candidate of each line
   // The laser line is one curve; a new piece (after a jump of the depth, or elsewhere) must earn
-  // this much (about five strong points' worth) to be kept: isolated texture and glints rarely do.
-  double restart_cost_db = 100.0;
+  // this much (about eight points' worth at amplitude_cap_db) to be kept: isolated texture and
+  // glints rarely do.
+  double restart_cost_db = 50.0;
+  // A candidate's amplitude counts up to this far above the threshold: beyond it the candidate is
+  // surely light, and whether it is the laser's is for the curve's continuity to say. (A texture
+  // ridge in daylight can be brighter than the laser where it crosses a bright, nearly clipped
+  // patch: counted in full, a piece of it outweighs the line's continuity.)
+  double amplitude_cap_db = 6.0;
   double jump_free_px = 2.0;
   double jump_cost_db_per_px = 2.0;
   double gap_cost_db = 1.0;
@@ -67,6 +73,7 @@ class LineSelector {
   LineSelectionOptions options_;
   int lines_ = 0, per_line_ = 0;
   std::vector<float> score_;             // per candidate: the best total of a path ending there
+  std::vector<float> position_;          // per candidate: its position (contiguous per line)
   std::vector<std::int32_t> from_;       // per candidate: its predecessor on that path, -1 none
   std::vector<float> column_best_;       // per line: the best total of a path ending on it
   std::vector<float> prefix_best_;       // per line: the best total of any path before it (>= 0)

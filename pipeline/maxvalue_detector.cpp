@@ -17,7 +17,8 @@ MaxValueDetector::MaxValueDetector(int threshold) : threshold_(threshold) {
 }
 
 void MaxValueDetector::reset(int width, int height) {
-  (void)height;
+  width_ = width;
+  height_ = height;
   max_value_.assign(width, 0);
   first_row_.assign(width, 0);
   last_row_.assign(width, 0);
@@ -32,11 +33,18 @@ void MaxValueDetector::detect(const ImageView& image, const FrameContext& frame,
   const int width = image.width;
   if (!frame.laser_on || static_cast<int>(max_value_.size()) != width || image.height > 65535)
     return;
-  // (In whole vectors of the widest target's: 64 columns.)
+  const DetectionRegion region = region_.in_frame(width, image.height);
+  if (region.width == 0 || region.height == 0) return;
+  // The region's columns in parts (in whole vectors of the widest target's: 64 columns).
   constexpr int kColumns = 64;
+  const int chunks = (region.width + kColumns - 1) / kColumns;
+  const int region_end = region.x + region.width;
   auto part = [&](int p) {
-    const auto [begin, end] = part_range((width + kColumns - 1) / kColumns, p, parts_);
-    if (begin < end) columns(image, begin * kColumns, std::min(end * kColumns, width));
+    const auto [begin, end] = part_range(chunks, p, parts_);
+    if (begin < end) {
+      columns(image, region, region.x + begin * kColumns,
+              std::min(region.x + end * kColumns, region_end));
+    }
   };
   if (parts_ > 1 && runner_->parts() == parts_) {
     runner_->run(PartWork(part));
@@ -44,7 +52,7 @@ void MaxValueDetector::detect(const ImageView& image, const FrameContext& frame,
     for (int p = 0; p < parts_; ++p)
       part(p);
   }
-  for (int u = 0; u < width; ++u) {
+  for (int u = region.x; u < region_end; ++u) {
     if (std::isnan(row_[u])) continue;
     ProfilePoint point;
     point.u = u;
@@ -54,21 +62,23 @@ void MaxValueDetector::detect(const ImageView& image, const FrameContext& frame,
   }
 }
 
-void MaxValueDetector::columns(const ImageView& image, int begin, int end) {
-  kernels::column_maxima(image.data, image.stride, begin, end, image.height, max_value_.data(),
-                         first_row_.data(), last_row_.data(), sum_.data());
+void MaxValueDetector::columns(const ImageView& image, const DetectionRegion& region, int begin,
+                               int end) {
+  // The region's rows from its top: first_row_ and last_row_ count from there.
+  kernels::column_maxima(image.row(region.y), image.stride, begin, end, region.height,
+                         max_value_.data(), first_row_.data(), last_row_.data(), sum_.data());
   const std::uint8_t* max_value = max_value_.data();
   const std::uint16_t* first_row = first_row_.data();
   const std::uint16_t* last_row = last_row_.data();
   const std::uint32_t* sum = sum_.data();
 
-  const float inv_height = 1.0f / static_cast<float>(image.height);
+  const float inv_height = 1.0f / static_cast<float>(region.height);
   for (int u = begin; u < end; ++u) {
     const int peak = max_value[u];
     row_[u] = std::numeric_limits<float>::quiet_NaN();
     if (peak < threshold_ || peak == 0) continue;
-    const int first = first_row[u];
-    const int last = last_row[u];
+    const int first = region.y + first_row[u];
+    const int last = region.y + last_row[u];
     float v = static_cast<float>(first);
     bool plateau = last > first;
     for (int r = first + 1; plateau && r < last; ++r)

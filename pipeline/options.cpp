@@ -1,6 +1,8 @@
 #include "pipeline/options.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <sstream>
 
 #include "pipeline/detector.hpp"
@@ -42,12 +44,52 @@ void at_least(const char* field, double value, double min) {
 
 }  // namespace
 
+DetectionRegion DetectionRegion::in_frame(int frame_width, int frame_height) const {
+  if (whole()) return {0, 0, frame_width, frame_height};
+  const std::int64_t x0 = std::clamp<std::int64_t>(x, 0, frame_width);
+  const std::int64_t y0 = std::clamp<std::int64_t>(y, 0, frame_height);
+  const std::int64_t x1 = std::clamp<std::int64_t>(std::int64_t{x} + width, x0, frame_width);
+  const std::int64_t y1 = std::clamp<std::int64_t>(std::int64_t{y} + height, y0, frame_height);
+  return {static_cast<int>(x0), static_cast<int>(y0), static_cast<int>(x1 - x0),
+          static_cast<int>(y1 - y0)};
+}
+
+bool DetectionRegion::contains(double px, double py) const {
+  if (!(std::isfinite(px) && std::isfinite(py))) return false;
+  const double column = std::round(px), row = std::round(py);
+  return column >= x && column < static_cast<double>(x) + width && row >= y &&
+         row < static_cast<double>(y) + height;
+}
+
+std::string DetectionRegion::text() const {
+  std::ostringstream out;
+  out << x << ',' << y << ',' << width << ',' << height;
+  return out.str();
+}
+
+void DetectionRegion::validate(int frame_width, int frame_height) const {
+  if (whole()) return;
+  std::ostringstream bracketed;
+  bracketed << '[' << x << ", " << y << ", " << width << ", " << height << ']';
+  const std::string given = bracketed.str();
+  if (x < 0 || y < 0) throw OptionError("roi", "x and y must be at least 0, got " + given);
+  if (width < 1 || height < 1) {
+    throw OptionError("roi", "width and height must be at least 1 pixel, got " + given);
+  }
+  if (std::int64_t{x} + width > frame_width || std::int64_t{y} + height > frame_height) {
+    std::ostringstream problem;
+    problem << given << " reaches beyond the " << frame_width << 'x' << frame_height << " frame";
+    throw OptionError("roi", problem.str());
+  }
+}
+
 void validate_maxvalue_threshold(int threshold) {
   within("threshold", threshold, 1, 255);
 }
 
 void LineSelectionOptions::validate() const {
   within("restart_cost_db", restart_cost_db, 0.0, 10000.0);
+  within("amplitude_cap_db", amplitude_cap_db, 0.1, 1000.0);
   within("jump_free_px", jump_free_px, 0.0, 1000.0);
   within("jump_cost_db_per_px", jump_cost_db_per_px, 0.0, 1000.0);
   within("gap_cost_db", gap_cost_db, 0.0, 1000.0);

@@ -189,7 +189,7 @@ MotionEstimate MotionEstimator::estimate_from_previous() {
   estimate.previous_to_current = h;
   // A frame-to-frame motion never mirrors the image: the local scale at the centre is positive.
   const double cu = 0.5 * (s.width - 1), cv = 0.5 * (s.height - 1);
-  const double w = h.h[6] * cu + h.h[7] * cv + h.h[8];
+  const double w = h.h(2, 0) * cu + h.h(2, 1) * cv + h.h(2, 2);
   const double determinant = to_matrix(h).determinant();
   estimate.valid = inliers >= o.min_inliers && w > 0 && determinant > 0;
   return estimate;

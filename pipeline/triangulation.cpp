@@ -15,14 +15,14 @@ constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
 Triangulator::Triangulator(const ScannerGeometry& geometry) : geometry_(geometry) {}
 
-bool Triangulator::point(double u, double v, std::array<double, 3>& xyz) const {
+bool Triangulator::point(double u, double v, Eigen::Vector3d& xyz) const {
   double x = 0, y = 0;
   if (!geometry_.normalised(u, v, x, y)) return false;
   // The ray is Z * (x, y, 1): a*x*Z + b*y*Z + c*Z + e = 0.
   const auto& [a, b, c, e] = geometry_.laser_plane;
   const double z = -e / (a * x + b * y + c);
   if (!(z > 0.0) || !std::isfinite(z)) return false;
-  xyz = {x * z, y * z, z};
+  xyz = Eigen::Vector3d(x * z, y * z, z);
   return true;
 }
 
@@ -32,7 +32,7 @@ void Triangulator::fill(Profile& profile) const {
 
 void Triangulator::fill(Profile& profile, std::size_t first, std::size_t end) const {
   for (ProfilePoint& p : profile.mutable_points().subspan(first, end - first)) {
-    std::array<double, 3> xyz{};
+    Eigen::Vector3d xyz;
     const auto [x, y] = profile.image_point(p);
     if (p.valid && point(x, y, xyz)) {
       p.xyz = {static_cast<float>(xyz[0]), static_cast<float>(xyz[1]), static_cast<float>(xyz[2])};
@@ -62,6 +62,8 @@ class TriangulatingDetector final : public Detector {
     runner_ = &runner;
     detector_->use_parts(runner);
   }
+  void set_region(const DetectionRegion& region) override { detector_->set_region(region); }
+  DetectionRegion region() const override { return detector_->region(); }
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override {
     detector_->detect(image, frame, out);
     // The points in parts (each its own range).

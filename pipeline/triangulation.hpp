@@ -1,6 +1,6 @@
 #pragma once
 
-#include <array>
+#include <Eigen/Core>
 #include <memory>
 
 #include "pipeline/detector.hpp"
@@ -18,7 +18,7 @@ class Triangulator {
 
   // The point of the laser sheet seen at raw pixel (u, v). False where the ray does not meet the
   // sheet in front of the camera (or cannot be undistorted).
-  bool point(double u, double v, std::array<double, 3>& xyz) const;
+  bool point(double u, double v, Eigen::Vector3d& xyz) const;
 
   // Fills xyz of every valid point of the profile (its points mapped to the frame by its axes);
   // NaN for rejected ones and for misses.

@@ -281,7 +281,7 @@ void LineValidator::reset(int width, int height, std::size_t max_points) {
 }
 
 void LineValidator::validate(Profile& profile, const PairMotion& motion, const ImageView& image,
-                             const std::array<double, 9>* homography) {
+                             const Homography* homography) {
   const int previous = current_;
   const int before = (current_ + 2) % 3;
   current_ = (current_ + 1) % 3;
@@ -408,16 +408,15 @@ void LineValidator::test_segments(SegmentedFrame& current, const SegmentedFrame&
   }
 }
 
-bool LineValidator::track_box(const LineSegment& s, const ImageView& image,
-                              const std::array<double, 9>& h, float& du, float& dv) const {
+bool LineValidator::track_box(const LineSegment& s, const ImageView& image, const Homography& h,
+                              float& du, float& dv) const {
   // The patch: around the box centre, at most patch_columns x patch_rows, in the current image.
   const int cu = (s.u_min + s.u_max) / 2;
   const int cv = static_cast<int>(std::lround(0.5f * (s.v_min + s.v_max)));
   const int half_u = std::min(options_.patch_columns / 2, std::max((s.u_max - s.u_min) / 2, 4));
   const int half_v = options_.patch_rows / 2;
   // Where the homography puts the centre in the previous frame: the search starts there.
-  const Homography forward{h};
-  const std::array<double, 2> back = forward.inverse().map(cu, cv);
+  const std::array<double, 2> back = h.inverse().map(cu, cv);
   if (!std::isfinite(back[0]) || !std::isfinite(back[1])) return false;
   const int su = static_cast<int>(std::lround(back[0])) - cu;
   const int sv = static_cast<int>(std::lround(back[1])) - cv;
@@ -477,7 +476,7 @@ bool LineValidator::track_box(const LineSegment& s, const ImageView& image,
 
 void LineValidator::associate_by_image_features(const SegmentedFrame& previous,
                                                 SegmentedFrame& current, const ImageView& image,
-                                                const std::array<double, 9>& homography) {
+                                                const Homography& homography) {
   for (LineSegment& s : current.segments) {
     s.match_count = 0;
     float du = 0, dv = 0;

@@ -179,7 +179,7 @@ class LineValidator {
   // p_current ~ H p_previous, or nullptr) and `image` (the original frame) are used by the
   // image_features association only. A frame without motion breaks the tracks.
   void validate(Profile& profile, const PairMotion& motion, const ImageView& image,
-                const std::array<double, 9>* homography);
+                const Homography* homography);
 
   // The segments of the last frame validated, for overlays and tests.
   const SegmentedFrame& segments() const { return frames_[current_]; }
@@ -190,10 +190,10 @@ class LineValidator {
 
  private:
   void associate_by_image_features(const SegmentedFrame& previous, SegmentedFrame& current,
-                                   const ImageView& image, const std::array<double, 9>& homography);
+                                   const ImageView& image, const Homography& homography);
   // Tracks the box of `s` (frame n) into the previous image; false when it does not converge.
-  bool track_box(const LineSegment& s, const ImageView& image, const std::array<double, 9>& h,
-                 float& du, float& dv) const;
+  bool track_box(const LineSegment& s, const ImageView& image, const Homography& h, float& du,
+                 float& dv) const;
   void test_segments(SegmentedFrame& current, const SegmentedFrame& previous,
                      const SegmentedFrame& before, const PairMotion& first,
                      const PairMotion& second);

@@ -13,7 +13,9 @@
 #include <laserline/status_t.hpp>
 #include <lcm/lcm-cpp.hpp>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -212,7 +214,7 @@ TEST_F(CommandTest, ExposureChangesWhatTheNextFramesCarryAndBadInputIsRefusedInO
   EXPECT_EQ(get.exit_code, 0) << get.out;
   EXPECT_EQ(get.out,
             "exposure_us=2000 gain_db=0 frame_rate_hz=20 laser.mode=on "
-            "detector.maxvalue.threshold=60\n");
+            "detector.maxvalue.threshold=60 detector.roi=0,0,320,240\n");
   EXPECT_TRUE(daemon.running());
   EXPECT_EQ(daemon.stop(), 0);
   const std::string log = daemon.log();
@@ -319,6 +321,92 @@ TEST_F(CommandTest, ThresholdChangesThePointsFoundFromTheNextFrame) {
   EXPECT_EQ(daemon.stop(), 0) << daemon.log();
 }
 
+// The detector's region: set on the detector in place by the worker between two frames; the
+// profiles published afterwards have points inside it only, and over the whole frame again once
+// it is back to full. Refused outside the frame, in one line.
+TEST_F(CommandTest, RegionLimitsThePointsFoundFromTheNextFrame) {
+  Listener listener;
+  Daemon daemon("roi", sim_config("", "mode: on"));
+  ASSERT_TRUE(listener.wait_for(
+      [](const Received& r) { return !r.profiles.empty() && r.profiles.back().num_points > 100; },
+      15))
+      << daemon.log();
+  // Around the rows where the line is now (it moves a little as the scanner sways).
+  std::vector<float> rows;
+  for (const auto& p : listener.received().profiles.back().points)
+    rows.push_back(p.v);
+  std::nth_element(rows.begin(), rows.begin() + rows.size() / 2, rows.end());
+  const int x = 100, width = 120, height = 60;
+  const int y = std::clamp(static_cast<int>(rows[rows.size() / 2]) - height / 2, 0, 240 - height);
+  const std::string region = std::to_string(x) + "," + std::to_string(y) + "," +
+                             std::to_string(width) + "," + std::to_string(height);
+  const auto set = ctl("set detector.roi " + region);
+  EXPECT_EQ(set.exit_code, 0) << set.out;
+  EXPECT_EQ(set.out, "detector.roi = " + region + " (was 0,0,320,240)\n");
+  listener.clear();
+  ASSERT_TRUE(listener.wait_for([](const Received& r) { return r.profiles.size() >= 4; }, 5))
+      << daemon.log();
+  const auto& profiles = listener.received().profiles;
+  for (std::size_t i = 1; i < profiles.size(); ++i) {  // (the first may have been on its way)
+    const laserline::profile_t& p = profiles[i];
+    EXPECT_EQ(p.search_axis, std::int8_t{laserline::profile_t::SEARCH_COLUMNS});
+    EXPECT_GT(p.num_points, width / 2) << p.sequence;
+    for (const auto& point : p.points) {
+      const long row = std::lround(point.v);
+      EXPECT_TRUE(point.u >= x && point.u < x + width && row >= y && row < y + height)
+          << "frame " << p.sequence << ": point " << point.u << ", " << point.v << " outside "
+          << region;
+    }
+  }
+  // A threshold change builds a new detector: it searches the same region.
+  const auto threshold = ctl("set detector.maxvalue.threshold 55");
+  EXPECT_EQ(threshold.exit_code, 0) << threshold.out;
+  listener.clear();
+  ASSERT_TRUE(listener.wait_for([](const Received& r) { return r.profiles.size() >= 3; }, 5))
+      << daemon.log();
+  for (std::size_t i = 1; i < listener.received().profiles.size(); ++i) {
+    const laserline::profile_t& p = listener.received().profiles[i];
+    EXPECT_GT(p.num_points, width / 2) << p.sequence;
+    for (const auto& point : p.points)
+      EXPECT_TRUE(point.u >= x && point.u < x + width) << p.sequence << ": column " << point.u;
+  }
+  const auto get = ctl("get");
+  EXPECT_EQ(get.exit_code, 0) << get.out;
+  EXPECT_NE(get.out.find(" detector.maxvalue.threshold=55 detector.roi=" + region + "\n"),
+            std::string::npos)
+      << get.out;
+
+  const auto outside = ctl("set detector.roi 300,0,40,10");
+  EXPECT_EQ(outside.exit_code, 1) << outside.out;
+  EXPECT_EQ(outside.out,
+            "refused: detector.roi: [300, 0, 40, 10] reaches beyond the 320x240 frame\n");
+  const auto malformed = ctl("set detector.roi 10,10,40");
+  EXPECT_EQ(malformed.exit_code, 1) << malformed.out;
+  EXPECT_EQ(malformed.out,
+            "refused: detector.roi: expected x,y,width,height in pixels (or full), got "
+            "'10,10,40'\n");
+
+  const auto full = ctl("set detector.roi full");
+  EXPECT_EQ(full.exit_code, 0) << full.out;
+  EXPECT_EQ(full.out, "detector.roi = 0,0,320,240 (was " + region + ")\n");
+  listener.clear();
+  ASSERT_TRUE(listener.wait_for(
+      [&](const Received& r) {
+        for (const auto& p : r.profiles) {
+          int beyond = 0;
+          for (const auto& point : p.points)
+            beyond += point.u < x || point.u >= x + width ? 1 : 0;
+          if (beyond > 100) return true;
+        }
+        return false;
+      },
+      5))
+      << daemon.log();
+  EXPECT_EQ(daemon.stop(), 0);
+  const std::string log = daemon.log();
+  EXPECT_NE(log.find(": detector.roi 0,0,320,240 -> " + region + "\n"), std::string::npos) << log;
+}
+
 TEST_F(CommandTest, NoDaemonIsNoAnswer) {
   const auto nobody = ctl("--channel NOBODY --timeout 0.3 get");
   EXPECT_EQ(nobody.exit_code, 3) << nobody.out;
@@ -339,6 +427,12 @@ TEST_F(CommandTest, PythonSendsTheSameThroughTheGeneratedTypes) {
   const auto refused = run_command(python + "laser pattern");
   EXPECT_EQ(refused.exit_code, 1) << refused.out;
   EXPECT_EQ(refused.out, "refused: laser.mode: pattern needs laser.pattern in the configuration\n");
+  const auto region = run_command(python + "set detector.roi 100,50,200,150");
+  EXPECT_EQ(region.exit_code, 0) << region.out;
+  EXPECT_EQ(region.out, "detector.roi = 100,50,200,150 (was 0,0,320,240)\n");
+  const auto get = run_command(python + "get");
+  EXPECT_EQ(get.exit_code, 0) << get.out;
+  EXPECT_NE(get.out.find(" detector.roi=100,50,200,150\n"), std::string::npos) << get.out;
 }
 
 // Aravis's fake GigE camera, running until destroyed; ready once Aravis discovers it.
@@ -424,7 +518,7 @@ lcm: {url: ")") + kUrl + R"(", image_every_n: 0, status_period_s: 0.25}
   EXPECT_EQ(get.exit_code, 0) << get.out;
   EXPECT_EQ(get.out,
             "exposure_us=5000 gain_db=3 frame_rate_hz=10 laser.mode=on "
-            "detector.maxvalue.threshold=40\n");
+            "detector.maxvalue.threshold=40 detector.roi=0,0,512,512\n");
   EXPECT_EQ(daemon.stop(), 0) << daemon.log();
 }
 

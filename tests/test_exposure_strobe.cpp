@@ -1,6 +1,6 @@
 // The strobe's exposure history, the matching of frames to exposures and the laser's state over
-// an exposure (hal/exposure_strobe.hpp), without hardware. The GPIO reader and the frame path
-// with them: test_strobe.cpp.
+// an exposure, each frame's laser state from them (hal/exposure_strobe.hpp), without hardware. The
+// GPIO reader and the frame path with them: test_strobe.cpp.
 #include "hal/exposure_strobe.hpp"
 
 #include <gtest/gtest.h>
@@ -41,26 +41,29 @@ TEST(ExposureHistory, KeepsTheLastExposuresFromTheirEdges) {
 TEST(ExposureHistory, ReadersNeverSeeATornExposure) {
   ExposureHistory history(8);
   std::atomic<bool> done{false};
+  std::atomic<std::int64_t> reads{0};
   std::thread writer([&] {
-    for (std::int64_t i = 1; i <= 50'000; ++i) {
+    // On a loaded machine the reader may not run at all during the first 50,000: the writer goes
+    // on until the reader has read some whole (a bounded wait).
+    for (std::int64_t i = 1;
+         i <= 50'000 || (reads.load(std::memory_order_relaxed) < 100 && i <= 50'000'000); ++i) {
       history.begin(i * 1000);
       history.end(i * 1000 + 7);
       if (i % 16 == 0) std::this_thread::yield();  // the reader gets to read some whole
     }
     done = true;
   });
-  std::int64_t reads = 0;
   while (!done) {
     const std::uint64_t n = history.completed();
     ExposureInterval interval;
     if (n > 0 && history.get(n - 1, &interval)) {
       ASSERT_EQ(interval.end_mono_ns - interval.start_mono_ns, 7);
       ASSERT_EQ(interval.start_mono_ns, static_cast<std::int64_t>(interval.index + 1) * 1000);
-      ++reads;
+      reads.fetch_add(1, std::memory_order_relaxed);
     }
   }
   writer.join();
-  EXPECT_GT(reads, 0);
+  EXPECT_GT(reads.load(), 0);
 }
 
 // Exposures every 10 ms, 2 ms long, from t = 100 ms; the camera's clock runs 5 s ahead.
@@ -133,6 +136,28 @@ TEST(LaserSwitchHistory, OnOffOrMixedOverAnExposure) {
     switches.add({i % 2 == 0, 1000 + 100 * i, static_cast<std::uint64_t>(2 + i)});
   EXPECT_EQ(switches.during(150, 160), LaserExposure::kUnknown) << "older than the switches kept";
   EXPECT_EQ(switches.during(2810, 2890), LaserExposure::kOn);  // after the switch at 2800 (on)
+}
+
+// Without a strobe each frame's laser state stays the estimate, and its own switch is late when it
+// came after the camera's timestamp of the exposure (the strobe's exact case: test_strobe.cpp).
+TEST(FrameLaserDecider, WithoutAStrobeTheCamerasTimestampDecidesLateSwitches) {
+  FrameLaserDecider decider(nullptr, 100.0);
+  FrameInfo info;
+  info.laser_on = true;
+  info.exposure_mono_ns = 50 * kMs;
+  info.exposure_start_mono_ns = 7;  // left from an earlier frame in the slot
+  FrameLaserDecider::Decision decided = decider.decide(info, 0);
+  EXPECT_FALSE(decided.matched);
+  EXPECT_FALSE(decided.late_switch) << "no switch yet";
+  EXPECT_EQ(info.exposure_start_mono_ns, 0);
+  decider.switched({true, 60 * kMs, 1});
+  decided = decider.decide(info, 1);
+  EXPECT_TRUE(decided.late_switch) << "switched for this frame after its exposure began";
+  EXPECT_EQ(info.laser_switch_mono_ns, 60 * kMs);
+  EXPECT_TRUE(info.laser_on) << "the estimate is the switch's intent";
+  info.exposure_mono_ns = 70 * kMs;
+  EXPECT_FALSE(decider.decide(info, 1).late_switch) << "switched before the exposure";
+  EXPECT_FALSE(decider.decide(info, 2).late_switch) << "an earlier frame's switch";
 }
 
 }  // namespace

@@ -74,9 +74,9 @@ lcm: {url: "udpm://239.255.76.67:7667?ttl=0", image_every_n: 5, image_compressio
   EXPECT_EQ(allocations, 0) << bytes << " bytes allocated over " << processed << " frames";
 }
 
-// Commands are carried out by the camera thread between grabs without allocating: parsed
-// beforehand (as the command thread does), then submitted and their results taken while every
-// allocation of the process is counted.
+// Commands are carried out by the camera thread (the detector's region by the worker) between
+// grabs without allocating: parsed beforehand (as the command thread does), then submitted and
+// their results taken while every allocation of the process is counted.
 TEST(FramePath, CommandsAreCarriedOutBetweenGrabsWithoutAllocating) {
   if (!g_namespace_problem.empty()) {
     GTEST_SKIP() << "no private network namespace for LCM over UDP: " << g_namespace_problem;
@@ -98,7 +98,8 @@ lcm: {url: "udpm://239.255.76.67:7667?ttl=0", image_every_n: 0, status_period_s:
   FramePath path(config, *backends.camera, *backends.laser, *backends.detector, lcm);
   std::vector<Command> commands;
   for (auto [name, value] : {std::pair{"exposure_us", "2500"}, std::pair{"gain_db", "6"},
-                             std::pair{"laser.mode", "alternate"}, std::pair{"get", ""}}) {
+                             std::pair{"laser.mode", "alternate"},
+                             std::pair{"detector.roi", "10,20,100,50"}, std::pair{"get", ""}}) {
     laserline::command_t message;
     message.id = static_cast<std::int64_t>(commands.size()) + 1;
     message.name = name;
@@ -132,6 +133,8 @@ lcm: {url: "udpm://239.255.76.67:7667?ttl=0", image_every_n: 0, status_period_s:
   EXPECT_STREQ(done.result.in_force,
                "exposure_us=2500 gain_db=6 frame_rate_hz=100 laser.mode=alternate");
   EXPECT_EQ(counted.count, 0) << counted.bytes << " bytes allocated";
+  // The worker set the region on the detector in place.
+  EXPECT_EQ(backends.detector->region(), (pipeline::DetectionRegion{10, 20, 100, 50}));
 }
 
 TEST(FramePath, LaserGoesOffWhenFramesStopAndBackOnWhenTheyReturn) {

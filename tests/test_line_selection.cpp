@@ -56,8 +56,8 @@ TEST(LineSelection, FollowsTheContinuousCurveNotTheStrongestCandidate) {
 }
 
 // The line hidden over lines 20..31 (longer than max_gap), a texture edge far from it there: the
-// edge earns more than one restart (12 points of 10 dB), but a new piece far from where the line
-// was seen pays the jump too, so the path waits for the line to come back.
+// edge earns more than one restart (12 points of the 6 dB cap), but a new piece far from where the
+// line was seen pays the jump too, so the path waits for the line to come back.
 TEST(LineSelection, ANewPieceFarFromTheLineMustEarnMoreThanOneRestart) {
   Lines lines;
   lines.piece(0, 19, 100.0f, 10.0f);
@@ -71,6 +71,25 @@ TEST(LineSelection, ANewPieceFarFromTheLineMustEarnMoreThanOneRestart) {
     EXPECT_EQ(chosen[line], -1.0f) << line;
   for (int line = 32; line < kLines; ++line)
     EXPECT_EQ(chosen[line], 101.0f) << line;
+}
+
+// Daylight: a texture ridge 4 px from the line, far brighter than the line (which crosses a bright
+// patch there), over lines 20..39. Beyond amplitude_cap_db both are surely light: the path stays
+// on the continuous line instead of paying two small jumps for the ridge's brightness.
+TEST(LineSelection, ABrightTextureRidgeDoesNotOutweighTheLinesContinuity) {
+  Lines lines;
+  lines.piece(0, kLines - 1, 100.0f, 8.0f);
+  lines.piece(20, 39, 104.0f, 40.0f);
+  LineSelector selector;
+  const std::vector<float> chosen = lines.select(selector);
+  for (int line = 0; line < kLines; ++line)
+    EXPECT_EQ(chosen[line], 100.0f) << line;
+
+  // Counted in full, the ridge's brightness wins: the cap is what keeps the line.
+  LineSelectionOptions uncapped;
+  uncapped.amplitude_cap_db = 1000.0;
+  LineSelector counting_in_full(uncapped);
+  EXPECT_EQ(lines.select(counting_in_full)[30], 104.0f);
 }
 
 // A depth jump: the line goes on 300 px away for 40 lines. That piece earns its restart and its
@@ -104,6 +123,9 @@ TEST(LineSelection, NegativeCostsAreRefused) {
   LineSelectionOptions options;
   options.restart_cost_db = -1.0;
   EXPECT_THROW(LineSelector{options}, std::invalid_argument);
+  LineSelectionOptions no_cap;
+  no_cap.amplitude_cap_db = 0.0;
+  EXPECT_THROW(LineSelector{no_cap}, std::invalid_argument);
 }
 
 }  // namespace

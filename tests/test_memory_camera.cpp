@@ -197,7 +197,6 @@ class MemoryCameraLog : public ::testing::Test {
     path_ = std::filesystem::temp_directory_path() /
             ("laserline_memory_" + std::to_string(getpid()) + ".lcmlog");
     write_log(path_.string(), 5);
-    daemon::register_lcm_camera();
   }
   void TearDown() override { std::filesystem::remove(path_); }
 

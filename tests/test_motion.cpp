@@ -373,7 +373,7 @@ TEST(Homography, InverseUndoesTheMapping) {
   Homography h;
   const cv::Matx33d m = perspective_warp() * rotation_about_centre(3.0);
   for (int i = 0; i < 9; ++i)
-    h.h[i] = m.val[i];
+    h.h(i) = m.val[i];
   const Homography inverse = h.inverse();
   for (const auto& p : {std::array<double, 2>{0, 0}, {1279, 0}, {640.5, 511.5}, {17, 1000}}) {
     const auto q = h.map(p[0], p[1]);
@@ -381,7 +381,7 @@ TEST(Homography, InverseUndoesTheMapping) {
     EXPECT_NEAR(back[0], p[0], 1e-9);
     EXPECT_NEAR(back[1], p[1], 1e-9);
   }
-  EXPECT_DOUBLE_EQ(inverse.h[8], 1.0);
+  EXPECT_DOUBLE_EQ(inverse.h(2, 2), 1.0);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -678,7 +678,8 @@ TEST(MotionEstimator, CameraMotionOfSimulatedPierMatchesTheSimulator) {
   cv::Mat frame(kHeight, kWidth, CV_8UC1);
   const auto pose = [&](std::uint64_t n) {
     const hal::SimCameraPose p = scene.camera_pose(n);
-    return Pose{cv::Matx33d(p.rotation.data()),
+    const Eigen::Matrix<double, 3, 3, Eigen::RowMajor> rotation = p.rotation;
+    return Pose{cv::Matx33d(rotation.data()),
                 cv::Vec3d(p.translation[0], p.translation[1], p.translation[2])};
   };
   constexpr int kFrames = 16;

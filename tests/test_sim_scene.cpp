@@ -532,19 +532,7 @@ Vec3 ray_hit(const SimScene& scene, const SimCameraPose& pose, double u, double 
   if (!(h1 < h0)) return {nan, nan, nan};
   const double top = base_plane ? 0.01 : o.relief_height_m + 0.01;
   double lo = (h0 - top) / (h0 - h1), hi = (h0 + 0.01) / (h0 - h1);
-  const double step = 0.001 / std::sqrt(dot3(ray, ray));
-  for (double z = lo + step; z < hi + step; z += step) {
-    if (above(std::min(z, hi)) <= 0) {
-      hi = std::min(z, hi);
-      break;
-    }
-    lo = z;
-  }
-  for (int i = 0; i < 60; ++i) {
-    const double mid = 0.5 * (lo + hi);
-    (above(mid) > 0 ? lo : hi) = mid;
-  }
-  return point(0.5 * (lo + hi));
+  return point(first_zero(above, lo, hi, 0.001 / std::sqrt(dot3(ray, ray))));
 }
 
 TEST(SimSceneRelief, HeightsSlopesAndRepetitionAreAsConfigured) {
@@ -581,7 +569,7 @@ TEST(SimSceneRelief, HeightsSlopesAndRepetitionAreAsConfigured) {
   o.tilt_x_deg = 0;
   o.tilt_y_deg = 0;
   SimScene straight(o);
-  const Vec3 p = straight.surface_point(0.3, -0.2);
+  const Eigen::Vector3d p = straight.surface_point(0.3, -0.2);
   EXPECT_NEAR(p[0], 0.3, 1e-12);
   EXPECT_NEAR(p[1], -0.2, 1e-12);
   EXPECT_NEAR(p[2], o.distance_m - straight.relief_height(0.3, -0.2), 1e-12);
@@ -634,24 +622,8 @@ TEST(SimSceneRelief, TruthOnTheReliefMatchesABruteForceSearchAlongTheCameraRays)
   for (int u = 0; u < o.calibration.camera.width; u += 4) {
     if (!std::isfinite(truth.position[u])) continue;
     int crossings = 0;
-    double lo = 0, hi = 0;
-    double previous = sheet_side(u, 0);
-    for (int v = 1; v < o.calibration.camera.height; ++v) {
-      const double side = sheet_side(u, v);
-      if ((side > 0) != (previous > 0)) {
-        ++crossings;
-        lo = v - 1;
-        hi = v;
-      }
-      previous = side;
-    }
+    const double row = sheet_crossing_row(sheet_side, u, o.calibration.camera.height, crossings);
     ASSERT_EQ(crossings, 1) << "column " << u << ": the line must be seen once";
-    const bool lo_positive = sheet_side(u, lo) > 0;
-    for (int i = 0; i < 40; ++i) {
-      const double mid = 0.5 * (lo + hi);
-      ((sheet_side(u, mid) > 0) == lo_positive ? lo : hi) = mid;
-    }
-    const double row = 0.5 * (lo + hi);
     const Vec3 world = ray_hit(scene, pose, u, row);
     const double depth = to_camera(pose, world)[2];
     EXPECT_NEAR(truth.position[u], row, 1e-3) << "column " << u;
@@ -689,8 +661,9 @@ TEST(SimSceneRelief, CameraPoseExplainsTheRenderedTextureWithParallax) {
 
   // Frame 0 is the world frame.
   const SimCameraPose p0 = scene.camera_pose(0);
-  for (int i = 0; i < 9; ++i)
-    EXPECT_NEAR(p0.rotation[i], i % 4 == 0 ? 1.0 : 0.0, 1e-12);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(p0.rotation(r, c), r == c ? 1.0 : 0.0, 1e-12);
   for (double t : p0.translation)
     EXPECT_NEAR(t, 0.0, 1e-12);
 
@@ -749,8 +722,9 @@ TEST(SimSceneRelief, CameraPoseExplainsTheRenderedTextureWithParallax) {
   const Vec3 centre = to_world(later, {0, 0, 0});
   for (int i = 0; i < 3; ++i)
     EXPECT_NEAR(centre[i], o.vehicle_speed_m_s * f.e1[i], 1e-12);
-  for (int i = 0; i < 9; ++i)
-    EXPECT_NEAR(later.rotation[i], i % 4 == 0 ? 1.0 : 0.0, 1e-12);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(later.rotation(r, c), r == c ? 1.0 : 0.0, 1e-12);
 }
 
 TEST(SimSceneRelief, RejectsImpossibleReliefOptions) {

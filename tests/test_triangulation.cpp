@@ -68,7 +68,7 @@ TEST(Triangulation, CleanSceneAtOneAndAHalfMetresIsWithinOneMillimetreRms) {
         ++matched;
         // The truth row itself lands on the truth point: the simulator's sheet is the plane the
         // triangulation uses.
-        std::array<double, 3> at_truth_row{};
+        Eigen::Vector3d at_truth_row;
         ASSERT_TRUE(triangulator.point(p.u, row, at_truth_row));
         double t2 = 0;
         for (int i = 0; i < 3; ++i)
@@ -115,7 +115,7 @@ TEST(Triangulation, RemovesLensDistortionAsOpenCvAppliesIt) {
                     std::vector<double>(g.distortion.begin(), g.distortion.end()), pixels);
   double worst = 0, worst_shift_px = 0;
   for (std::size_t i = 0; i < truth.size(); ++i) {
-    std::array<double, 3> xyz{};
+    Eigen::Vector3d xyz;
     ASSERT_TRUE(triangulator.point(pixels[i].x, pixels[i].y, xyz)) << i;
     worst = std::max({worst, std::abs(xyz[0] - truth[i].x), std::abs(xyz[1] - truth[i].y),
                       std::abs(xyz[2] - truth[i].z)});

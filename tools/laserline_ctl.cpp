@@ -4,6 +4,7 @@
 //
 //   laserline-ctl set exposure_us 1500
 //   laserline-ctl get
+//   laserline-ctl set detector.roi 100,50,400,300
 //   laserline-ctl laser off
 #include <unistd.h>
 
@@ -29,6 +30,7 @@ constexpr const char* kUsage =
     "Sends one command to a running laserlined and prints its answer in one line.\n"
     "  set NAME VALUE       exposure_us, gain_db, frame_rate_hz, laser.mode,\n"
     "                       detector.maxvalue.threshold, detector.frontend.snr_threshold_db,\n"
+    "                       detector.roi (x,y,width,height or full),\n"
     "                       genicam:<Feature> (aravis), v4l2:<control name> (v4l2)\n"
     "  get                  every value in force\n"
     "  laser MODE           the same as set laser.mode MODE\n"

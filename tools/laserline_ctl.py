@@ -8,6 +8,7 @@ ships no LCM Python module and none is needed for messages this small.
 
   laserline_ctl.py set exposure_us 1500
   laserline_ctl.py get
+  laserline_ctl.py set detector.roi 100,50,400,300    # "full": the whole frame again
   laserline_ctl.py laser off
   laserline_ctl.py --types build/default/lcmtypes/python get     # types not installed
 

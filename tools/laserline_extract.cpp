@@ -29,6 +29,7 @@
 #include "hal/calibration.hpp"
 #include "hal/laser_channel.hpp"
 #include "pipeline/detector.hpp"
+#include "pipeline/options.hpp"
 #include "tools/cli.hpp"
 #include "tools/extract_inputs.hpp"
 #include "tools/extractor.hpp"
@@ -68,8 +69,9 @@ constexpr const char* kUsage =
     "  --channel NAME|EXPR  the laser's light in colour frames: red, green (default), blue,\n"
     "                     grey, or a weighted sum such as \"red - (green + blue) / 2\" (also\n"
     "                     cancels white light); mono frames are taken as they are\n"
-    "  --roi x,y,w,h      keep only points in this rectangle (left column, top row, width,\n"
-    "                     height in pixels); the detector still sees the whole frame\n"
+    "  --roi x,y,w,h      search only this rectangle (left column, top row, width, height in\n"
+    "                     pixels; the filters still read the pixels around it), in place of\n"
+    "                     the configuration's detector.roi\n"
     "  --mask FILE        keep only points on non-zero pixels of this image (the frames' size)\n"
     "  --laser-pattern BITS  the laser state of successive frames, 1 on, 0 off, repeated from\n"
     "                     the start of each sequence (folder, video, log, run of image files):\n"
@@ -228,8 +230,10 @@ void apply_threshold(const Options& o, laserline::pipeline::DetectorOptions& det
   }
 }
 
-// --roi and --mask, checked against the frames' size (the calibration's).
-Region region_of(const Options& o, int width, int height) {
+// --roi and --mask, checked against the frames' size (the calibration's). --roi is also the
+// region the detector searches (*searched), in place of the configuration's detector.roi.
+Region region_of(const Options& o, int width, int height,
+                 laserline::pipeline::DetectionRegion* searched) {
   Region region;
   const std::string frames = std::to_string(width) + "x" + std::to_string(height) +
                              " frames of the calibration " + o.calib;
@@ -246,6 +250,7 @@ Region region_of(const Options& o, int width, int height) {
       fatal("--roi " + o.roi + ": reaches beyond the " + frames);
     }
     region.limit_to(cv::Rect(x, y, w, h));
+    *searched = {x, y, w, h};
   }
   if (!o.mask.empty()) {
     cv::Mat image;
@@ -366,10 +371,16 @@ int run_extract(int argc, char** argv) {
     fatal(e.what());
   }
   apply_threshold(options, detector_options);
-  const Region region = region_of(options, calibration.camera.width, calibration.camera.height);
+  const Region region = region_of(options, calibration.camera.width, calibration.camera.height,
+                                  &detector_options.roi);
   std::unique_ptr<laserline::pipeline::Detector> detector;
   try {
     detector = laserline::pipeline::make_detector(options.detector, detector_options);
+  } catch (const laserline::pipeline::OptionError& e) {
+    if (e.field() != "roi") fatal("--detector " + options.detector + ": " + e.what());
+    // (--roi was checked above: the configuration's.)
+    fatal((options.config.empty() ? std::string("built-in configuration") : options.config) +
+          ": detector.roi: " + e.problem() + " of the calibration " + options.calib);
   } catch (const std::invalid_argument& e) {
     fatal("--detector " + options.detector + ": " + e.what());
   }

@@ -8,43 +8,38 @@
 // Controls (--allow-control, with a --token the page must give): the page posts a setting to
 // /command; the view checks the token, sends a laserline.command_t carrying it to the daemon and
 // answers with the daemon's command_ack_t.
+//
+// Here: the command line and the HTTP routes. What arrived and its events: view_state.hpp; the
+// commands: view_command_relay.hpp.
 #include <httplib.h>
 #include <netdb.h>
 #include <signal.h>
 #include <sys/socket.h>
 #include <unistd.h>
-#include <laserline/command_ack_t.hpp>
-#include <laserline/command_t.hpp>
-#include <laserline/image_t.hpp>
-#include <laserline/profile_t.hpp>
-#include <laserline/status_t.hpp>
 #include <lcm/lcm-cpp.hpp>
 
-#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
-#include <condition_variable>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <deque>
-#include <map>
 #include <memory>
-#include <mutex>
-#include <opencv2/imgcodecs.hpp>
-#include <optional>
-#include <random>
 #include <string>
+#include <string_view>
 #include <thread>
-#include <vector>
 
-#include "lcmtypes/checked_decode.hpp"
 #include "tools/cli.hpp"
 #include "tools/view_assets.hpp"
+#include "tools/view_command_relay.hpp"
+#include "tools/view_json.hpp"
+#include "tools/view_state.hpp"
 
 namespace {
+
+using laserline::view::CommandRelay;
+using laserline::view::LiveState;
 
 constexpr const char* kUsage =
     "usage: laserline-view [--listen ADDR:PORT] [--url URL] [--profile-channel C]\n"
@@ -68,522 +63,9 @@ constexpr const char* kUsage =
 // How long /command waits for the daemon's answer.
 constexpr std::chrono::seconds kCommandTimeout{3};
 
-using Clock = std::chrono::steady_clock;
-
 // Live streams open at once; the HTTP thread pool keeps threads for the page's files besides.
 constexpr int kMaxStreams = 8;
 constexpr std::size_t kHttpThreads = kMaxStreams + 4;
-// Points of one profile kept for the 3-D view (every n-th): enough for the shape, small to send.
-constexpr std::size_t kCloudPointsPerProfile = 160;
-constexpr std::size_t kRecentProfiles = 64;  // to pair a raw frame with its profile
-constexpr int kJpegQuality = 85;
-
-// --- JSON, written by hand: numbers, strings, arrays of numbers -----------------------------
-
-void append_string(std::string& out, const std::string& text) {
-  out += '"';
-  for (const char c : text) {
-    if (c == '"' || c == '\\') {
-      out += '\\';
-      out += c;
-    } else if (static_cast<unsigned char>(c) < 0x20) {
-      char escaped[8];
-      std::snprintf(escaped, sizeof escaped, "\\u%04x", static_cast<unsigned>(c));
-      out += escaped;
-    } else {
-      out += c;
-    }
-  }
-  out += '"';
-}
-
-void append_number(std::string& out, double value, int decimals = 3) {
-  if (!std::isfinite(value)) {
-    out += "null";
-    return;
-  }
-  char text[48];
-  std::snprintf(text, sizeof text, "%.*f", decimals, value);
-  // "1.500" -> "1.5", "2.000" -> "2": smaller events.
-  std::string s = text;
-  if (s.find('.') != std::string::npos) {
-    while (s.back() == '0')
-      s.pop_back();
-    if (s.back() == '.') s.pop_back();
-  }
-  if (s == "-0") s = "0";
-  out += s;
-}
-
-void append_integer(std::string& out, std::int64_t value) {
-  out += std::to_string(value);
-}
-
-class JsonObject {
- public:
-  JsonObject& integer(const char* key, std::int64_t value) {
-    this->key(key);
-    append_integer(out_, value);
-    return *this;
-  }
-  JsonObject& number(const char* key, double value, int decimals = 3) {
-    this->key(key);
-    append_number(out_, value, decimals);
-    return *this;
-  }
-  JsonObject& boolean(const char* key, bool value) {
-    this->key(key);
-    out_ += value ? "true" : "false";
-    return *this;
-  }
-  JsonObject& string(const char* key, const std::string& value) {
-    this->key(key);
-    append_string(out_, value);
-    return *this;
-  }
-  // Already JSON.
-  JsonObject& raw(const char* key, const std::string& json) {
-    this->key(key);
-    out_ += json;
-    return *this;
-  }
-  std::string str() const { return out_ + "}"; }
-
- private:
-  void key(const char* name) {
-    out_ += out_.size() > 1 ? ",\"" : "\"";
-    out_ += name;
-    out_ += "\":";
-  }
-  std::string out_ = "{";
-};
-
-std::string numbers(const std::vector<float>& values, int decimals) {
-  std::string out = "[";
-  for (std::size_t i = 0; i < values.size(); ++i) {
-    if (i > 0) out += ',';
-    append_number(out, values[i], decimals);
-  }
-  return out + "]";
-}
-
-// --- What arrived -----------------------------------------------------------------------------
-
-struct Channel {
-  std::string name;
-  std::int64_t received = 0;
-  std::int64_t malformed = 0;
-  Clock::time_point last{};
-};
-
-// Points of one profile for the 3-D view, millimetres in the camera frame.
-struct CloudChunk {
-  std::int64_t index;
-  Clock::time_point received;
-  std::int64_t utime;  // exposure: profiles are spaced as exposed, not as they arrived in bursts
-  std::vector<float> xyz_mm;
-};
-
-struct EncodedFrame {
-  std::int64_t sequence = -1;
-  std::string jpeg;
-};
-
-class LiveState {
- public:
-  LiveState(std::string profile_channel, std::string image_channel, std::string status_channel,
-            double history_s)
-      : history_(
-            std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(history_s))) {
-    channels_[kProfile].name = std::move(profile_channel);
-    channels_[kImage].name = std::move(image_channel);
-    channels_[kStatus].name = std::move(status_channel);
-  }
-
-  // --- the LCM thread ---
-  void on_message(const lcm::ReceiveBuffer* rbuf, const std::string& channel_name) {
-    for (int c = 0; c < kChannels; ++c) {
-      if (channel_name == channels_[c].name) receive(c, rbuf->data, rbuf->data_size);
-    }
-  }
-
-  // --- any thread ---
-  void stop() {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      stopping_ = true;
-    }
-    changed_.notify_all();
-  }
-
-  // One browser's event stream: what it has been sent, and when it may have more.
-  class Stream {
-   public:
-    Stream(LiveState& state, double frame_rate_hz, double profile_rate_hz)
-        : state_(state),
-          frame_period_(period(frame_rate_hz)),
-          profile_period_(period(profile_rate_hz)) {}
-
-    // Waits (at most about a second) for something new that is due and returns it as SSE text;
-    // empty when stopping.
-    std::string next(bool* stopping);
-
-   private:
-    static Clock::duration period(double hz) {
-      return std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / hz));
-    }
-    LiveState& state_;
-    Clock::duration frame_period_, profile_period_;
-    std::int64_t status_sent_ = 0, profile_sent_ = 0, frame_sent_ = 0, cloud_sent_ = -1;
-    Clock::time_point next_frame_{}, next_profile_{}, next_viewer_{};
-    bool started_ = false;
-  };
-
-  // The latest raw frame as JPEG (encoded once per frame, whoever asks); nullptr when none
-  // arrived or it does not decode (then *problem says why).
-  std::shared_ptr<const EncodedFrame> frame_jpeg(std::string* problem);
-
-  std::atomic<int> open_streams_{0};
-
- private:
-  enum { kProfile, kImage, kStatus, kChannels };
-
-  void receive(int c, const void* data, std::size_t size) {
-    std::string problem;
-    bool ok = false;
-    if (c == kProfile) {
-      auto p = std::make_shared<laserline::profile_t>();
-      ok = laserline::messages::decode(data, size, p.get(), limits_, &problem);
-      if (ok) store_profile(std::move(p));
-    } else if (c == kImage) {
-      auto image = std::make_shared<laserline::image_t>();
-      ok = laserline::messages::decode(data, size, image.get(), limits_, &problem);
-      if (ok) {
-        std::lock_guard<std::mutex> lock(mutex_);
-        image_ = std::move(image);
-        ++image_count_;
-      }
-    } else {
-      auto s = std::make_shared<laserline::status_t>();
-      ok = laserline::messages::decode(data, size, s.get(), limits_, &problem);
-      if (ok) {
-        std::lock_guard<std::mutex> lock(mutex_);
-        status_ = std::move(s);
-        ++status_count_;
-      }
-    }
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      Channel& channel = channels_[c];
-      ++channel.received;
-      channel.last = Clock::now();
-      if (!ok) {
-        ++channel.malformed;
-        last_problem_ = channel.name + ": " + problem + "; skipped";
-      }
-    }
-    if (!ok) problems_.report(channels_[c].name, channels_[c].name + ": " + problem + "; skipped");
-    changed_.notify_all();
-  }
-
-  void store_profile(std::shared_ptr<laserline::profile_t> p) {
-    CloudChunk chunk{0, Clock::now(), p->utime, {}};
-    std::size_t with_xyz = 0;
-    for (const auto& pt : p->points) {
-      if (pt.valid && std::isfinite(pt.xyz[0]) && std::isfinite(pt.xyz[1]) &&
-          std::isfinite(pt.xyz[2])) {
-        ++with_xyz;
-      }
-    }
-    const std::size_t step =
-        std::max<std::size_t>(1, (with_xyz + kCloudPointsPerProfile - 1) / kCloudPointsPerProfile);
-    std::size_t k = 0;
-    for (const auto& pt : p->points) {
-      if (!pt.valid || !std::isfinite(pt.xyz[0]) || !std::isfinite(pt.xyz[1]) ||
-          !std::isfinite(pt.xyz[2])) {
-        continue;
-      }
-      if (k++ % step != 0) continue;
-      for (int i = 0; i < 3; ++i)
-        chunk.xyz_mm.push_back(pt.xyz[i] * 1000.0f);
-    }
-    std::lock_guard<std::mutex> lock(mutex_);
-    chunk.index = ++profile_count_;
-    if (!chunk.xyz_mm.empty()) cloud_.push_back(std::move(chunk));
-    while (!cloud_.empty() && cloud_.front().received < Clock::now() - history_)
-      cloud_.pop_front();
-    recent_.push_back(p);
-    if (recent_.size() > kRecentProfiles) recent_.pop_front();
-    profile_ = std::move(p);
-  }
-
-  std::string status_json(const laserline::status_t& s) const;
-  std::string profile_json(const laserline::profile_t& p, std::int64_t cloud_after,
-                           std::int64_t* cloud_sent) const;
-  std::string frame_json(const laserline::image_t& image) const;
-  std::string viewer_json() const;
-
-  mutable std::mutex mutex_;
-  std::condition_variable changed_;
-  bool stopping_ = false;
-  Channel channels_[kChannels];
-  std::string last_problem_;
-  std::shared_ptr<const laserline::profile_t> profile_;
-  std::shared_ptr<const laserline::image_t> image_;
-  std::shared_ptr<const laserline::status_t> status_;
-  std::int64_t profile_count_ = 0, image_count_ = 0, status_count_ = 0;
-  std::deque<std::shared_ptr<const laserline::profile_t>> recent_;
-  std::deque<CloudChunk> cloud_;
-  Clock::duration history_;
-  const Clock::time_point started_ = Clock::now();
-
-  // Only the LCM thread touches these.
-  laserline::messages::Limits limits_;
-  laserline::messages::ProblemLog problems_{"laserline-view: "};
-
-  std::mutex encode_mutex_;  // one encoder at a time; readers of the cache take mutex_
-  std::shared_ptr<const EncodedFrame> encoded_;
-};
-
-std::string LiveState::status_json(const laserline::status_t& s) const {
-  char instance[24];
-  std::snprintf(instance, sizeof instance, "%016llx",
-                static_cast<unsigned long long>(s.instance_id));
-  JsonObject o;
-  o.integer("utime", s.utime)
-      .integer("uptime_us", s.uptime_us)
-      .string("camera_backend", s.camera_backend)
-      .string("detector", s.detector)
-      .string("camera_state", s.camera_state)
-      .boolean("laser_on", s.laser_on)
-      .integer("laser_switches", s.laser_switches)
-      .integer("frames_captured", s.frames_captured)
-      .integer("frames_processed", s.frames_processed)
-      .integer("frames_dropped", s.frames_dropped)
-      .integer("profiles_published", s.profiles_published)
-      .integer("profiles_dropped", s.profiles_dropped)
-      .integer("images_published", s.images_published)
-      .integer("images_dropped", s.images_dropped)
-      .integer("grab_timeouts", s.grab_timeouts)
-      .integer("grab_errors", s.grab_errors)
-      .integer("publish_errors", s.publish_errors)
-      .integer("laser_safety_offs", s.laser_safety_offs)
-      .integer("laser_errors", s.laser_errors)
-      .number("frame_rate_hz", s.frame_rate_hz, 2)
-      .number("points_per_profile", s.points_per_profile, 1)
-      .integer("latency_samples", s.latency_samples)
-      .number("latency_p50_ms", s.latency_p50_ms, 2)
-      .number("latency_p99_ms", s.latency_p99_ms, 2)
-      .number("latency_max_ms", s.latency_max_ms, 2)
-      .number("pipeline_p50_ms", s.pipeline_p50_ms, 2)
-      .number("pipeline_p99_ms", s.pipeline_p99_ms, 2)
-      .number("pipeline_max_ms", s.pipeline_max_ms, 2)
-      .number("cpu_percent", s.cpu_percent, 1)
-      .integer("frames_over_budget", s.frames_over_budget)
-      .number("processing_max_ms", s.processing_max_ms, 2)
-      .integer("laser_late_switches", s.laser_late_switches)
-      .integer("camera_reconnects", s.camera_reconnects)
-      .integer("camera_missing_packets", s.camera_missing_packets)
-      .integer("camera_timeouts", s.camera_timeouts)
-      .integer("camera_size_mismatches", s.camera_size_mismatches)
-      .integer("camera_underruns", s.camera_underruns)
-      .integer("camera_other_errors", s.camera_other_errors)
-      .integer("camera_skipped_frames", s.camera_skipped_frames)
-      .integer("bad_messages", s.bad_messages)
-      .integer("bad_frames", s.bad_frames)
-      .string("instance_id", instance);
-  return o.str();
-}
-
-// Points in the camera frame (mm) for the plot, and the 3-D chunks after `cloud_after`.
-std::string LiveState::profile_json(const laserline::profile_t& p, std::int64_t cloud_after,
-                                    std::int64_t* cloud_sent) const {
-  std::vector<float> xz, candidates_xz, uv;
-  std::int64_t valid = 0;
-  for (const auto& pt : p.points) {
-    if (pt.valid) ++valid;
-    uv.push_back(static_cast<float>(pt.u));
-    uv.push_back(pt.v);
-    if (!std::isfinite(pt.xyz[0]) || !std::isfinite(pt.xyz[2])) continue;
-    auto& out = pt.valid ? xz : candidates_xz;
-    out.push_back(pt.xyz[0] * 1000.0f);
-    out.push_back(pt.xyz[2] * 1000.0f);
-  }
-  std::string cloud = "[";
-  for (const auto& chunk : cloud_) {
-    if (chunk.index <= cloud_after) continue;
-    if (cloud.size() > 1) cloud += ',';
-    // Ages by exposure time from the newest profile, and that one's by the clock here (a replay's
-    // or another computer's clock is not this one's).
-    const CloudChunk& newest = cloud_.back();
-    const double age_ms =
-        std::chrono::duration<double, std::milli>(Clock::now() - newest.received).count() +
-        std::max(0.0, static_cast<double>(newest.utime - chunk.utime) * 1e-3);
-    cloud += JsonObject().number("age_ms", age_ms, 0).raw("xyz", numbers(chunk.xyz_mm, 0)).str();
-    *cloud_sent = chunk.index;
-  }
-  cloud += "]";
-  JsonObject o;
-  o.integer("sequence", p.sequence)
-      .integer("utime", p.utime)
-      .boolean("laser_on", p.laser_on)
-      .string("detector", p.detector)
-      .integer("width", p.width)
-      .integer("height", p.height)
-      .integer("points", p.num_points)
-      .integer("valid", valid)
-      .raw("xz", numbers(xz, 1))
-      .raw("candidates_xz", numbers(candidates_xz, 1))
-      .raw("cloud", cloud);
-  // Pixels where nothing is triangulated: the plot shows the line in the image then.
-  if (xz.empty() && candidates_xz.empty()) o.raw("uv", numbers(uv, 2));
-  return o.str();
-}
-
-// The frame's description and its profile's points in the frame's own pixels.
-std::string LiveState::frame_json(const laserline::image_t& image) const {
-  const laserline::profile_t* match = nullptr;
-  for (const auto& p : recent_) {
-    if (p->sequence == image.sequence) match = p.get();
-  }
-  std::vector<float> points, candidates;
-  if (match != nullptr) {
-    // Points are in full-frame pixels; the frame may be a region, downscaled by block means
-    // (a block's centre is at k*i + (k-1)/2).
-    const double k = image.downscale > 1 ? image.downscale : 1;
-    const double x0 = image.roi_x + (k - 1) / 2, y0 = image.roi_y + (k - 1) / 2;
-    for (const auto& pt : match->points) {
-      const double x = match->search_origin[0] + pt.u * match->search_line_step[0] +
-                       pt.v * match->search_along[0];
-      const double y = match->search_origin[1] + pt.u * match->search_line_step[1] +
-                       pt.v * match->search_along[1];
-      auto& out = pt.valid ? points : candidates;
-      out.push_back(static_cast<float>((x - x0) / k));
-      out.push_back(static_cast<float>((y - y0) / k));
-    }
-  }
-  JsonObject o;
-  o.integer("sequence", image.sequence)
-      .integer("utime", image.utime)
-      .boolean("laser_on", image.laser_on)
-      .integer("width", image.width)
-      .integer("height", image.height)
-      .boolean("profile", match != nullptr)
-      .raw("points", numbers(points, 1))
-      .raw("candidates", numbers(candidates, 1));
-  return o.str();
-}
-
-std::string LiveState::viewer_json() const {
-  const auto now = Clock::now();
-  std::string channels = "[";
-  for (const auto& c : channels_) {
-    if (channels.size() > 1) channels += ',';
-    const double age_s = c.received > 0 ? std::chrono::duration<double>(now - c.last).count() : NAN;
-    channels += JsonObject()
-                    .string("name", c.name)
-                    .integer("received", c.received)
-                    .integer("malformed", c.malformed)
-                    .number("age_s", age_s, 1)
-                    .str();
-  }
-  channels += "]";
-  return JsonObject()
-      .raw("channels", channels)
-      .string("last_problem", last_problem_)
-      .integer("streams", open_streams_)
-      .number("uptime_s", std::chrono::duration<double>(now - started_).count(), 0)
-      .number("history_s", std::chrono::duration<double>(history_).count(), 1)
-      .str();
-}
-
-std::string LiveState::Stream::next(bool* stopping) {
-  std::unique_lock<std::mutex> lock(state_.mutex_);
-  std::string out;
-  auto event = [&out](const char* name, const std::string& data) {
-    out += "event: ";
-    out += name;
-    out += "\ndata: ";
-    out += data;
-    out += "\n\n";
-  };
-  if (!started_) {
-    started_ = true;
-    out += "retry: 2000\n\n";
-  }
-  const auto give_up = Clock::now() + std::chrono::seconds(1);
-  while (true) {
-    if (state_.stopping_) {
-      *stopping = true;
-      return "";
-    }
-    const auto now = Clock::now();
-    if (now >= next_viewer_) {
-      event("viewer", state_.viewer_json());
-      next_viewer_ = now + std::chrono::seconds(1);
-    }
-    if (state_.status_ && state_.status_count_ != status_sent_) {
-      event("status", state_.status_json(*state_.status_));
-      status_sent_ = state_.status_count_;
-    }
-    if (state_.profile_ && state_.profile_count_ != profile_sent_ && now >= next_profile_) {
-      event("profile", state_.profile_json(*state_.profile_, cloud_sent_, &cloud_sent_));
-      profile_sent_ = state_.profile_count_;
-      next_profile_ = now + profile_period_;
-    }
-    if (state_.image_ && state_.image_count_ != frame_sent_ && now >= next_frame_) {
-      event("frame", state_.frame_json(*state_.image_));
-      frame_sent_ = state_.image_count_;
-      next_frame_ = now + frame_period_;
-    }
-    if (!out.empty() || now >= give_up) return out;
-    // Until something arrives, or what arrived earlier becomes due.
-    auto wake = std::min(give_up, next_viewer_);
-    if (state_.profile_count_ != profile_sent_) wake = std::min(wake, next_profile_);
-    if (state_.image_count_ != frame_sent_) wake = std::min(wake, next_frame_);
-    const std::int64_t seen = state_.profile_count_ + state_.image_count_ + state_.status_count_;
-    state_.changed_.wait_until(lock, wake, [&] {
-      return state_.stopping_ ||
-             state_.profile_count_ + state_.image_count_ + state_.status_count_ != seen;
-    });
-  }
-}
-
-std::shared_ptr<const EncodedFrame> LiveState::frame_jpeg(std::string* problem) {
-  std::shared_ptr<const laserline::image_t> image;
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    image = image_;
-    if (!image) {
-      *problem = "no raw frame received yet on " + channels_[kImage].name;
-      return nullptr;
-    }
-    if (encoded_ && encoded_->sequence == image->sequence) return encoded_;
-  }
-  std::lock_guard<std::mutex> encoding(encode_mutex_);
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (encoded_ && encoded_->sequence == image->sequence) return encoded_;
-  }
-  cv::Mat pixels;
-  if (!laserline::messages::unpack_image(*image, limits_, cv::IMREAD_UNCHANGED, &pixels, problem)) {
-    *problem =
-        channels_[kImage].name + ": frame " + std::to_string(image->sequence) + ": " + *problem;
-    return nullptr;
-  }
-  if (pixels.depth() == CV_16U) pixels.convertTo(pixels, CV_8U, 1.0 / 256.0);
-  auto encoded = std::make_shared<EncodedFrame>();
-  encoded->sequence = image->sequence;
-  std::vector<unsigned char> bytes;
-  if (!cv::imencode(".jpg", pixels, bytes, {cv::IMWRITE_JPEG_QUALITY, kJpegQuality})) {
-    *problem = "frame " + std::to_string(image->sequence) + " does not encode as JPEG";
-    return nullptr;
-  }
-  encoded->jpeg.assign(bytes.begin(), bytes.end());
-  std::lock_guard<std::mutex> lock(mutex_);
-  encoded_ = encoded;
-  return encoded;
-}
 
 // --- Command line ---------------------------------------------------------------------------
 
@@ -658,71 +140,6 @@ std::string content_type(std::string_view path) {
   if (ends_with(".css")) return "text/css; charset=utf-8";
   return "application/octet-stream";
 }
-
-// Sends the page's commands to the daemon and waits for their answers. Thread context: send()
-// from the HTTP threads, on_ack() from the LCM thread.
-class CommandRelay {
- public:
-  CommandRelay(lcm::LCM& lcm, std::string channel, std::string token)
-      : lcm_(lcm), channel_(std::move(channel)), token_(std::move(token)) {}
-
-  // The daemon's answer, or none within kCommandTimeout.
-  std::optional<laserline::command_ack_t> send(const std::string& name, const std::string& value) {
-    laserline::command_t command;
-    command.utime = std::chrono::duration_cast<std::chrono::microseconds>(
-                        std::chrono::system_clock::now().time_since_epoch())
-                        .count();
-    command.sender = "laserline-view";
-    command.name = name;
-    command.value = value;
-    command.token = token_;
-    std::unique_lock lock(mutex_);
-    command.id = static_cast<std::int64_t>(random_() >> 1);
-    waiting_[command.id];
-    lock.unlock();
-    lcm_.publish(channel_, &command);
-    lock.lock();
-    const bool answered = answered_.wait_for(
-        lock, kCommandTimeout, [&] { return waiting_[command.id].has_value() || stopping_; });
-    std::optional<laserline::command_ack_t> ack = std::move(waiting_[command.id]);
-    waiting_.erase(command.id);
-    if (!answered) ack.reset();
-    return ack;
-  }
-
-  void on_ack(const lcm::ReceiveBuffer* rbuf) {
-    laserline::command_ack_t ack;
-    std::string problem;
-    if (!laserline::messages::decode(rbuf->data, rbuf->data_size, &ack, {}, &problem)) return;
-    {
-      std::lock_guard lock(mutex_);
-      const auto waiting = waiting_.find(ack.id);
-      if (waiting == waiting_.end()) return;  // another sender's
-      waiting->second = std::move(ack);
-    }
-    answered_.notify_all();
-  }
-
-  void stop() {
-    {
-      std::lock_guard lock(mutex_);
-      stopping_ = true;
-    }
-    answered_.notify_all();
-  }
-
-  bool token_is(const std::string& token) const { return token == token_; }
-
- private:
-  lcm::LCM& lcm_;
-  std::string channel_;
-  std::string token_;
-  std::mutex mutex_;
-  std::condition_variable answered_;
-  std::map<std::int64_t, std::optional<laserline::command_ack_t>> waiting_;
-  std::mt19937_64 random_{std::random_device{}()};
-  bool stopping_ = false;
-};
 
 void on_command_ack(const lcm::ReceiveBuffer* rbuf, const std::string&, CommandRelay* relay) {
   relay->on_ack(rbuf);
@@ -853,7 +270,7 @@ int run_view(int argc, char** argv) {
              {std::pair{"name", &name}, std::pair{"value", &value},
               std::pair{"old_value", &old_value}, std::pair{"reason", &reason}}) {
           json += std::string(", \"") + key + "\": ";
-          append_string(json, *text);
+          laserline::view::append_string(json, *text);
         }
         json += "}";
         res.status = status;
@@ -869,7 +286,7 @@ int run_view(int argc, char** argv) {
         reply(400, false, name, "", "", "name: 1 to 255 characters, value: at most 255");
         return;
       }
-      const auto ack = relay.send(name, req.get_param_value("value"));
+      const auto ack = relay.send(name, req.get_param_value("value"), kCommandTimeout);
       if (!ack) {
         reply(504, false, name, "", "", "no answer from the daemon within 3 s");
         return;

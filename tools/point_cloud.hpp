@@ -17,7 +17,9 @@ class PointCloudError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// Where the camera is in the world: X_world = R(rotation) * X_camera + position.
+// Where the camera is in the world: X_world = R(rotation) * X_camera + position. The quaternion
+// is a vectorisable fixed-size Eigen type (16-byte aligned): held in a std::vector, that is safe
+// since C++17, whose allocator honours alignof (no EIGEN_MAKE_ALIGNED_OPERATOR_NEW needed).
 struct Pose {
   Eigen::Vector3d position = Eigen::Vector3d::Zero();
   Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();  // unit

@@ -111,17 +111,17 @@ FrameGeometry make_geometry(const SimSceneOptions& o, const Mat3& r, const Vec3&
                                  (g.d_surface * re2 + c2 * g.n) / texel, g.n};
   for (int i = 0; i < 3; ++i) {
     const Vec3& m = rows[i];
-    g.h[i * 3 + 0] = m[0] / g.fx;
-    g.h[i * 3 + 1] = m[1] / g.fy;
-    g.h[i * 3 + 2] = m[2] - m[0] * g.cx / g.fx - m[1] * g.cy / g.fy;
+    g.h(i, 0) = m[0] / g.fx;
+    g.h(i, 1) = m[1] / g.fy;
+    g.h(i, 2) = m[2] - m[0] * g.cx / g.fx - m[1] * g.cy / g.fy;
   }
   return g;
 }
 
 float albedo_at(const FrameGeometry& g, const float* tex, double u, double v) {
-  const double s = g.h[0] * u + g.h[1] * v + g.h[2];
-  const double t = g.h[3] * u + g.h[4] * v + g.h[5];
-  const double w = g.h[6] * u + g.h[7] * v + g.h[8];
+  const double s = g.h(0, 0) * u + g.h(0, 1) * v + g.h(0, 2);
+  const double t = g.h(1, 0) * u + g.h(1, 1) * v + g.h(1, 2);
+  const double w = g.h(2, 0) * u + g.h(2, 1) * v + g.h(2, 2);
   if (!(w > 0)) return 0.0f;
   return sample_tile(tex, static_cast<float>(std::clamp(s / w, -1e7, 1e7)),
                      static_cast<float>(std::clamp(t / w, -1e7, 1e7)));

@@ -26,7 +26,7 @@ struct FrameGeometry {
   bool surface = false;   // the surface plane is in front of the camera
   Vec3 n = Vec3::Zero();  // surface: n . X = d_surface, n pointing away from the camera
   double d_surface = 0;
-  std::array<double, 9> h{};   // pixel (u, v, 1) -> (S, T, W); texel coordinates are S/W, T/W
+  Mat3 h = Mat3::Zero();       // pixel (u, v, 1) -> (S, T, W); texel coordinates are S/W, T/W
   std::array<double, 4> lp{};  // laser sheet a X + b Y + c Z + e = 0
   double fx = 1, fy = 1, cx = 0, cy = 0;
   // For the relief: surface coordinates (metres) of a camera-frame point X are

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <cstdio>
 
+#include "hal/registry.hpp"
 #include "hal/sim/sim_camera.hpp"
 #include "hal/sim/sim_laser.hpp"
 #include "hal/yaml_reader.hpp"
@@ -106,5 +107,10 @@ std::unique_ptr<SimCamera> make_sim_camera(const CameraRequest& request) {
 std::unique_ptr<Laser> create_sim_laser(YamlMap& /*options*/) {
   return std::make_unique<SimLaser>();
 }
+
+namespace {
+const CameraBackendRegistration kSimCamera{"sim", create_sim_camera};
+const LaserBackendRegistration kSimLaser{"sim", create_sim_laser};
+}  // namespace
 
 }  // namespace laserline::hal

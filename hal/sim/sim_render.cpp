@@ -495,10 +495,10 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
   for (int v = 0; v < height; ++v) {
     const double dv = v;
     if (g.surface && ambient > 0) {
-      const double s_row = g.h[1] * dv + g.h[2], t_row = g.h[4] * dv + g.h[5];
+      const double s_row = g.h(0, 1) * dv + g.h(0, 2), t_row = g.h(1, 1) * dv + g.h(1, 2);
       // Texel coordinates stay below 1e7 in magnitude (|numerator| / w_min at either end).
-      const double reach = std::max({std::abs(s_row), std::abs(s_row + g.h[0] * padded),
-                                     std::abs(t_row), std::abs(t_row + g.h[3] * padded)});
+      const double reach = std::max({std::abs(s_row), std::abs(s_row + g.h(0, 0) * padded),
+                                     std::abs(t_row), std::abs(t_row + g.h(1, 0) * padded)});
       const float w_min = static_cast<float>(std::max(reach * 1e-7, 1e-30));
       // On the relief the hit slides from the base-plane hit toward the camera's foot point (by
       // at most all the way: the height below is floored at the relief's), so with this floor
@@ -507,17 +507,17 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
       const float relief_w_min =
           static_cast<float>(std::max(reach * std::max(1.0, texel_to_cell) * 1e-6, 1e-30));
       if (relief_.empty()) {
-        ambient_row(tex, static_cast<float>(s_row), static_cast<float>(g.h[0]),
-                    static_cast<float>(t_row), static_cast<float>(g.h[3]),
-                    static_cast<float>(g.h[7] * dv + g.h[8]), static_cast<float>(g.h[6]), w_min,
-                    ambient, padded, row);
+        ambient_row(tex, static_cast<float>(s_row), static_cast<float>(g.h(0, 0)),
+                    static_cast<float>(t_row), static_cast<float>(g.h(1, 0)),
+                    static_cast<float>(g.h(2, 1) * dv + g.h(2, 2)), static_cast<float>(g.h(2, 0)),
+                    w_min, ambient, padded, row);
       } else {
         const ReliefRow r{static_cast<float>(s_row),
-                          static_cast<float>(g.h[0]),
+                          static_cast<float>(g.h(0, 0)),
                           static_cast<float>(t_row),
-                          static_cast<float>(g.h[3]),
-                          static_cast<float>(g.h[7] * dv + g.h[8]),
-                          static_cast<float>(g.h[6]),
+                          static_cast<float>(g.h(1, 0)),
+                          static_cast<float>(g.h(2, 1) * dv + g.h(2, 2)),
+                          static_cast<float>(g.h(2, 0)),
                           relief_w_min,
                           static_cast<float>(g.c1 / g.texel_m),
                           static_cast<float>(g.c2 / g.texel_m),
@@ -530,10 +530,10 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
         relief_row(tex, relief_.data(), r, padded, row);
       }
       if (!caustics_.empty()) {
-        caustic_row(caustics_.data(), static_cast<float>(s_row), static_cast<float>(g.h[0]),
-                    static_cast<float>(t_row), static_cast<float>(g.h[3]),
-                    static_cast<float>(g.h[7] * dv + g.h[8]), static_cast<float>(g.h[6]), w_min,
-                    caustic, padded, row);
+        caustic_row(caustics_.data(), static_cast<float>(s_row), static_cast<float>(g.h(0, 0)),
+                    static_cast<float>(t_row), static_cast<float>(g.h(1, 0)),
+                    static_cast<float>(g.h(2, 1) * dv + g.h(2, 2)), static_cast<float>(g.h(2, 0)),
+                    w_min, caustic, padded, row);
       }
     } else {
       std::fill(row, row + padded, 0.0f);

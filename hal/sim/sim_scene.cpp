@@ -203,9 +203,8 @@ SimScene::Pose SimScene::pose_at(std::uint64_t sequence) const {
 SimCameraPose SimScene::camera_pose(std::uint64_t sequence) const {
   const Pose pose = pose_at(sequence);  // camera -> world
   SimCameraPose out;
-  // Row-major R^T is column-major R.
-  Eigen::Map<Mat3>(out.rotation.data()) = pose.r;
-  Eigen::Map<Vec3>(out.translation.data()) = -(pose.r.transpose() * pose.t);
+  out.rotation = pose.r.transpose();
+  out.translation = -(pose.r.transpose() * pose.t);
   return out;
 }
 
@@ -213,12 +212,11 @@ double SimScene::relief_height(double x_m, double y_m) const {
   return relief_.empty() ? 0.0 : relief_at(relief_.data(), x_m, y_m);
 }
 
-std::array<double, 3> SimScene::surface_point(double x_m, double y_m) const {
+Vec3 SimScene::surface_point(double x_m, double y_m) const {
   const Mat3 basis = rot_x(options_.tilt_x_deg * kDeg) * rot_y(options_.tilt_y_deg * kDeg);
   const double h = relief_height(x_m, y_m);
   // Axes e1, e2 are the basis' first two columns, the normal toward the camera minus the third.
-  std::array<double, 3> out{};
-  Eigen::Map<Vec3>(out.data()) = x_m * basis.col(0) + y_m * basis.col(1) - h * basis.col(2);
+  Vec3 out = x_m * basis.col(0) + y_m * basis.col(1) - h * basis.col(2);
   out[2] += options_.distance_m;
   return out;
 }

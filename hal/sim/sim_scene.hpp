@@ -1,5 +1,6 @@
 #pragma once
 
+#include <Eigen/Core>
 #include <array>
 #include <cstdint>
 #include <span>
@@ -150,12 +151,12 @@ struct SimLineFamily {
 SimLineFamily epipolar_lines(const Calibration& calibration);
 
 // The true pose of the camera for one frame, world -> camera: X_camera = rotation X_world +
-// translation (rotation row-major). The world frame is the camera frame of frame 0 at rest (x
+// translation. The world frame is the camera frame of frame 0 at rest (x
 // right, y down, z along the optical axis); the surface's base plane goes through (0, 0,
 // distance_m) of the world.
 struct SimCameraPose {
-  std::array<double, 9> rotation{1, 0, 0, 0, 1, 0, 0, 0, 1};
-  std::array<double, 3> translation{};
+  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
 };
 
 // The exact answer for one frame, along a family of lines (for the paper's mounting, columns:
@@ -202,7 +203,7 @@ class SimScene {
   // tilt_y_deg then tilt_x_deg. relief_height() is the height toward the camera there (0 without
   // relief); surface_point() is the point of the relieved surface in the world frame.
   double relief_height(double x_m, double y_m) const;
-  std::array<double, 3> surface_point(double x_m, double y_m) const;
+  Eigen::Vector3d surface_point(double x_m, double y_m) const;
 
  private:
   struct Pose;

@@ -9,6 +9,7 @@
 
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "pipeline/kernels/image_kernels.cpp"
+#include <hwy/cache_control.h>
 #include <hwy/foreach_target.h>  // IWYU pragma: keep
 #include <hwy/highway.h>
 
@@ -25,72 +26,122 @@ void ColumnMaxima(const std::uint8_t* image, std::ptrdiff_t stride, int begin, i
   reference::column_maxima(image, stride, begin, end, height, max, first, last, sum);
 }
 #else
-// A strip of one vector of columns goes down all the rows with its state in registers: the
-// largest value (bytes), where it is first and last reached and the sum (16-bit lanes, the bytes
-// widened by interleaving with zeros, so in the interleave's order of columns; the sums flushed
-// every 256 rows, before they can overflow).
+// A strip of kVectors vectors of columns goes down all the rows with its state in registers, in
+// chunks of 256 rows so that everything per row stays in byte lanes without a shuffle: within a
+// chunk the largest value, the rows (from the chunk's start) where it is first and last reached,
+// and the sums of the even and of the odd columns (the bytes read as little-endian 16-bit lanes,
+// masked and shifted: 256 x 255 fits). After each chunk, its result merged into the strip's: a
+// larger largest takes the chunk's first and last row, an equal one its last row only. Two
+// vectors read whole cache lines of 64 bytes per row on AVX2.
+template <int kVectors>
+void ColumnMaximaStrip(const std::uint8_t* image, std::ptrdiff_t stride, int u, int height,
+                       std::uint8_t* max, std::uint16_t* first, std::uint16_t* last,
+                       std::uint32_t* sum) {
+  const hn::ScalableTag<std::uint8_t> d8;
+  const hn::Repartition<std::uint16_t, decltype(d8)> d16;
+  using V8 = hn::Vec<decltype(d8)>;
+  using V16 = hn::Vec<decltype(d16)>;
+  const std::size_t n = hn::Lanes(d8);
+  const std::size_t half = hn::Lanes(d16);
+  constexpr int kChunk = 256;
+  constexpr int kAhead = 16;  // rows read ahead
+  const V16 low_byte = hn::Set(d16, 0x00FF);
+  const V8 one = hn::Set(d8, 1);
+  const auto split = [&](V8 bytes, V16& even_lanes, V16& odd_lanes) HWY_ATTR {
+    const V16 pairs = hn::BitCast(d16, bytes);
+    even_lanes = hn::And(pairs, low_byte);
+    odd_lanes = hn::ShiftRight<8>(pairs);
+  };
+  V8 most[kVectors];
+  V16 first_even[kVectors], first_odd[kVectors], last_even[kVectors], last_odd[kVectors];
+  for (int k = 0; k < kVectors; ++k) {
+    most[k] = hn::Zero(d8);
+    first_even[k] = first_odd[k] = last_even[k] = last_odd[k] = hn::Zero(d16);
+  }
+  for (std::size_t j = 0; j < kVectors * n; ++j)
+    sum[u + j] = 0;
+  alignas(64) std::array<std::uint16_t, HWY_MAX_BYTES / 2> even{}, odd{};
+  for (int v0 = 0; v0 < height; v0 += kChunk) {
+    V8 chunk_most[kVectors], chunk_first[kVectors], chunk_last[kVectors];
+    V16 sum_even[kVectors], sum_odd[kVectors];
+    for (int k = 0; k < kVectors; ++k) {
+      chunk_most[k] = chunk_first[k] = chunk_last[k] = hn::Zero(d8);
+      sum_even[k] = sum_odd[k] = hn::Zero(d16);
+    }
+    V8 row = hn::Zero(d8);  // from the chunk's start
+    const std::uint8_t* p = image + v0 * stride + u;
+    for (int v = v0; v < std::min(v0 + kChunk, height); ++v, p += stride) {
+      // Rows a strip apart defeat the hardware's prefetcher.
+      if (v + kAhead < height) {
+        hwy::Prefetch(p + kAhead * stride);
+        if (kVectors * n > 64) hwy::Prefetch(p + kAhead * stride + 64);
+      }
+      for (int k = 0; k < kVectors; ++k) {
+        const V8 x = hn::LoadU(d8, p + k * n);
+        const V8 larger = hn::Max(chunk_most[k], x);
+        // Not greater: the largest so far stays; at least as large: x is the largest.
+        chunk_first[k] = hn::IfThenElse(hn::Eq(larger, chunk_most[k]), chunk_first[k], row);
+        chunk_last[k] = hn::IfThenElse(hn::Eq(larger, x), row, chunk_last[k]);
+        chunk_most[k] = larger;
+        const V16 pairs = hn::BitCast(d16, x);
+        sum_even[k] = hn::Add(sum_even[k], hn::And(pairs, low_byte));
+        sum_odd[k] = hn::Add(sum_odd[k], hn::ShiftRight<8>(pairs));
+      }
+      row = hn::Add(row, one);
+    }
+    const V16 start = hn::Set(d16, static_cast<std::uint16_t>(v0));
+    for (int k = 0; k < kVectors; ++k) {
+      V16 chunk_most_even, chunk_most_odd, most_even, most_odd, chunk_first_even, chunk_first_odd,
+          chunk_last_even, chunk_last_odd;
+      split(chunk_most[k], chunk_most_even, chunk_most_odd);
+      split(most[k], most_even, most_odd);
+      split(chunk_first[k], chunk_first_even, chunk_first_odd);
+      split(chunk_last[k], chunk_last_even, chunk_last_odd);
+      first_even[k] = hn::IfThenElse(hn::Gt(chunk_most_even, most_even),
+                                     hn::Add(start, chunk_first_even), first_even[k]);
+      first_odd[k] = hn::IfThenElse(hn::Gt(chunk_most_odd, most_odd),
+                                    hn::Add(start, chunk_first_odd), first_odd[k]);
+      // (Highway 1.0 has no Ge of unsigned lanes.)
+      last_even[k] = hn::IfThenElse(hn::Eq(hn::Max(chunk_most_even, most_even), chunk_most_even),
+                                    hn::Add(start, chunk_last_even), last_even[k]);
+      last_odd[k] = hn::IfThenElse(hn::Eq(hn::Max(chunk_most_odd, most_odd), chunk_most_odd),
+                                   hn::Add(start, chunk_last_odd), last_odd[k]);
+      most[k] = hn::Max(most[k], chunk_most[k]);
+      hn::Store(sum_even[k], d16, even.data());
+      hn::Store(sum_odd[k], d16, odd.data());
+      const int columns = u + static_cast<int>(k * n);
+      for (std::size_t j = 0; j < half; ++j) {
+        sum[columns + 2 * j] += even[j];
+        sum[columns + 2 * j + 1] += odd[j];
+      }
+    }
+  }
+  // Columns 2j from the even lanes, 2j + 1 from the odd ones.
+  const auto spread = [&](std::uint16_t* to, int columns, V16 even_lanes, V16 odd_lanes) HWY_ATTR {
+    hn::Store(even_lanes, d16, even.data());
+    hn::Store(odd_lanes, d16, odd.data());
+    for (std::size_t j = 0; j < half; ++j) {
+      to[columns + 2 * j] = even[j];
+      to[columns + 2 * j + 1] = odd[j];
+    }
+  };
+  for (int k = 0; k < kVectors; ++k) {
+    const int columns = u + static_cast<int>(k * n);
+    hn::StoreU(most[k], d8, max + columns);
+    spread(first, columns, first_even[k], first_odd[k]);
+    spread(last, columns, last_even[k], last_odd[k]);
+  }
+}
+
 void ColumnMaxima(const std::uint8_t* image, std::ptrdiff_t stride, int begin, int end, int height,
                   std::uint8_t* max, std::uint16_t* first, std::uint16_t* last,
                   std::uint32_t* sum) {
-  const hn::ScalableTag<std::uint8_t> d8;
-  const hn::Repartition<std::uint16_t, decltype(d8)> d16;
-  const int n = static_cast<int>(hn::Lanes(d8));
-  const std::size_t half = hn::Lanes(d16);
-  constexpr std::size_t kMost = HWY_MAX_BYTES;  // bytes of the widest vector
-  const auto zero = hn::Zero(d8);
-  // The strip's column of each 16-bit lane.
-  const auto iota = hn::Iota(d8, 0);
-  alignas(64) std::array<std::uint16_t, kMost> column{};
-  hn::Store(hn::BitCast(d16, hn::InterleaveLower(d8, iota, zero)), d16, column.data());
-  hn::Store(hn::BitCast(d16, hn::InterleaveUpper(d8, iota, zero)), d16, column.data() + half);
-  alignas(64) std::array<std::uint16_t, kMost> values{};
-  auto spread = [&](std::uint16_t* to, int u, auto low, auto high) HWY_ATTR {
-    hn::Store(low, d16, values.data());
-    hn::Store(high, d16, values.data() + half);
-    for (std::size_t j = 0; j < 2 * half; ++j)
-      to[u + column[j]] = values[j];
-  };
+  const int n = static_cast<int>(hn::Lanes(hn::ScalableTag<std::uint8_t>()));
   int u = begin;
-  for (; u + n <= end; u += n) {
-    auto most = hn::Zero(d8);
-    auto first_low = hn::Zero(d16), first_high = first_low, last_low = first_low,
-         last_high = first_low;
-    for (int j = 0; j < n; ++j)
-      sum[u + j] = 0;
-    for (int v0 = 0; v0 < height; v0 += 256) {
-      auto sum_low = hn::Zero(d16), sum_high = sum_low;
-      for (int v = v0; v < std::min(v0 + 256, height); ++v) {
-        const auto x = hn::LoadU(d8, image + v * stride + u);
-        const auto row = hn::Set(d16, static_cast<std::uint16_t>(v));
-        const auto larger = hn::Max(most, x);
-        // Not greater: the largest so far stays; at least as large: x is the largest.
-        const auto stays = hn::VecFromMask(d8, hn::Eq(larger, most));
-        const auto reaches = hn::VecFromMask(d8, hn::Eq(larger, x));
-        most = larger;
-        first_low =
-            hn::IfThenElse(hn::MaskFromVec(hn::BitCast(d16, hn::InterleaveLower(d8, stays, stays))),
-                           first_low, row);
-        first_high =
-            hn::IfThenElse(hn::MaskFromVec(hn::BitCast(d16, hn::InterleaveUpper(d8, stays, stays))),
-                           first_high, row);
-        last_low = hn::IfThenElse(
-            hn::MaskFromVec(hn::BitCast(d16, hn::InterleaveLower(d8, reaches, reaches))), row,
-            last_low);
-        last_high = hn::IfThenElse(
-            hn::MaskFromVec(hn::BitCast(d16, hn::InterleaveUpper(d8, reaches, reaches))), row,
-            last_high);
-        sum_low = hn::Add(sum_low, hn::BitCast(d16, hn::InterleaveLower(d8, x, zero)));
-        sum_high = hn::Add(sum_high, hn::BitCast(d16, hn::InterleaveUpper(d8, x, zero)));
-      }
-      hn::Store(sum_low, d16, values.data());
-      hn::Store(sum_high, d16, values.data() + half);
-      for (std::size_t j = 0; j < 2 * half; ++j)
-        sum[u + column[j]] += values[j];
-    }
-    hn::StoreU(most, d8, max + u);
-    spread(first, u, first_low, first_high);
-    spread(last, u, last_low, last_high);
-  }
+  for (; u + 2 * n <= end; u += 2 * n)
+    ColumnMaximaStrip<2>(image, stride, u, height, max, first, last, sum);
+  for (; u + n <= end; u += n)
+    ColumnMaximaStrip<1>(image, stride, u, height, max, first, last, sum);
   if (u < end) reference::column_maxima(image, stride, u, end, height, max, first, last, sum);
 }
 #endif

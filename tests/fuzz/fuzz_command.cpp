@@ -2,7 +2,7 @@
 // checked decode of laserline.command_t, then parse_command() against the built-in configuration
 // (or one with a token and a laser pattern) and the simulated camera's ranges. Its contract: no
 // crash or exception; a refusal always says why; an accepted command's texts are NUL-terminated
-// in their fixed buffers and its number lies in the camera's range.
+// in their fixed buffers, its number lies in the camera's range and its region in the frame.
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -63,6 +63,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if (command.id != message.id || message.name != command.setting.name) std::abort();
   if (command.kind == CommandKind::kThreshold) {
     options.validate();  // what was accepted is what the pipeline takes: this must not throw
+  }
+  if (command.kind == CommandKind::kRegion) {
+    const laserline::hal::FrameFormat format = setup.camera.format();
+    command.region.validate(format.width, format.height);  // inside the frame: must not throw
   }
   if (command.kind == CommandKind::kCamera) {
     const std::string name = command.setting.name;
