@@ -58,9 +58,11 @@ Frames render(const std::string& name, int width, int height, int count) {
   return {};
 }
 
-// Every frame's profile from `detector` run with `runner`.
-std::vector<pipeline::Profile> detect_all(const Frames& frames, const std::string& detector_name,
-                                          pipeline::PartRunner& runner) {
+// Every frame's profile from `detector` run with `runner`; frame i searched in regions[i] where
+// given (set between frames, as the worker does).
+std::vector<pipeline::Profile> detect_all(
+    const Frames& frames, const std::string& detector_name, pipeline::PartRunner& runner,
+    const std::vector<pipeline::DetectionRegion>& regions = {}) {
   pipeline::DetectorOptions options;
   options.geometry = daemon::scanner_geometry(frames.scenario.scene.calibration);
   const std::unique_ptr<pipeline::Detector> detector =
@@ -70,6 +72,7 @@ std::vector<pipeline::Profile> detect_all(const Frames& frames, const std::strin
   detector->reset(width, height);
   std::vector<pipeline::Profile> profiles;
   for (std::size_t i = 0; i < frames.pixels.size(); ++i) {
+    if (i < regions.size()) detector->set_region(regions[i]);
     profiles.emplace_back(detector->max_points(width, height));
     const pipeline::ImageView view{frames.pixels[i].data(), width, height, frames.format.stride};
     const auto sequence = static_cast<std::uint64_t>(frames.scenario.first_frame) + i;
@@ -132,6 +135,46 @@ TEST(Parts, EveryDetectorGivesTheSameProfilesInParts) {
   }
   // Wider: five strips.
   expect_same_in_parts(render("ambient", 1280, 1024, 4));
+}
+
+// Within regions: the parts split the region's columns, some parts with none; the region changes
+// between frames (a part's rings then hold columns another part made before).
+TEST(Parts, EveryDetectorGivesTheSameProfilesInPartsWithinARegion) {
+  const Frames frames = render("ambient", 1280, 1024, 6);
+  const std::vector<pipeline::DetectionRegion> regions = {
+      {300, 200, 700, 600}, {300, 200, 700, 600}, {517, 0, 90, 1024},
+      {517, 0, 90, 1024},   {0, 450, 1280, 300},  {1100, 100, 180, 900}};
+  for (const std::string& detector : pipeline::detector_names()) {
+    pipeline::SequentialParts one(1);
+    const std::vector<pipeline::Profile> reference = detect_all(frames, detector, one, regions);
+    for (std::size_t i = 0; i < reference.size(); ++i) {
+      const pipeline::DetectionRegion& r = regions[i];
+      std::size_t valid = 0;
+      for (const pipeline::ProfilePoint& p : reference[i].points()) {
+        valid += p.valid ? 1 : 0;
+        const auto [x, y] = reference[i].image_point(p);
+        EXPECT_TRUE(r.contains(x, y))
+            << detector << " frame " << i << ": (" << x << ", " << y << ") outside " << r.text();
+      }
+      // (The first frame of a background detector has no background yet.)
+      if (i > 1) {
+        EXPECT_GT(valid, 0u) << detector << " frame " << i << ": no points to compare";
+      }
+    }
+    for (int parts : {2, 3}) {
+      pipeline::SequentialParts in_order(parts);
+      ReversedParts reversed(parts);
+      for (pipeline::PartRunner* runner : {static_cast<pipeline::PartRunner*>(&in_order),
+                                           static_cast<pipeline::PartRunner*>(&reversed)}) {
+        const std::vector<pipeline::Profile> split = detect_all(frames, detector, *runner, regions);
+        for (std::size_t i = 0; i < reference.size(); ++i) {
+          EXPECT_EQ(difference(reference[i], split[i]), "")
+              << detector << " frame " << i << " in " << regions[i].text() << ", " << parts
+              << " parts" << (runner == &reversed ? " in reverse" : "");
+        }
+      }
+    }
+  }
 }
 
 TEST(Parts, PartRangesCoverTheItemsOnce) {
