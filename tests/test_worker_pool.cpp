@@ -87,36 +87,43 @@ TEST(WorkerPool, EveryDetectorGivesTheProfilesOfOneThread) {
     }
     pipeline::DetectorOptions options;
     options.geometry = daemon::scanner_geometry(s.scene.calibration);
-    for (const std::string& name : pipeline::detector_names()) {
-      auto detect_all = [&](pipeline::PartRunner& runner) {
-        const auto detector = pipeline::make_detector(name, options);
-        detector->use_parts(runner);
-        detector->reset(format.width, format.height);
-        std::vector<pipeline::Profile> profiles;
-        for (std::size_t i = 0; i < frames.size(); ++i) {
-          profiles.emplace_back(detector->max_points(format.width, format.height));
-          detector->detect({frames[i].data(), format.width, format.height, format.stride},
-                           {i, true}, profiles.back());
-        }
-        return profiles;
-      };
-      pipeline::SequentialParts one;
-      const std::vector<pipeline::Profile> reference = detect_all(one);
-      for (int parts : {2, 3}) {
-        daemon::WorkerPool pool(parts);
-        pool.start();
-        const std::vector<pipeline::Profile> split = detect_all(pool);
-        pool.stop();
-        for (std::size_t i = 0; i < reference.size(); ++i) {
-          ASSERT_EQ(split[i].size(), reference[i].size())
-              << name << ", " << parts << " threads, frame " << i;
-          ASSERT_GT(reference[i].size(), 0u) << name;
-          for (std::size_t k = 0; k < reference[i].size(); ++k) {
-            const pipeline::ProfilePoint& p = reference[i].points()[k];
-            const pipeline::ProfilePoint& q = split[i].points()[k];
-            ASSERT_TRUE(p.u == q.u && std::memcmp(&p.v, &q.v, sizeof p.v) == 0 &&
-                        p.valid == q.valid)
-                << name << ", " << parts << " threads, frame " << i << " point " << k;
+    // The whole frame, and a region across two of the front end's three strips (so that of three
+    // parts one has none).
+    for (const pipeline::DetectionRegion& region :
+         {pipeline::DetectionRegion{}, pipeline::DetectionRegion{100, 80, 300, 320}}) {
+      for (const std::string& name : pipeline::detector_names()) {
+        auto detect_all = [&](pipeline::PartRunner& runner) {
+          const auto detector = pipeline::make_detector(name, options);
+          detector->use_parts(runner);
+          detector->reset(format.width, format.height);
+          detector->set_region(region);
+          std::vector<pipeline::Profile> profiles;
+          for (std::size_t i = 0; i < frames.size(); ++i) {
+            profiles.emplace_back(detector->max_points(format.width, format.height));
+            detector->detect({frames[i].data(), format.width, format.height, format.stride},
+                             {i, true}, profiles.back());
+          }
+          return profiles;
+        };
+        pipeline::SequentialParts one;
+        const std::vector<pipeline::Profile> reference = detect_all(one);
+        for (int parts : {2, 3}) {
+          daemon::WorkerPool pool(parts);
+          pool.start();
+          const std::vector<pipeline::Profile> split = detect_all(pool);
+          pool.stop();
+          for (std::size_t i = 0; i < reference.size(); ++i) {
+            ASSERT_EQ(split[i].size(), reference[i].size())
+                << name << " in " << region.text() << ", " << parts << " threads, frame " << i;
+            ASSERT_GT(reference[i].size(), 0u) << name << " in " << region.text();
+            for (std::size_t k = 0; k < reference[i].size(); ++k) {
+              const pipeline::ProfilePoint& p = reference[i].points()[k];
+              const pipeline::ProfilePoint& q = split[i].points()[k];
+              ASSERT_TRUE(p.u == q.u && std::memcmp(&p.v, &q.v, sizeof p.v) == 0 &&
+                          p.valid == q.valid)
+                  << name << " in " << region.text() << ", " << parts << " threads, frame " << i
+                  << " point " << k;
+            }
           }
         }
       }
