@@ -5,6 +5,12 @@
 //   naive_opencv_stages: warpPerspective, subtract, remap, boxFilter x4, absdiff, divide, and a
 //                      per-column loop for the peaks
 //   frontend_background_detector: the whole `background` detector, homography estimation included
+//   frontend_background_threads/<n>: the same, its work split across n threads (the daemon's
+//                      pipeline.worker_threads; wall time), worker_pool_stage/<n>: what handing
+//                      one stage to them costs; frontend_background_serial_parallel:
+//                      the same in two parts on one thread, its time inside the split stages
+//                      (parallel_ms) and outside (serial_ms), and what Amdahl's law makes of them
+//                      for 2, 4 and 8 threads (speedup_<n>)
 //   frontend_fir_detector: the `fir` detector (no background subtraction)
 //   frontend_fir_region/<percent>: `fir` searching the middle <percent> of the columns and rows
 //   frontend_validation_stages/<association>: Section IV on the candidates `background` gives on
@@ -19,6 +25,9 @@
 // Run: build/default/bench/laserline_bench --benchmark_filter='frontend|naive'
 #include <benchmark/benchmark.h>
 
+#include <time.h>
+
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <memory>
@@ -27,6 +36,7 @@
 #include <vector>
 
 #include "daemon/config.hpp"
+#include "daemon/worker_pool.hpp"
 #include "hal/sim/sim_scene.hpp"
 #include "pipeline/backprojection_detector.hpp"
 #include "pipeline/detector.hpp"
@@ -201,6 +211,122 @@ void BM_frontend_background_detector(benchmark::State& state) {
   state.counters["inliers"] = detector.last_motion().inliers;
 }
 BENCHMARK(BM_frontend_background_detector)->Unit(benchmark::kMillisecond);
+
+// Seconds of `clock` (a thread's own CPU time: what it worked, however busy the machine is).
+double seconds(clockid_t clock) {
+  timespec t{};
+  clock_gettime(clock, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+// A runner that times the stages it runs: the time inside run() on `clock`.
+class TimedParts final : public pipeline::PartRunner {
+ public:
+  TimedParts(pipeline::PartRunner& runner, clockid_t clock) : runner_(runner), clock_(clock) {}
+  int parts() const override { return runner_.parts(); }
+  void run(pipeline::PartWork work) override {
+    const double start = seconds(clock_);
+    runner_.run(work);
+    inside_ += seconds(clock_) - start;
+  }
+  double inside_s() const { return inside_; }
+
+ private:
+  pipeline::PartRunner& runner_;
+  clockid_t clock_;
+  double inside_ = 0;
+};
+
+// `background` as the daemon runs it: the detector made by make_detector(), its work shared by the
+// worker and n - 1 helper threads.
+void BM_frontend_background_threads(benchmark::State& state) {
+  const Frames& f = frames();
+  const int threads = static_cast<int>(state.range(0));
+  daemon::WorkerPool pool(threads);
+  pool.start();
+  TimedParts timed(pool, CLOCK_MONOTONIC);
+  const std::unique_ptr<pipeline::Detector> detector =
+      pipeline::make_detector("background", bench_options());
+  detector->use_parts(timed);
+  detector->reset(kWidth, kHeight);
+  pipeline::Profile profile(detector->max_points(kWidth, kHeight));
+  detector->detect(view(f.previous), {0, true}, profile);
+  std::uint64_t sequence = 1;
+  const double inside_before = timed.inside_s();
+  // Each frame's latency: on a machine other work shares, the least is what the threads give
+  // when they have the cores to themselves.
+  std::vector<double> latencies;
+  latencies.reserve(1 << 16);
+  for (auto _ : state) {
+    const double start = seconds(CLOCK_MONOTONIC);
+    detector->detect(view(sequence % 2 == 1 ? f.current : f.previous), {sequence, true}, profile);
+    if (latencies.size() < latencies.capacity())
+      latencies.push_back(seconds(CLOCK_MONOTONIC) - start);
+    ++sequence;
+    benchmark::DoNotOptimize(profile.points().data());
+  }
+  pool.stop();
+  const auto frames_done = static_cast<double>(sequence - 1);
+  state.counters["parallel_ms"] = 1e3 * (timed.inside_s() - inside_before) / frames_done;
+  std::sort(latencies.begin(), latencies.end());
+  state.counters["least_ms"] = 1e3 * latencies.front();
+  state.counters["median_ms"] = 1e3 * latencies[latencies.size() / 2];
+}
+BENCHMARK(BM_frontend_background_threads)
+    ->Arg(1)
+    ->Arg(2)
+    ->Arg(4)
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond);
+
+// What handing one stage to the threads and waiting for them costs (an empty stage), the helpers
+// spinning as they do between the stages of a frame.
+void BM_worker_pool_stage(benchmark::State& state) {
+  daemon::WorkerPool pool(static_cast<int>(state.range(0)));
+  pool.start();
+  int done = 0;
+  auto work = [&](int part) {
+    if (part == 0) ++done;
+  };
+  for (auto _ : state)
+    pool.run(pipeline::PartWork(work));
+  pool.stop();
+  benchmark::DoNotOptimize(done);
+}
+BENCHMARK(BM_worker_pool_stage)->Arg(2)->Arg(4)->UseRealTime()->Unit(benchmark::kMicrosecond);
+
+// The serial and the parallel part of `background` (Amdahl): two parts one after the other on this
+// thread, its CPU time inside the split stages (the parallel part's work, with what splitting
+// adds) and outside. With n threads at best serial + parallel / n.
+void BM_frontend_background_serial_parallel(benchmark::State& state) {
+  const Frames& f = frames();
+  pipeline::SequentialParts two(2);
+  TimedParts timed(two, CLOCK_THREAD_CPUTIME_ID);
+  const std::unique_ptr<pipeline::Detector> detector =
+      pipeline::make_detector("background", bench_options());
+  detector->use_parts(timed);
+  detector->reset(kWidth, kHeight);
+  pipeline::Profile profile(detector->max_points(kWidth, kHeight));
+  detector->detect(view(f.previous), {0, true}, profile);
+  std::uint64_t sequence = 1;
+  const double inside_before = timed.inside_s();
+  const double start = seconds(CLOCK_THREAD_CPUTIME_ID);
+  for (auto _ : state) {
+    detector->detect(view(sequence % 2 == 1 ? f.current : f.previous), {sequence, true}, profile);
+    ++sequence;
+    benchmark::DoNotOptimize(profile.points().data());
+  }
+  const double total = seconds(CLOCK_THREAD_CPUTIME_ID) - start;
+  const auto frames_done = static_cast<double>(sequence - 1);
+  const double parallel = (timed.inside_s() - inside_before) / frames_done;
+  const double serial = total / frames_done - parallel;
+  state.counters["serial_ms"] = 1e3 * serial;
+  state.counters["parallel_ms"] = 1e3 * parallel;
+  for (const int n : {2, 4, 8}) {
+    state.counters["speedup_" + std::to_string(n)] = (serial + parallel) / (serial + parallel / n);
+  }
+}
+BENCHMARK(BM_frontend_background_serial_parallel)->Unit(benchmark::kMillisecond);
 
 void BM_frontend_fir_detector(benchmark::State& state) {
   const Frames& f = frames();

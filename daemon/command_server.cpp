@@ -77,6 +77,7 @@ void CommandServer::receive(const lcm::ReceiveBuffer& buffer) {
     std::unique_ptr<pipeline::Detector> detector;
     try {
       detector = pipeline::make_detector(config_.detector, options);
+      detector->use_parts(path_.detection_parts());
       const hal::FrameFormat format = camera_.format();
       detector->reset(format.width, format.height);
     } catch (const std::exception& e) {

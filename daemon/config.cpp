@@ -324,6 +324,8 @@ void check_frame_path(const DaemonConfig& config, const hal::FrameFormat& format
                            " MB: fewer slots, a smaller camera or a higher limit");
   }
   // The detector's own refusal (e.g. a frame smaller than its filters), as the start meets it.
+  // (Sized in as many parts as worker_threads, as the frame path will run it.)
+  detector.use_parts(pipeline::sequential_parts(config.worker_threads));
   const std::uint64_t before = heap_in_use();
   try {
     detector.reset(format.width, format.height);
@@ -476,6 +478,7 @@ DaemonConfig parse_config(const YAML::Node& root_node, const std::string& source
   c.image_slots = power_of_two(pipe, "image_slots", c.image_slots);
   c.frame_memory_limit_mb =
       pipe.integer("frame_memory_limit_mb", c.frame_memory_limit_mb, 16, 1 << 20);
+  c.worker_threads = pipe.integer("worker_threads", c.worker_threads, 1, pipeline::kMaxParts);
   pipe.finish();
 
   hal::YamlMap lcm = root.map("lcm");

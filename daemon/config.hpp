@@ -73,6 +73,8 @@ struct DaemonConfig {
   std::vector<int> cpus;  // CPU affinity of the frame-path threads; empty = any
 
   int frame_slots = 8;
+  // Threads that share each frame's detection (the worker and worker_threads - 1 helpers).
+  int worker_threads = 1;
   int profile_slots = 16;
   int image_slots = 2;
   // What the frame path may allocate at start (rings, raw-frame and publishing buffers, the

@@ -83,7 +83,8 @@ FramePath::FramePath(const DaemonConfig& config, hal::Camera& camera, hal::Laser
       strobe_(laser.strobe()),
       detector_(&detector),
       lcm_(lcm),
-      commands_(camera, counters_.camera_state) {}
+      commands_(camera, counters_.camera_state),
+      parts_(config.worker_threads) {}
 
 FramePath::~FramePath() {
   stop();
@@ -92,6 +93,7 @@ FramePath::~FramePath() {
 bool FramePath::start(std::string* error) {
   format_ = camera_.format();
   try {
+    detector_->use_parts(parts_);
     detector_->reset(format_.width, format_.height);  // allocates: before any thread runs
   } catch (const std::exception& e) {
     // E.g. a camera whose frames are not the size the calibration describes.
@@ -143,6 +145,8 @@ bool FramePath::start(std::string* error) {
   // Consumers first, so that nothing is produced before someone can take it.
   publisher_thread_ = std::thread([this] { publisher_loop(); });
   image_thread_ = std::thread([this] { image_loop(); });
+  // The CPUs its threads are pinned to, else the process's.
+  parts_.start(config_.realtime ? static_cast<int>(config_.cpus.size()) : 0);
   worker_thread_ = std::thread([this] { worker_loop(); });
   camera_thread_ = std::thread([this] { camera_loop(); });
   for (auto [thread, spec] :
@@ -150,6 +154,17 @@ bool FramePath::start(std::string* error) {
         std::pair{&worker_thread_, kWorkerThread}, std::pair{&camera_thread_, kCameraThread}}) {
     const std::string problem =
         configure_thread(thread->native_handle(), spec, config_.realtime, config_.cpus);
+    if (!problem.empty()) {
+      stop();
+      if (error != nullptr) *error = problem;
+      return false;
+    }
+  }
+  for (std::size_t i = 0; i < parts_.helpers().size(); ++i) {
+    const pthread_t helper = parts_.helpers()[i].native_handle();
+    const std::string problem =
+        configure_thread(helper, kWorkerHelperThread, config_.realtime, config_.cpus);
+    pthread_setname_np(helper, (kWorkerHelperThread.name + std::to_string(i + 1)).c_str());
     if (!problem.empty()) {
       stop();
       if (error != nullptr) *error = problem;
@@ -177,6 +192,7 @@ void FramePath::stop() {
   switch_laser(false, 0);
   frames_->wake();
   if (worker_thread_.joinable()) worker_thread_.join();
+  parts_.stop();
   profiles_->wake();
   if (publisher_thread_.joinable()) publisher_thread_.join();
   images_->wake();

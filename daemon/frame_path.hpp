@@ -16,6 +16,7 @@
 #include "daemon/lcm_publisher.hpp"
 #include "daemon/raw_frame_encoder.hpp"
 #include "daemon/spsc_ring.hpp"
+#include "daemon/worker_pool.hpp"
 #include "hal/camera.hpp"
 #include "hal/exposure_strobe.hpp"
 #include "hal/laser.hpp"
@@ -88,6 +89,10 @@ class FramePath {
   void count_bad_command() { counters_.bad_commands.fetch_add(1, std::memory_order_relaxed); }
   static constexpr std::size_t kCommandSlots = CommandApplier::kSlots;
 
+  // The threads sharing each frame's detection (pipeline.worker_threads): a replacement detector
+  // is given them (Detector::use_parts()) before its reset().
+  pipeline::PartRunner& detection_parts() { return parts_; }
+
   // True once the camera ended by itself (a replayed recording reached its end).
   bool source_ended() const { return source_ended_.load(std::memory_order_acquire); }
   // The strobe's health in one line into `out` (no allocation): "" without laser.strobe_line,
@@ -148,6 +153,7 @@ class FramePath {
   LatencySummary final_latency_;
   LatencySummary final_pipeline_;
 
+  WorkerPool parts_;  // the worker and its helpers
   std::thread camera_thread_;
   std::thread worker_thread_;
   std::thread publisher_thread_;

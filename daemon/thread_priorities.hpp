@@ -17,6 +17,9 @@ struct ThreadSpec {
 inline constexpr ThreadSpec kStrobeThread{"ll-strobe", 70};
 inline constexpr ThreadSpec kCameraThread{"ll-camera", 60};
 inline constexpr ThreadSpec kWorkerThread{"ll-worker", 50};
+// The worker's helpers (pipeline.worker_threads > 1; named ll-worker-1, -2, ...): a share of each
+// frame's detection, the worker's own work, at its priority.
+inline constexpr ThreadSpec kWorkerHelperThread{"ll-worker-", 50};
 // Below the frame path, since LCM's publish takes a lock and makes a syscall (it may block, which
 // never holds up camera or worker), but above every normal thread, so that profiles leave on
 // time whatever else the computer does: bench_raw_frames measured p99 arrival->published with

@@ -22,7 +22,14 @@ std::size_t BackgroundDetector::max_points(int width, int /*height*/) const {
   return frontend_.max_points(width);
 }
 
+void BackgroundDetector::use_parts(PartRunner& runner) {
+  runner_ = &runner;
+  frontend_.use_parts(runner);
+  motion_.use_parts(runner);
+}
+
 void BackgroundDetector::reset(int width, int height) {
+  parts_ = std::clamp(runner_->parts(), 1, kMaxParts);
   frontend_.reset(width, height);
   motion_.reset(width, height, estimate_camera_motion_ ? &geometry_ : nullptr);
   // Only the rows the warp can reach are kept: those of the depth range, plus what the scene can
@@ -36,6 +43,7 @@ void BackgroundDetector::reset(int width, int height) {
   history_.assign(static_cast<std::size_t>(options_.history_frames), History{});
   for (History& h : history_)
     h.rows.assign(static_cast<std::size_t>(width) * band_rows_, 0);
+  incoming_.assign(static_cast<std::size_t>(width) * band_rows_, 0);
   newest_ = -1;
   width_ = width;
   height_ = height;
@@ -95,6 +103,21 @@ void BackgroundDetector::detect(const ImageView& image, const FrameContext& fram
 void BackgroundDetector::collect_candidates(const ImageView& image, const FrameContext& frame,
                                             Profile& out) {
   out.clear();
+  // The rows this frame keeps, in bands of rows (the kept frames stay as they are until it is
+  // done: one of them may be its background).
+  auto keep_rows = [&](int part) {
+    const auto [first, end] = part_range(band_rows_, part, parts_);
+    for (int v = first; v < end; ++v) {
+      std::memcpy(incoming_.data() + static_cast<std::size_t>(v) * width_,
+                  image.row(band_first_ + v), static_cast<std::size_t>(width_));
+    }
+  };
+  if (parts_ > 1 && runner_->parts() == parts_) {
+    runner_->run(PartWork(keep_rows));
+  } else {
+    for (int part = 0; part < parts_; ++part)
+      keep_rows(part);
+  }
   last_motion_ = motion_.update(image);
   // Chain the kept frames' motion to this frame; without a motion estimate none of them can be
   // warped onto it.
@@ -123,10 +146,7 @@ void BackgroundDetector::collect_candidates(const ImageView& image, const FrameC
   // This frame joins the history, in place of the oldest.
   newest_ = (newest_ + 1) % static_cast<int>(history_.size());
   History& h = history_[static_cast<std::size_t>(newest_)];
-  for (int v = 0; v < band_rows_; ++v) {
-    std::memcpy(h.rows.data() + static_cast<std::size_t>(v) * width_, image.row(band_first_ + v),
-                static_cast<std::size_t>(width_));
-  }
+  h.rows.swap(incoming_);
   h.sequence = frame.sequence;
   h.laser_on = frame.laser_on;
   h.usable = true;

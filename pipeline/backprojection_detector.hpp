@@ -21,6 +21,7 @@ class BackprojectionDetector final : public Detector {
   const char* name() const override { return "backprojection"; }
   std::size_t max_points(int width, int height) const override;
   void reset(int width, int height) override;
+  void use_parts(PartRunner& runner) override { background_.use_parts(runner); }
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override;
   // The candidates' region: a segment that leaves it is validated on its part inside.
   void set_region(const DetectionRegion& region) override { background_.set_region(region); }

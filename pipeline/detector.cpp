@@ -52,6 +52,7 @@ class SearchAxesDetector final : public Detector {
     frame_height_ = height;
     set_region(region_);
   }
+  void use_parts(PartRunner& runner) override { detector_->use_parts(runner); }
   void set_region(const DetectionRegion& region) override {
     region_ = region;
     detector_->set_region(search_region());

@@ -9,6 +9,7 @@
 #include "pipeline/image_view.hpp"
 #include "pipeline/line_selection.hpp"
 #include "pipeline/motion.hpp"
+#include "pipeline/parts.hpp"
 #include "pipeline/profile.hpp"
 #include "pipeline/validation.hpp"
 
@@ -120,6 +121,10 @@ class Detector {
   // Most points one frame can produce (capacity the caller gives the output Profile).
   virtual std::size_t max_points(int width, int height) const = 0;
   virtual void reset(int width, int height) = 0;
+  // Splits each frame's work into runner.parts() parts (pipeline/parts.hpp), the same profile to
+  // the bit for any number; before reset(), which sizes each part's buffers. The runner must
+  // outlive the detector's use of it. Default: one part.
+  virtual void use_parts(PartRunner& runner) { (void)runner; }
   virtual void detect(const ImageView& image, const FrameContext& frame, Profile& out) = 0;
   // Searches only `region` from the next detect() on, in the coordinates of the image detect() is
   // given (make_detector()'s detectors: the frame's pixels); it must be whole() or inside the

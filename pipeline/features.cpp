@@ -40,18 +40,11 @@ template <typename Body>
   });
 }
 
-// Level 1 of the frame (full size is not kept: the tracker keeps patches of it, see State).
-void downsample_frame(const ImageView& frame, Level& level1) {
-  for (int v = 0; v < level1.height; ++v) {
-    downsample_row(frame.row(2 * v), frame.row(2 * v + 1),
-                   level1.pixels.data() + static_cast<std::ptrdiff_t>(v) * level1.width,
-                   level1.width);
-  }
-}
-
-void downsample(const Level& fine, Level& coarse) {
-  for (int v = 0; v < coarse.height; ++v) {
-    downsample_row(fine.row(2 * v), fine.row(2 * v + 1),
+// Rows [first, end) of `coarse`, from the rows twice as far down of the finer image.
+void downsample_rows(const std::uint8_t* fine, std::ptrdiff_t stride, Level& coarse, int first,
+                     int end) {
+  for (int v = first; v < end; ++v) {
+    downsample_row(fine + 2 * v * stride, fine + (2 * v + 1) * stride,
                    coarse.pixels.data() + static_cast<std::ptrdiff_t>(v) * coarse.width,
                    coarse.width);
   }
@@ -129,49 +122,61 @@ bool looks_like_laser(const ImageView& level, int u, int v, int radius, double r
 
 namespace motion_detail {
 
-void build_pyramid(const ImageView& frame, int levels, Pyramid& pyramid) {
-  if (levels > 1) downsample_frame(frame, pyramid.levels[1]);
-  for (int l = 2; l < levels; ++l)
-    downsample(pyramid.levels[l - 1], pyramid.levels[l]);
+void build_pyramid(const ImageView& frame, int levels, Pyramid& pyramid, int first, int end) {
+  if (levels <= 1) return;
+  downsample_rows(frame.data, frame.stride, pyramid.levels[1], first, end);
+  for (int l = 2; l < levels; ++l) {
+    const Level& fine = pyramid.levels[l - 1];
+    Level& coarse = pyramid.levels[l];
+    downsample_rows(fine.pixels.data(), fine.width, coarse, first >> (l - 1),
+                    std::min(end >> (l - 1), coarse.height));
+  }
 }
 
 }  // namespace motion_detail
 
-void MotionEstimator::detect_features(int index, const ImageView& frame) {
+void MotionEstimator::find_corners(int index, const ImageView& frame, int part) {
   State& s = *state_;
   const MotionOptions& o = options_;
+  CornerScratch& scratch = s.corner_scratch[static_cast<std::size_t>(part)];
   const ImageView level =
       o.detect_level == 0 ? frame : s.pyramids[index].levels[o.detect_level].view();
   const int width = level.width;
-  const int cells = o.grid_columns * o.grid_rows;
-  std::fill(s.cell_u.begin(), s.cell_u.end(), -1);
+  // The part's grid rows and the rows of the level they cover.
+  const auto [first_grid_row, end_grid_row] = part_range(o.grid_rows, part, s.parts);
+  if (first_grid_row == end_grid_row) return;
+  const int first_cell = first_grid_row * o.grid_columns;
+  const int end_cell = end_grid_row * o.grid_columns;
+  std::fill(s.cell_u.begin() + first_cell, s.cell_u.begin() + end_cell, -1);
 
   // Gradient products (doubled central differences, integers) of the last three rows, and their
   // sums over those rows (kept sliding); summed over columns u-1 .. u+1 they are the structure
   // tensor of (u, v), four times over.
-  const int first = s.margin - 1, last = level.height - s.margin;
+  const int v_first = s.grid_row_start[first_grid_row];
+  const int v_end = s.grid_row_start[end_grid_row];
+  const int first = v_first - 1;
   const int u_first = s.margin - 1, u_last = width - s.margin;  // inclusive
-  std::int32_t* __restrict sum_xx = s.column_xx.data();
-  std::int32_t* __restrict sum_xy = s.column_xy.data();
-  std::int32_t* __restrict sum_yy = s.column_yy.data();
+  std::int32_t* __restrict sum_xx = scratch.column_xx.data();
+  std::int32_t* __restrict sum_xy = scratch.column_xy.data();
+  std::int32_t* __restrict sum_yy = scratch.column_yy.data();
   for (int u = u_first; u <= u_last; ++u)
     sum_xx[u] = sum_xy[u] = sum_yy[u] = 0;
-  for (auto* rows : {&s.gxx, &s.gxy, &s.gyy})
+  for (auto* rows : {&scratch.gxx, &scratch.gxy, &scratch.gyy})
     for (auto& row : *rows)
       std::fill(row.begin(), row.end(), 0);
   // Adds row v's products to the sums, replacing those of row v-3.
   const auto slide = [&](int v) {
     const int slot = v % 3;
-    slide_structure_row(level.row(v - 1), level.row(v), level.row(v + 1), s.gxx[slot].data(),
-                        s.gxy[slot].data(), s.gyy[slot].data(), sum_xx, sum_xy, sum_yy, u_first,
-                        u_last + 1);
+    slide_structure_row(level.row(v - 1), level.row(v), level.row(v + 1), scratch.gxx[slot].data(),
+                        scratch.gxy[slot].data(), scratch.gyy[slot].data(), sum_xx, sum_xy, sum_yy,
+                        u_first, u_last + 1);
   };
   const float floor4 = 4.0f * kMinEigenvalue;
-  std::fill(s.cell_score.begin(), s.cell_score.end(), floor4);
+  std::fill(s.cell_score.begin() + first_cell, s.cell_score.begin() + end_cell, floor4);
   slide(first);
   slide(first + 1);
-  std::int32_t* __restrict bound = s.eigen_bound.data();
-  for (int v = s.margin; v < last; ++v) {
+  std::int32_t* __restrict bound = scratch.eigen_bound.data();
+  for (int v = v_first; v < v_end; ++v) {
     slide(v + 1);
     // The smaller eigenvalue is at most min(a, c): most pixels stop at that bound.
     eigenvalue_bound_row(sum_xx, sum_yy, bound, s.margin, width - s.margin);
@@ -204,6 +209,18 @@ void MotionEstimator::detect_features(int index, const ImageView& frame) {
     }
   }
 
+  for (int cell = first_cell; cell < end_cell; ++cell) {
+    s.cell_on_laser[cell] =
+        s.cell_u[cell] >= 0 && looks_like_laser(level, s.cell_u[cell], s.cell_v[cell],
+                                                2 * o.window_radius, o.laser_filter_ratio);
+  }
+}
+
+void MotionEstimator::detect_features(int index, const ImageView& frame) {
+  State& s = *state_;
+  const MotionOptions& o = options_;
+  const int cells = o.grid_columns * o.grid_rows;
+
   // Full-size position of a detect-level pixel: the whole pixel nearest its block's centre, so
   // the full-size template needs no interpolation.
   const int factor = 1 << o.detect_level;
@@ -213,8 +230,7 @@ void MotionEstimator::detect_features(int index, const ImageView& frame) {
     if (s.cell_u[cell] < 0) continue;
     const Point p{static_cast<float>(s.cell_u[cell] * factor + offset),
                   static_cast<float>(s.cell_v[cell] * factor + offset)};
-    if (looks_like_laser(level, s.cell_u[cell], s.cell_v[cell], 2 * o.window_radius,
-                         o.laser_filter_ratio)) {
+    if (s.cell_on_laser[cell]) {
       s.rejected[index][rejected++] = p;
     } else {
       // The full-size template for the tracker, (2r+3)^2 around the feature.

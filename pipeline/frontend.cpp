@@ -14,6 +14,7 @@
 #include <numeric>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 #include <type_traits>
 
 #include "pipeline/frontend_common.hpp"
@@ -186,26 +187,30 @@ void Frontend::reset(int width, int height) {
   normalised_stride_ = normalised_pad_ + strips * kStripColumns + ring_stride_;
   const auto ring = static_cast<std::size_t>(ring_stride_);
   const auto s = static_cast<std::size_t>(normalised_stride_);
-  normalised_ring_.assign(static_cast<std::size_t>(normalised_ring_rows_) * s, 0);
   band_most_.assign(static_cast<std::size_t>(strips * (band_ring_rows_ + 1)), 0);
-  // Each strip's rings end with a row of zeros (the rows beyond the ends); the last, with a
-  // register's lanes more for the noise sums to read past it.
-  const auto band_ring =
-      static_cast<std::size_t>(strips * (band_ring_rows_ + 1)) * ring + kernels::kWindowLanes;
+  // Each strip's rings end with a row of zeros (the rows beyond the ends), and a register's lanes
+  // more for the noise sums to read past it (not into the next strip's ring, which another part
+  // may be writing).
+  band_strip_size_ = static_cast<std::size_t>(band_ring_rows_ + 1) * ring + kernels::kWindowLanes;
+  const auto band_ring = static_cast<std::size_t>(strips) * band_strip_size_;
   narrow_.assign(narrow_band_ ? band_ring : 0, narrow_band_ ? strips * ring : 0);
   wide_.assign(narrow_band_ ? 0 : band_ring, narrow_band_ ? 0 : strips * ring);
-  band_rows_.assign(static_cast<std::size_t>(kRowBlock + 2 * look), 0);
-  band_slots_.assign(band_rows_.size(), 0);
-  normalised_rows_.assign(static_cast<std::size_t>(kRowBlock + look + outer_ + 3), nullptr);
-  const auto blocks = static_cast<std::size_t>((width + kWarpBlock - 1) / kWarpBlock);
-  warp_left_.assign(blocks, 0);
-  warp_top_.assign(blocks, 0);
-  warp_whole_.assign(blocks, 0);
-  warp_offset_.assign(blocks, 0);
-  for (std::vector<std::int32_t>& weights : warp_weights_)
-    weights.assign(blocks, 0);
+  // Each part's buffers (its strips and warp blocks are placed for each pass: place_parts()).
+  const int blocks = (width + kWarpBlock - 1) / kWarpBlock;
+  parts_.resize(static_cast<std::size_t>(std::clamp(runner_->parts(), 1, kMaxParts)));
+  for (Part& part : parts_) {
+    part.normalised_ring.assign(static_cast<std::size_t>(normalised_ring_rows_) * s, 0);
+    part.band_rows.assign(static_cast<std::size_t>(kRowBlock + 2 * look), 0);
+    part.band_slots.assign(part.band_rows.size(), 0);
+    part.normalised_rows.assign(static_cast<std::size_t>(kRowBlock + look + outer_ + 3), nullptr);
+    for (std::vector<std::int32_t>* warp :
+         {&part.warp_left, &part.warp_top, &part.warp_whole, &part.warp_offset})
+      warp->assign(static_cast<std::size_t>(blocks), 0);
+    for (std::vector<std::int32_t>& weights : part.warp_weights)
+      weights.assign(static_cast<std::size_t>(blocks), 0);
+    part.peak_bits.assign((ring + 63) / 64, 0u);
+  }
   zero_normalised_.assign(s, 0);
-  peak_bits_.assign((ring + 63) / 64, 0u);
   column_best_.assign(static_cast<std::size_t>(width) * options_.max_candidates_per_column, {});
   column_count_.assign(static_cast<std::size_t>(width), 0);
   line_candidates_.assign(static_cast<std::size_t>(width) * options_.max_candidates_per_column, {});
@@ -270,6 +275,30 @@ void Frontend::update_bounds() {
       std::min(width_, (b.column_end + noise_pad_ + kWarpBlock - 1) / kWarpBlock * kWarpBlock);
 }
 
+void Frontend::place_parts(const PassBounds& bounds) {
+  const int strip_begin = bounds.column_begin / kStripColumns;
+  const int strip_end = (bounds.column_end + kStripColumns - 1) / kStripColumns;
+  const int blocks = (width_ + kWarpBlock - 1) / kWarpBlock;
+  const int normalise_begin = bounds.normalise_begin / kWarpBlock;
+  const int normalise_end = std::min((bounds.normalise_end + kWarpBlock - 1) / kWarpBlock, blocks);
+  for (std::size_t p = 0; p < parts_.size(); ++p) {
+    Part& part = parts_[p];
+    const auto [first, end] =
+        part_range(strip_end - strip_begin, static_cast<int>(p), static_cast<int>(parts_.size()));
+    part.first_strip = strip_begin + first;
+    part.end_strip = strip_begin + end;
+    part.first_block = part.end_block = 0;
+    if (first == end) continue;
+    // The normalised columns its strips read: their own and the noise window's reach beyond (up
+    // to a strip's ring stride), within those the pass makes.
+    const int first_column = part.first_strip * kStripColumns - noise_pad_;
+    const int end_column = (part.end_strip - 1) * kStripColumns - noise_pad_ + ring_stride_;
+    part.first_block = std::max(std::max(first_column, 0) / kWarpBlock, normalise_begin);
+    part.end_block = std::max(std::min((end_column + kWarpBlock - 1) / kWarpBlock, normalise_end),
+                              part.first_block);
+  }
+}
+
 namespace {
 
 static_assert(Frontend::kWarpBlock == kernels::WarpRow::kWarpBlock);
@@ -307,12 +336,15 @@ void Frontend::set_frame_minus_background(const ImageView& current, const ImageV
   subtracting_ = true;
 }
 
-void Frontend::normalise_row(int r, std::uint16_t* out, int begin, int end) {
+void Frontend::normalise_row(Part& part, int r, std::uint16_t* out) {
   const float v = rows_.source_row(r);
   const SourceRow row(current_, v);
+  // The part's columns [u0, u1): whole warp blocks (each is evaluated as in one part: alike).
+  const int u0 = part.first_block * kWarpBlock;
+  const int u1 = std::min(part.end_block * kWarpBlock, width_);
+  if (u0 >= u1) return;
   if (!subtracting_) {
-    kernels::interpolate_row(row.a + begin, row.b + begin, row.fb, normalised_shift_, end - begin,
-                             out + begin);
+    kernels::interpolate_row(row.a + u0, row.b + u0, row.fb, normalised_shift_, u1 - u0, out + u0);
     return;
   }
   // The background may be a band of rows of the frame (its own size; the homography says where).
@@ -325,31 +357,29 @@ void Frontend::normalise_row(int r, std::uint16_t* out, int begin, int end) {
   const auto xn0 = static_cast<float>(g(0, 1) * v + g(0, 2)), xnu = static_cast<float>(g(0, 0));
   const auto yn0 = static_cast<float>(g(1, 1) * v + g(1, 2)), ynu = static_cast<float>(g(1, 0));
   const auto wn0 = static_cast<float>(g(2, 1) * v + g(2, 2)), wnu = static_cast<float>(g(2, 0));
-  const int first_block = begin / kWarpBlock;
-  const int blocks = (end + kWarpBlock - 1) / kWarpBlock;  // the blocks [first_block, blocks)
+  const int first_block = part.first_block, blocks = part.end_block - part.first_block;
   const int width = width_, stride = background.stride, last_column = background.width - 1;
   const int last_row = background.height - 1;
   // Where each block was in the background, for all blocks of the row at once (positions held
   // within two background sizes).
-  std::int32_t* left = warp_left_.data();
-  std::int32_t* top = warp_top_.data();
-  std::int32_t* whole = warp_whole_.data();
-  std::int32_t* offset = warp_offset_.data();
-  std::int32_t* w00 = warp_weights_[0].data();
-  std::int32_t* w01 = warp_weights_[1].data();
-  std::int32_t* w10 = warp_weights_[2].data();
-  std::int32_t* w11 = warp_weights_[3].data();
+  // (The kernels index the blocks from the part's first.)
+  std::int32_t* left = part.warp_left.data();
+  std::int32_t* top = part.warp_top.data();
+  std::int32_t* whole = part.warp_whole.data();
+  std::int32_t* offset = part.warp_offset.data();
+  std::int32_t* w00 = part.warp_weights[0].data();
+  std::int32_t* w01 = part.warp_weights[1].data();
+  std::int32_t* w10 = part.warp_weights[2].data();
+  std::int32_t* w11 = part.warp_weights[3].data();
   const float far = 2.0f * std::max(bg_width, bg_height);
   const int partial = kernels::warp_blocks(
       {xn0, xnu, yn0, ynu, wn0, wnu, far, width, stride, last_column, last_row}, first_block,
-      blocks, {left, top, whole, offset, w00, w01, w10, w11});
-  // From the first block on (its pixels and per-block values).
-  const int j = first_block;
-  kernels::difference_row({row.a + begin, row.b + begin,   row.fb,     normalised_shift_,
-                           out + begin,   background.data, stride,     left + j,
-                           top + j,       whole + j,       offset + j, w00 + j,
-                           w01 + j,       w10 + j,         w11 + j,    blocks - j,
-                           width - begin, last_column,     last_row,   partial});
+      first_block + blocks, {left, top, whole, offset, w00, w01, w10, w11});
+  const auto j = static_cast<std::size_t>(first_block);
+  kernels::difference_row({row.a + u0,      row.b + u0, row.fb,      normalised_shift_, out + u0,
+                           background.data, stride,     left + j,    top + j,           whole + j,
+                           offset + j,      w00 + j,    w01 + j,     w10 + j,           w11 + j,
+                           blocks,          width - u0, last_column, last_row,          partial});
 }
 
 bool Frontend::water_glows(const ImageView& frame) const {
@@ -395,21 +425,13 @@ void Frontend::find_candidates(Profile& out) {
 void Frontend::collect_candidates(Profile& out) {
   out.clear();
   glowing_ = water_glows(current_);
-  roll(nullptr);
+  roll(nullptr);  // (and line_candidates_, see line_candidates())
   const int per_column = options_.max_candidates_per_column;
   const bool all_rows = region_.whole();
   for (int u = 0; u < width_; ++u) {
-    Peak* best = column_best_.data() + static_cast<std::size_t>(u) * per_column;
-    LineCandidate* line = line_candidates_.data() + static_cast<std::size_t>(u) * per_column;
+    const LineCandidate* line = line_candidates_.data() + static_cast<std::size_t>(u) * per_column;
     const int n = column_count_[u];
-    // By row (normalised rows grow with the original rows).
-    std::sort(best, best + n, [](const Peak& a, const Peak& b) { return a.r < b.r; });
     for (int i = 0; i < n; ++i) {
-      // The band-pass peak's row, good to about half a laser width: only the chosen point gets
-      // the sub-pixel fit (the costly part of this stage, done for all columns at the end).
-      line[i].position = rows_.to_source_single(best[i].r);
-      line[i].snr_db = kDecibelsPerNeper * std::log(best[i].snr);  // 20 log10 (cheaper)
-      line[i].amplitude_db = kDecibelsPerNeper * std::log(std::max(best[i].band, 1e-3f));
       // Outside the region's rows, those the refinement can bring into them (kept until then).
       if (!all_rows) {
         const double v = line[i].position;
@@ -427,6 +449,24 @@ void Frontend::collect_candidates(Profile& out) {
     }
   }
   collected_ = out.size();
+}
+
+void Frontend::line_candidates(int first, int end) {
+  const int per_column = options_.max_candidates_per_column;
+  for (int u = first; u < end; ++u) {
+    Peak* best = column_best_.data() + static_cast<std::size_t>(u) * per_column;
+    LineCandidate* line = line_candidates_.data() + static_cast<std::size_t>(u) * per_column;
+    const int n = column_count_[u];
+    // By row (normalised rows grow with the original rows).
+    std::sort(best, best + n, [](const Peak& a, const Peak& b) { return a.r < b.r; });
+    for (int i = 0; i < n; ++i) {
+      // The band-pass peak's row, good to about half a laser width: only the chosen point gets
+      // the sub-pixel fit (the costly part of this stage, done for all columns at the end).
+      line[i].position = rows_.to_source_single(best[i].r);
+      line[i].snr_db = kDecibelsPerNeper * std::log(best[i].snr);  // 20 log10 (cheaper)
+      line[i].amplitude_db = kDecibelsPerNeper * std::log(std::max(best[i].band, 1e-3f));
+    }
+  }
 }
 
 void Frontend::select_line(Profile& out) {

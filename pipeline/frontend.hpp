@@ -11,6 +11,7 @@
 #include "pipeline/image_view.hpp"
 #include "pipeline/line_selection.hpp"
 #include "pipeline/motion.hpp"
+#include "pipeline/parts.hpp"
 #include "pipeline/profile.hpp"
 
 namespace laserline::pipeline {
@@ -77,6 +78,10 @@ class Frontend {
     return static_cast<std::size_t>(width) *
            static_cast<std::size_t>(options_.max_candidates_per_column);
   }
+  // Splits the pass down the rows (III-B to E) and the refinement (III-F) of each frame into
+  // runner.parts() parts, each a range of strips of columns; before reset(), which sizes each
+  // part's buffers. The runner must outlive the front end's use. Default: one part.
+  void use_parts(PartRunner& runner) { runner_ = &runner; }
   void reset(int width, int height);
 
   // III-B on the frame itself (the `fir` detector). The view must stay valid until the last call
@@ -163,10 +168,46 @@ class Frontend {
   double refine_reach(double v) const;
   struct StageImages;
   // The pass down the rows: candidates into column_best_ / column_count_, and the intermediate
-  // rows into `images` where given. In 16- or 32-bit band-pass lanes (see the constructor).
+  // rows into `images` where given, in 16- or 32-bit band-pass lanes (see the constructor); then
+  // line_candidates() of every column.
   void roll(const StageImages* images);
-  void roll_narrow(const StageImages* images);
-  void roll_wide(const StageImages* images);
+  // The candidates of columns [first, end) by row, as the line selection sees them.
+  void line_candidates(int first, int end);
+  // work(part) for each part: by the runner, or one after another when the runner does not run
+  // the parts reset() sized for (one part, or a runner given after reset()).
+  template <class Work>
+  void run_parts(Work& work) {
+    if (parts_.size() > 1 && runner_->parts() == static_cast<int>(parts_.size())) {
+      runner_->run(PartWork(work));
+    } else {
+      for (std::size_t p = 0; p < parts_.size(); ++p)
+        work(static_cast<int>(p));
+    }
+  }
+  void roll_narrow(const StageImages* images, const PassBounds& bounds, int part);
+  void roll_wide(const StageImages* images, const PassBounds& bounds, int part);
+  // What one part of the pass owns: its strips [first_strip, end_strip) (its columns; the pass's
+  // strips split between the parts, place_parts()), the warp blocks [first_block, end_block)
+  // whose normalised columns its strips read (within the pass's), and its own rings and scratch
+  // rows (the columns it reads beyond its own are made again by each part).
+  struct Part {
+    int first_strip = 0, end_strip = 0, first_block = 0, end_block = 0;
+    std::vector<std::uint16_t> normalised_ring;  // 8 - normalised_shift_ fractional bits
+    // Per warp block of the row being normalised: where its first pixel lies in the background
+    // (integer column and row), whether the block lies wholly inside it, the offset of its first
+    // pixel's in the background where whole, its four bilinear weights (top left, top right,
+    // bottom left, bottom right).
+    std::vector<std::int32_t> warp_left, warp_top, warp_whole, warp_offset;
+    std::array<std::vector<std::int32_t>, 4> warp_weights;
+    // Per block of rows: where each row it touches is (offsets into a strip's rings, pointers to
+    // the normalised rows), from the first it touches on.
+    std::vector<std::size_t> band_rows;
+    std::vector<int> band_slots;  // the band-pass rows' slots (band_rows = slot * ring stride)
+    std::vector<const std::uint16_t*> normalised_rows;
+    std::vector<std::uint64_t> peak_bits;  // one row of a strip's candidates, as bits
+  };
+  // Each part's strips and warp blocks for a pass within `bounds` (no allocation).
+  void place_parts(const PassBounds& bounds);
   // The strips' band-pass rows and running box sums (modulo 2^bits).
   template <class Lane>
   struct BandRings {
@@ -179,7 +220,8 @@ class Frontend {
     }
   };
   template <class Lane>
-  void roll_with(const StageImages* images, BandRings<Lane>& rings);
+  void roll_with(const StageImages* images, const PassBounds& bounds, BandRings<Lane>& rings,
+                 Part& part);
   // Its stages (see frontend.cpp): the pass's settings, the normalised rows (III-B), where a
   // block's rows are, a strip's band-pass rows (III-C), a row's candidates (III-D/E).
   template <class Lane>
@@ -188,11 +230,11 @@ class Frontend {
   struct StripRows;
   template <class Lane>
   RollPass<Lane> roll_pass() const;
-  std::uint16_t* normalised_slot(int r);
-  const std::uint16_t* normalised_at(int r, int rows);
-  void normalise_until(int last, int rows, float normalised_one, int& next,
-                       const PassBounds& bounds, const StageImages* images);
-  void place_block_rows(int rows, int band_base, int band_top, int normalised_base,
+  std::uint16_t* normalised_slot(Part& part, int r);
+  const std::uint16_t* normalised_at(Part& part, int r, int rows);
+  void normalise_until(Part& part, int last, int rows, float normalised_one, int& next,
+                       const StageImages* images);
+  void place_block_rows(Part& part, int rows, int band_base, int band_top, int normalised_base,
                         int normalised_top);
   template <class Lane>
   void band_pass_rows(const RollPass<Lane>& pass, const StripRows<Lane>& strip, int first, int end,
@@ -203,8 +245,8 @@ class Frontend {
   template <class Lane>
   void row_candidates(const RollPass<Lane>& pass, const StripRows<Lane>& strip, int r,
                       const StageImages* images);
-  // Normalised row r into out[begin, end) (begin a multiple of kWarpBlock).
-  void normalise_row(int r, std::uint16_t* out, int begin, int end);
+  // The columns of normalised row r the part's warp blocks cover into out (column 0 at out[0]).
+  void normalise_row(Part& part, int r, std::uint16_t* out);
   // The noise window of a row less its guard band: `rows` rows from each of `above` and `below`
   // (offsets of the rows in a strip's band-pass ring).
  public:
@@ -232,6 +274,7 @@ class Frontend {
   // refine_row() of the first `count` points waiting for it (refine_columns_, ...): into the
   // profile's points.
   void refine(std::span<ProfilePoint> points, std::size_t count);
+  void refine_range(std::span<ProfilePoint> points, std::size_t first, std::size_t end);
 
   ScannerGeometry geometry_;
   FrontendOptions options_;
@@ -275,28 +318,15 @@ class Frontend {
   // row), and per strip the band-pass rows (ring_stride_ values per row, and after the last row a
   // row of zeros); the per-strip sums are as wide.
   int normalised_ring_rows_ = 0, band_ring_rows_ = 0, ring_stride_ = 0;
+  std::size_t band_strip_size_ = 0;  // values of a strip's band-pass ring
   // Normalised rows: zeros on either side of the image's columns, `normalised_pad_` on the left.
   int normalised_pad_ = 0, normalised_stride_ = 0;
-  std::vector<std::uint16_t> normalised_ring_;  // 8 - normalised_shift_ fractional bits
+  PartRunner* runner_ = &one_part();
+  std::vector<Part> parts_;
   BandRings<std::int16_t> narrow_;
   BandRings<std::int32_t> wide_;
-  std::vector<int> band_most_;  // per band-pass row of a strip: its largest value
-  // Per warp block of the row being normalised: where its first pixel lies in the background
-  // (integer column and row).
-  std::vector<std::int32_t> warp_left_, warp_top_;
-  // ... and whether the block lies wholly inside it.
-  std::vector<std::int32_t> warp_whole_;
-  std::vector<std::int32_t> warp_offset_;  // of its first pixel's in the background, where whole
-  // its four bilinear weights (top left, top right, bottom left, bottom right)
-  std::array<std::vector<std::int32_t>, 4> warp_weights_;
+  std::vector<int> band_most_;                  // per band-pass row of a strip: its largest value
   std::vector<std::uint16_t> zero_normalised_;  // a row of zeros: the rows beyond the ends
-  // Per block of rows: where each row it touches is (offsets into a strip's rings, pointers to
-  // the normalised rows), from the first it touches on.
-  std::vector<std::size_t> band_rows_;
-  std::vector<int> band_slots_;  // the band-pass rows' slots (band_rows_ = slot * ring stride)
-  std::vector<const std::uint16_t*> normalised_rows_;
-  // One row of a strip's candidates, as bits.
-  std::vector<std::uint64_t> peak_bits_;
   struct Peak {
     float r = 0;     // normalised row of the band-pass peak (sub-row)
     float snr = 0;   // amplitude ratio

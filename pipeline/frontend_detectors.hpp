@@ -19,6 +19,7 @@ class FirDetector final : public Detector {
   const char* name() const override { return "fir"; }
   std::size_t max_points(int width, int height) const override;
   void reset(int width, int height) override;
+  void use_parts(PartRunner& runner) override { frontend_.use_parts(runner); }
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override;
   void set_region(const DetectionRegion& region) override { frontend_.set_region(region); }
   DetectionRegion region() const override { return frontend_.region(); }
@@ -49,6 +50,7 @@ class BackgroundDetector final : public Detector {
   const char* name() const override { return "background"; }
   std::size_t max_points(int width, int height) const override;
   void reset(int width, int height) override;
+  void use_parts(PartRunner& runner) override;
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override;
   // The front-end's search (the motion is estimated over the whole frame).
   void set_region(const DetectionRegion& region) override { frontend_.set_region(region); }
@@ -89,6 +91,11 @@ class BackgroundDetector final : public Detector {
   MotionEstimator motion_;
   MotionEstimate last_motion_;
   std::vector<History> history_;
+  // The current frame's kept rows, copied in parts while its detection runs; then a History's
+  // (the buffers are swapped).
+  std::vector<std::uint8_t> incoming_;
+  PartRunner* runner_ = &one_part();
+  int parts_ = 1;
   int newest_ = -1;                     // index in history_ of the last frame kept
   int band_first_ = 0, band_rows_ = 0;  // which rows of a frame are kept
   int width_ = 0, height_ = 0;

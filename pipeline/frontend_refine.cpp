@@ -244,8 +244,18 @@ float Frontend::refine_row(int u, float v_guess) const {
 }
 
 void Frontend::refine(std::span<ProfilePoint> points, std::size_t count) {
+  // The points in parts (each writes its own points, and its own range of the lanes).
+  const int parts = static_cast<int>(parts_.size());
+  auto part = [&](int p) {
+    const auto [first, end] = part_range(static_cast<int>(count), p, parts);
+    refine_range(points, static_cast<std::size_t>(first), static_cast<std::size_t>(end));
+  };
+  run_parts(part);
+}
+
+void Frontend::refine_range(std::span<ProfilePoint> points, std::size_t first, std::size_t end) {
   if (!subtracting_ || glowing_) {
-    for (std::size_t k = 0; k < count; ++k)
+    for (std::size_t k = first; k < end; ++k)
       points[refine_points_[k]].v = refine_row(refine_columns_[k], refine_guesses_[k]);
     return;
   }
@@ -253,8 +263,8 @@ void Frontend::refine(std::span<ProfilePoint> points, std::size_t count) {
   // through the vector kernel, the same arithmetic as refine_row(); the others one by one.
   const int last = height_ - 1;
   RefineLanes& lanes = refine_lanes_;
-  std::size_t n = 0;
-  for (std::size_t k = 0; k < count; ++k) {
+  std::size_t n = first;
+  for (std::size_t k = first; k < end; ++k) {
     const int u = refine_columns_[k];
     const float guess = refine_guesses_[k];
     const RefineStart start = refine_start(guess);
@@ -279,15 +289,24 @@ void Frontend::refine(std::span<ProfilePoint> points, std::size_t count) {
     lanes.point[n] = refine_points_[k];
     ++n;
   }
-  const kernels::RefineColumns columns{
-      lanes.u.data(),           lanes.centre.data(),  lanes.lo.data(),
-      lanes.count.data(),       lanes.spacing.data(), lanes.edge.data(),
-      lanes.x0.data(),          lanes.y0.data(),      lanes.dx.data(),
-      lanes.dy.data(),          current_.data,        current_.stride,
-      background_.data,         background_.stride,   last,
-      options_.saturation_level};
-  kernels::refine_columns(columns, static_cast<int>(n), lanes.rows.data());
-  for (std::size_t j = 0; j < n; ++j)
+  const kernels::RefineColumns columns{lanes.u.data() + first,
+                                       lanes.centre.data() + first,
+                                       lanes.lo.data() + first,
+                                       lanes.count.data() + first,
+                                       lanes.spacing.data() + first,
+                                       lanes.edge.data() + first,
+                                       lanes.x0.data() + first,
+                                       lanes.y0.data() + first,
+                                       lanes.dx.data() + first,
+                                       lanes.dy.data() + first,
+                                       current_.data,
+                                       current_.stride,
+                                       background_.data,
+                                       background_.stride,
+                                       last,
+                                       options_.saturation_level};
+  kernels::refine_columns(columns, static_cast<int>(n - first), lanes.rows.data() + first);
+  for (std::size_t j = first; j < n; ++j)
     points[lanes.point[j]].v = lanes.rows[j];
 }
 

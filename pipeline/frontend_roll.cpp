@@ -110,6 +110,7 @@ struct Frontend::StripRows {
   int band_base = 0;
   const std::uint16_t* const* normalised_rows = nullptr;  // of row normalised_base on
   int normalised_base = 0;
+  std::uint64_t* peak_bits = nullptr;  // one row's candidates
 
   LASERLINE_ROW_KERNEL Lane* band(int r) const { return band_ring + band_rows[r - band_base]; }
   LASERLINE_ROW_KERNEL int& row_most(int r) const { return most[band_slots[r - band_base]]; }
@@ -146,29 +147,31 @@ LASERLINE_ROW_KERNEL Frontend::RollPass<Lane> Frontend::roll_pass() const {
   return pass;
 }
 
-// Column 0 of normalised row r in the ring.
-LASERLINE_ROW_KERNEL std::uint16_t* Frontend::normalised_slot(int r) {
-  return normalised_ring_.data() + normalised_pad_ +
+// Column 0 of normalised row r in the part's ring.
+LASERLINE_ROW_KERNEL std::uint16_t* Frontend::normalised_slot(Part& part, int r) {
+  return part.normalised_ring.data() + normalised_pad_ +
          static_cast<std::size_t>(r % normalised_ring_rows_) * normalised_stride_;
 }
 
 // Normalised row r; rows beyond the ends are rows of zeros (a box cut short sums what it covers).
-LASERLINE_ROW_KERNEL const std::uint16_t* Frontend::normalised_at(int r, int rows) {
+LASERLINE_ROW_KERNEL const std::uint16_t* Frontend::normalised_at(Part& part, int r, int rows) {
   if (r < 0 || r >= rows) return zero_normalised_.data() + normalised_pad_;
-  return normalised_slot(r);
+  return normalised_slot(part, r);
 }
 
-// III-B: the normalised rows from `next` to `last` (at most the last row) into the ring, and into
-// images->normalised where asked; `next` moves on past them.
-LASERLINE_ROW_KERNEL void Frontend::normalise_until(int last, int rows, float normalised_one,
-                                                    int& next, const PassBounds& bounds,
+// III-B: the part's columns of the normalised rows from `next` to `last` (at most the last row)
+// into its ring, and its own columns into images->normalised where asked; `next` moves on past
+// them.
+LASERLINE_ROW_KERNEL void Frontend::normalise_until(Part& part, int last, int rows,
+                                                    float normalised_one, int& next,
                                                     const StageImages* images) {
   for (; next <= std::min(last, rows - 1); ++next) {
-    std::uint16_t* out = normalised_slot(next);
-    normalise_row(next, out, bounds.normalise_begin, bounds.normalise_end);
+    std::uint16_t* out = normalised_slot(part, next);
+    normalise_row(part, next, out);
     if (images != nullptr && !images->normalised.empty()) {
       float* dst = images->normalised.data() + next * static_cast<std::size_t>(stride_);
-      for (int u = 0; u < width_; ++u)
+      const int end = std::min(part.end_strip * kStripColumns, width_);
+      for (int u = part.first_strip * kStripColumns; u < end; ++u)
         dst[u] = static_cast<float>(out[u]) / normalised_one;
     }
   }
@@ -177,19 +180,20 @@ LASERLINE_ROW_KERNEL void Frontend::normalise_until(int last, int rows, float no
 // Where the rows a block touches are, the same in every strip: as offsets into a strip's rings
 // (rows beyond the ends: the zero row after the ring's last) from row band_base to band_top, and
 // the normalised rows from normalised_base to normalised_top.
-LASERLINE_ROW_KERNEL void Frontend::place_block_rows(int rows, int band_base, int band_top,
-                                                     int normalised_base, int normalised_top) {
+LASERLINE_ROW_KERNEL void Frontend::place_block_rows(Part& part, int rows, int band_base,
+                                                     int band_top, int normalised_base,
+                                                     int normalised_top) {
   const auto ring = static_cast<std::size_t>(ring_stride_);
   // (Slots counted on from the first, wrapping: a division per row and strip was 2% of the time.)
   for (int r = band_base, slot = band_base < 0 ? 0 : band_base % band_ring_rows_; r < band_top;
        ++r) {
     const int at = r < 0 || r >= rows ? band_ring_rows_ : slot;
-    band_slots_[r - band_base] = at;
-    band_rows_[r - band_base] = static_cast<std::size_t>(at) * ring;
+    part.band_slots[r - band_base] = at;
+    part.band_rows[r - band_base] = static_cast<std::size_t>(at) * ring;
     if (r >= 0) slot = slot + 1 == band_ring_rows_ ? 0 : slot + 1;
   }
   for (int r = normalised_base; r <= normalised_top; ++r)
-    normalised_rows_[r - normalised_base] = normalised_at(r, rows);
+    part.normalised_rows[r - normalised_base] = normalised_at(part, r, rows);
 }
 
 // III-C: the band-pass rows [first, end) of a strip: box means down the columns; at the ends the
@@ -282,7 +286,7 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
   if (!searched || strip.row_most(r) < pass.lane_threshold) return;
   // Candidates: maxima of the band-pass within `reach` rows at or above the threshold.
   const std::size_t* rows_at = strip.band_rows + (r - strip.band_base);
-  std::uint64_t* bits = peak_bits_.data();
+  std::uint64_t* bits = strip.peak_bits;
   kernels::peak_bits(strip.band_ring, rows_at, reach_, pass.lane_threshold, count, bits);
   const Lane* up = strip.band(r - 1);
   const Lane* down = strip.band(r + 1);
@@ -348,22 +352,24 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
   }
 }
 
-// Rows go in blocks: the block's normalised rows across the whole image (long runs through the
+// Rows go in blocks: the block's normalised rows across the part's columns (long runs through the
 // frame), then strip by strip the band-pass, noise and candidates of the block's rows (the
-// strip's rings stay in the first-level cache for the whole block). Within a region (bounds_)
-// only its strips, and the rows from those its first row's noise window reaches.
+// strip's rings stay in the first-level cache for the whole block). Within a region (bounds)
+// only its strips, and the rows from those its first row's noise window reaches. A part does its
+// own strips and writes only their sums and their columns' candidates.
 template <class Lane>
-LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRings<Lane>& rings) {
+LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, const PassBounds& bounds,
+                                              BandRings<Lane>& rings, Part& part) {
   using Sum = std::make_unsigned_t<Lane>;
+  if (part.first_strip == part.end_strip) return;
   RollPass<Lane> pass = roll_pass<Lane>();
   const int rows = pass.rows;
   const auto ring = static_cast<std::size_t>(ring_stride_);
-  const PassBounds bounds = images != nullptr ? whole_bounds() : bounds_;
-  const int strip_begin = bounds.column_begin / kStripColumns;
-  const int strip_end = (bounds.column_end + kStripColumns - 1) / kStripColumns;
-  std::fill(column_count_.begin(), column_count_.end(), 0);
-  std::fill(rings.inner.begin(), rings.inner.end(), Sum{0});
-  std::fill(rings.outer.begin(), rings.outer.end(), Sum{0});
+  const auto sums = rings.inner.begin() + static_cast<std::ptrdiff_t>(part.first_strip * ring);
+  const auto sums_end = rings.inner.begin() + static_cast<std::ptrdiff_t>(part.end_strip * ring);
+  std::fill(sums, sums_end, Sum{0});
+  std::fill(rings.outer.begin() + (sums - rings.inner.begin()),
+            rings.outer.begin() + (sums_end - rings.inner.begin()), Sum{0});
 
   pass.start = std::max(bounds.row_begin - pass.look, 0);
   int next_normalised = std::max(pass.start - pass.ho - 1, 0);
@@ -371,12 +377,12 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
   for (int r_begin = pass.start; r_begin < bounds.row_end; r_begin += kRowBlock) {
     const int r_end = std::min(r_begin + kRowBlock, bounds.row_end);
     const int band_end = std::min(r_end + pass.look, rows);  // band-pass rows [next_band, band_end)
-    normalise_until(band_end - 1 + pass.ho, rows, pass.normalised_one, next_normalised, bounds,
+    normalise_until(part, band_end - 1 + pass.ho, rows, pass.normalised_one, next_normalised,
                     images);
     const int band_base = r_begin - pass.look;
     const int normalised_base = next_band - pass.ho - 1;
-    place_block_rows(rows, band_base, r_end + pass.look, normalised_base, band_end + pass.ho);
-    for (int s = strip_begin; s < strip_end; ++s) {
+    place_block_rows(part, rows, band_base, r_end + pass.look, normalised_base, band_end + pass.ho);
+    for (int s = part.first_strip; s < part.end_strip; ++s) {
       StripRows<Lane> strip;
       strip.c0 = std::max(s * kStripColumns, bounds.column_begin);
       strip.c1 = std::min({(s + 1) * kStripColumns, width_, bounds.column_end});
@@ -386,12 +392,13 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
       strip.most = band_most_.data() + static_cast<std::size_t>(s) * (band_ring_rows_ + 1);
       strip.inner = rings.inner.data() + state;
       strip.outer = rings.outer.data() + state;
-      strip.band_ring = rings.band.data() + state * static_cast<std::size_t>(band_ring_rows_ + 1);
-      strip.band_rows = band_rows_.data();
-      strip.band_slots = band_slots_.data();
+      strip.band_ring = rings.band.data() + static_cast<std::size_t>(s) * band_strip_size_;
+      strip.band_rows = part.band_rows.data();
+      strip.band_slots = part.band_slots.data();
       strip.band_base = band_base;
-      strip.normalised_rows = normalised_rows_.data();
+      strip.normalised_rows = part.normalised_rows.data();
       strip.normalised_base = normalised_base;
+      strip.peak_bits = part.peak_bits.data();
       band_pass_rows(pass, strip, next_band, band_end, images);
       for (int r = std::max(r_begin, bounds.row_begin); r < r_end; ++r)
         row_candidates(pass, strip, r, images);
@@ -401,19 +408,29 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, BandRin
 }
 
 void Frontend::roll(const StageImages* images) {
-  if (narrow_band_) {
-    roll_narrow(images);
-  } else {
-    roll_wide(images);
-  }
+  // The stage images are of the whole frame.
+  const PassBounds bounds = images != nullptr ? whole_bounds() : bounds_;
+  place_parts(bounds);
+  std::fill(column_count_.begin(), column_count_.end(), 0);  // (the columns no part searches)
+  auto part = [&](int p) {
+    if (narrow_band_) {
+      roll_narrow(images, bounds, p);
+    } else {
+      roll_wide(images, bounds, p);
+    }
+    const Part& own = parts_[static_cast<std::size_t>(p)];
+    line_candidates(std::min(own.first_strip * kStripColumns, width_),
+                    std::min(own.end_strip * kStripColumns, width_));
+  };
+  run_parts(part);
 }
 
-void Frontend::roll_narrow(const StageImages* images) {
-  roll_with(images, narrow_);
+void Frontend::roll_narrow(const StageImages* images, const PassBounds& bounds, int part) {
+  roll_with(images, bounds, narrow_, parts_[static_cast<std::size_t>(part)]);
 }
 
-void Frontend::roll_wide(const StageImages* images) {
-  roll_with(images, wide_);
+void Frontend::roll_wide(const StageImages* images, const PassBounds& bounds, int part) {
+  roll_with(images, bounds, wide_, parts_[static_cast<std::size_t>(part)]);
 }
 
 void Frontend::stage_images(std::span<float> normalised, std::span<float> band_pass,

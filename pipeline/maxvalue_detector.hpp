@@ -23,11 +23,16 @@ class MaxValueDetector final : public Detector {
     return static_cast<std::size_t>(width);
   }
   void reset(int width, int height) override;
+  // Parts: ranges of columns.
+  void use_parts(PartRunner& runner) override { runner_ = &runner; }
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override;
   void set_region(const DetectionRegion& region) override { region_ = region; }
   DetectionRegion region() const override { return region_.in_frame(width_, height_); }
 
  private:
+  // Columns [begin, end) of the region (in the frame): their points into row_ and snr_db_.
+  void columns(const ImageView& image, const DetectionRegion& region, int begin, int end);
+
   int threshold_;
   DetectionRegion region_;
   int width_ = 0, height_ = 0;
@@ -37,6 +42,10 @@ class MaxValueDetector final : public Detector {
   std::vector<std::uint16_t> first_row_;
   std::vector<std::uint16_t> last_row_;
   std::vector<std::uint32_t> sum_;
+  // Per column: its point's row and SNR (NaN: none), before they go into the profile in order.
+  std::vector<float> row_, snr_db_;
+  PartRunner* runner_ = &one_part();
+  int parts_ = 1;
 };
 
 }  // namespace laserline::pipeline

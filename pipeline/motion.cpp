@@ -111,15 +111,26 @@ void MotionEstimator::reset(int width, int height, const ScannerGeometry* geomet
   s.tracks.assign(cells, FeatureTrack{});
 
   s.cell_of_row.assign(detect_height, -1);
-  for (int v = s.margin; v < detect_height - s.margin; ++v)
+  s.grid_row_start.assign(o.grid_rows + 1, detect_height - s.margin);
+  for (int v = detect_height - s.margin - 1; v >= s.margin; --v) {
     s.cell_of_row[v] = (v - s.margin) * o.grid_rows / valid_height;
-  for (int i = 0; i < 3; ++i) {
-    s.gxx[i].assign(detect_width, 0);
-    s.gxy[i].assign(detect_width, 0);
-    s.gyy[i].assign(detect_width, 0);
+    s.grid_row_start[s.cell_of_row[v]] = v;
   }
-  for (auto* v : {&s.column_xx, &s.column_xy, &s.column_yy, &s.eigen_bound})
-    v->assign(detect_width, 0);
+  s.parts = std::clamp(runner_->parts(), 1, kMaxParts);
+  s.pyramid_alignment = 1 << std::max(0, o.pyramid_levels - 2);
+  s.corner_scratch.resize(static_cast<std::size_t>(s.parts));
+  for (CornerScratch& scratch : s.corner_scratch) {
+    for (int i = 0; i < 3; ++i) {
+      scratch.gxx[i].assign(detect_width, 0);
+      scratch.gxy[i].assign(detect_width, 0);
+      scratch.gyy[i].assign(detect_width, 0);
+    }
+    for (auto* v :
+         {&scratch.column_xx, &scratch.column_xy, &scratch.column_yy, &scratch.eigen_bound})
+      v->assign(detect_width, 0);
+  }
+  s.cell_on_laser.assign(cells, 0);
+  s.feature_tracks.assign(cells, TrackResult{});
   s.cell_start.assign(o.grid_columns + 1, 0);
   for (int column = 0; column <= o.grid_columns; ++column)
     s.cell_start[column] = s.margin + (column * valid_width + o.grid_columns - 1) / o.grid_columns;
@@ -141,10 +152,21 @@ void MotionEstimator::reset(int width, int height, const ScannerGeometry* geomet
   s.follow_has_patch.assign(follow, 0);
   s.follow_patches.assign(static_cast<std::size_t>(follow) * s.patch_bytes, 0);
   s.followed.assign(follow, {});
+  s.follow_tracks.assign(follow, TrackResult{});
   s.follow_count = 0;
   if (s.has_camera) camera_.reset(*geometry, cells);
   s.width = width;
   s.height = height;
+}
+
+template <class Work>
+void MotionEstimator::run_parts(Work& work) {
+  if (state_->parts > 1 && runner_->parts() == state_->parts) {
+    runner_->run(PartWork(work));
+  } else {
+    for (int part = 0; part < state_->parts; ++part)
+      work(part);
+  }
 }
 
 std::span<const FeatureTrack> MotionEstimator::tracks() const {
@@ -170,10 +192,24 @@ MotionEstimate MotionEstimator::update(const ImageView& frame) {
   }
 
   const int current = 1 - s.previous;
-  build_pyramid(frame, o.pyramid_levels, s.pyramids[current]);
+  // The pyramid in bands of rows; then the previous frame's features tracked into it and this
+  // frame's corners found in it, each part a share of the features and a band of grid rows.
+  const int level1 = s.height >> 1;
+  const int units = (level1 + s.pyramid_alignment - 1) / s.pyramid_alignment;
+  auto pyramid_part = [&](int part) {
+    const auto [first, end] = part_range(units, part, s.parts);
+    build_pyramid(frame, o.pyramid_levels, s.pyramids[current], first * s.pyramid_alignment,
+                  std::min(end * s.pyramid_alignment, level1));
+  };
+  run_parts(pyramid_part);
+  auto features_part = [&](int part) {
+    if (s.has_previous) track_part(current, frame, part);
+    find_corners(current, frame, part);
+  };
+  run_parts(features_part);
 
   if (s.has_previous) {
-    estimate = estimate_from_previous(current, frame);
+    estimate = estimate_from_previous();
     s.reported_rejected = s.previous;
   }
   if (s.has_camera) keep_follow_patches(frame);

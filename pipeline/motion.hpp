@@ -14,6 +14,7 @@
 #include "pipeline/geometry.hpp"
 #include "pipeline/homography.hpp"
 #include "pipeline/image_view.hpp"
+#include "pipeline/parts.hpp"
 
 namespace laserline::pipeline {
 
@@ -146,6 +147,9 @@ class MotionEstimator {
   MotionEstimator& operator=(const MotionEstimator&) = delete;
 
   const MotionOptions& options() const { return options_; }
+  // Splits the pyramid, the tracking and the feature detection of each frame into runner.parts()
+  // parts; before reset(), which sizes each part's buffers. Default: one part.
+  void use_parts(PartRunner& runner) { runner_ = &runner; }
   // `geometry` (copied; may be null: homography only) gives the intrinsics and distortion for the
   // camera motion; its size must be width x height.
   void reset(int width, int height, const ScannerGeometry* geometry = nullptr);
@@ -159,20 +163,31 @@ class MotionEstimator {
 
  private:
   struct State;
-  // Finds the features of `frame`, whose pyramid is `index` (and the ones the laser filter
-  // rejects), and keeps the full-size patches around them.
+  // work(part) for each part: by the runner, or one after another when it does not run the parts
+  // reset() sized for.
+  template <class Work>
+  void run_parts(Work& work);
+  // Part `part` of the corners of pyramid `index` (the strongest per grid cell of its grid rows)
+  // and the laser filter's verdict on them.
+  void find_corners(int index, const ImageView& frame, int part);
+  // Part `part` of the tracks of the previous frame's features (and of the points followed) into
+  // pyramid `current`.
+  void track_part(int current, const ImageView& frame, int part);
+  // The features of `frame`, whose pyramid is `index`, from find_corners() (and the ones the
+  // laser filter rejects), and the full-size patches around them.
   void detect_features(int index, const ImageView& frame);
-  // Tracks the previous frame's features into `frame` (pyramid `current`), fits the homography.
-  MotionEstimate estimate_from_previous(int current, const ImageView& frame);
+  // The homography (and camera motion) from the tracks track_part() found.
+  MotionEstimate estimate_from_previous();
   // RANSAC and least-squares refit over the first n tracked pairs; false when nothing fits.
   bool fit_homography(int n, Homography& result, int& inlier_count);
-  // Follows the camera estimator's points (to_follow()) from the previous frame into `frame`
-  // (pyramid `current`), into State::followed; returns how many there are.
-  int follow_points(int current, const ImageView& frame);
+  // Where the camera estimator's points (to_follow()) of the previous frame were found in the
+  // current one (track_part() tracked them), into State::followed; returns how many there are.
+  int follow_points();
   // Keeps the full-size patches around the camera estimator's new points to follow.
   void keep_follow_patches(const ImageView& frame);
 
   MotionOptions options_;
+  PartRunner* runner_ = &one_part();
   State* state_ = nullptr;
   CameraMotionEstimator camera_;
 };

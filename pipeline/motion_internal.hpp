@@ -51,6 +51,20 @@ struct Pyramid {
 
 using Point = std::array<float, 2>;
 
+// Where a point was tracked to (tracking.cpp).
+struct TrackResult {
+  float u = 0, v = 0;
+  bool converged = false;
+};
+
+// One part's scratch for the corners (features.cpp): gradient products of the last three rows,
+// their sums over those rows (kept sliding), the bound of the smaller eigenvalue per column.
+struct CornerScratch {
+  std::array<std::vector<std::int32_t>, 3> gxx, gxy, gyy;
+  std::vector<std::int32_t> column_xx, column_xy, column_yy;
+  std::vector<std::int32_t> eigen_bound;
+};
+
 // splitmix64: small, fast and the same everywhere, so RANSAC repeats bit for bit.
 struct Random {
   std::uint64_t state;
@@ -67,8 +81,10 @@ using Matrix3 = Eigen::Matrix3d;
 
 Matrix3 to_matrix(const Homography& h);
 
-// Builds levels 1 .. levels-1 of `frame`'s pyramid (level 0, full size, is not kept).
-void build_pyramid(const ImageView& frame, int levels, Pyramid& pyramid);
+// Builds levels 1 .. levels-1 of `frame`'s pyramid (level 0, full size, is not kept): the rows
+// [first, end) of level 1 and the rows of the coarser levels made from them only (first and end
+// multiples of 2^(levels - 2), or end the height of level 1).
+void build_pyramid(const ImageView& frame, int levels, Pyramid& pyramid, int first, int end);
 
 // The eight-point normal matrix row of one correspondence: current^T E previous = row . e.
 inline Eigen::Matrix<double, 9, 1> epipolar_row(double x1, double y1, double x2, double y2) {
@@ -109,12 +125,18 @@ struct MotionEstimator::State {
   // Feature detection at the detect level: border kept clear, grid cells of the area within.
   int margin = 0;
   std::vector<int> cell_of_row;
-  std::vector<int> cell_start;  // first column of each grid column, and one past the last
-  std::array<std::vector<std::int32_t>, 3> gxx, gxy, gyy;     // rolling rows of gradient products
-  std::vector<std::int32_t> column_xx, column_xy, column_yy;  // their sums over three rows
-  std::vector<std::int32_t> eigen_bound;  // per column of the row: bound of the smaller eigenvalue
+  std::vector<int> cell_start;      // first column of each grid column, and one past the last
+  std::vector<int> grid_row_start;  // first row of each grid row, and one past the last
+  std::vector<motion_detail::CornerScratch> corner_scratch;  // per part
   std::vector<float> cell_score;
   std::vector<int> cell_u, cell_v;
+  std::vector<std::uint8_t> cell_on_laser;  // the laser filter's verdict on the cell's corner
+
+  // The work split in parts (pipeline/parts.hpp): each part's rows of level 1 (a multiple of
+  // pyramid_alignment), features tracked and grid rows searched.
+  int parts = 1;
+  int pyramid_alignment = 1;
+  std::vector<motion_detail::TrackResult> feature_tracks, follow_tracks;
 
   // RANSAC, per tracked pair: full-size coordinates as double, indices of the converged tracks.
   std::vector<double> px, py, cx, cy;

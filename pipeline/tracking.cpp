@@ -46,11 +46,6 @@ bool sample_patch(const ImageView& image, float x, float y, int n, float* out) {
   return true;
 }
 
-struct TrackResult {
-  float u = 0, v = 0;
-  bool converged = false;
-};
-
 // Pyramidal Lucas-Kanade (translation only) of the point (pu, pv), full-size whole pixels, from
 // the previous frame into the current one, coarse to fine. Below full size both frames are
 // pyramid levels; at full size the previous frame is the (2r+3)^2 patch around the point kept
@@ -147,7 +142,7 @@ TrackResult track_point(const Pyramid& previous, const Pyramid& current,
 
 }  // namespace
 
-MotionEstimate MotionEstimator::estimate_from_previous(int current, const ImageView& frame) {
+MotionEstimate MotionEstimator::estimate_from_previous() {
   State& s = *state_;
   const MotionOptions& o = options_;
   MotionEstimate estimate;
@@ -155,13 +150,11 @@ MotionEstimate MotionEstimator::estimate_from_previous(int current, const ImageV
   estimate.detected = s.feature_count[previous] + s.rejected_count[previous];
   estimate.rejected_on_laser = s.rejected_count[previous];
 
+  // The tracks track_part() found, in the order of the features.
   int n = 0;
   for (int i = 0; i < s.feature_count[previous]; ++i) {
     const Point p = s.features[previous][i];
-    const TrackResult t =
-        track_point(s.pyramids[previous], s.pyramids[current],
-                    s.patches[previous].data() + static_cast<std::ptrdiff_t>(i) * s.patch_bytes,
-                    frame, o, p[0], p[1]);
+    const TrackResult t = s.feature_tracks[static_cast<std::size_t>(i)];
     if (!t.converged) continue;
     FeatureTrack& track = s.tracks[s.track_count++];
     track = FeatureTrack{p[0], p[1], t.u, t.v, false};
@@ -174,7 +167,7 @@ MotionEstimate MotionEstimator::estimate_from_previous(int current, const ImageV
   }
   estimate.tracked = n;
   if (s.has_camera) {
-    const int followed = follow_points(current, frame);
+    const int followed = follow_points();
     estimate.camera = camera_.estimate({s.tracks.data(), static_cast<std::size_t>(s.track_count)},
                                        {s.followed.data(), static_cast<std::size_t>(followed)});
   }
@@ -202,17 +195,37 @@ MotionEstimate MotionEstimator::estimate_from_previous(int current, const ImageV
   return estimate;
 }
 
-int MotionEstimator::follow_points(int current, const ImageView& frame) {
+void MotionEstimator::track_part(int current, const ImageView& frame, int part) {
+  State& s = *state_;
+  const int previous = s.previous;
+  const auto [first, end] = part_range(s.feature_count[previous], part, s.parts);
+  for (int i = first; i < end; ++i) {
+    const Point p = s.features[previous][i];
+    s.feature_tracks[static_cast<std::size_t>(i)] =
+        track_point(s.pyramids[previous], s.pyramids[current],
+                    s.patches[previous].data() + static_cast<std::ptrdiff_t>(i) * s.patch_bytes,
+                    frame, options_, p[0], p[1]);
+  }
+  if (!s.has_camera) return;
+  const auto [first_followed, end_followed] = part_range(s.follow_count, part, s.parts);
+  for (int k = first_followed; k < end_followed; ++k) {
+    if (!s.follow_has_patch[k]) continue;
+    const Point from = s.follow_pixel[k];
+    s.follow_tracks[static_cast<std::size_t>(k)] =
+        track_point(s.pyramids[previous], s.pyramids[current],
+                    s.follow_patches.data() + static_cast<std::ptrdiff_t>(k) * s.patch_bytes, frame,
+                    options_, from[0], from[1]);
+  }
+}
+
+int MotionEstimator::follow_points() {
   State& s = *state_;
   constexpr float kLost = std::numeric_limits<float>::quiet_NaN();
   for (int k = 0; k < s.follow_count; ++k) {
     s.followed[k] = {kLost, kLost};
     if (!s.follow_has_patch[k]) continue;
     const Point from = s.follow_pixel[k];
-    const TrackResult t =
-        track_point(s.pyramids[s.previous], s.pyramids[current],
-                    s.follow_patches.data() + static_cast<std::ptrdiff_t>(k) * s.patch_bytes, frame,
-                    options_, from[0], from[1]);
+    const TrackResult t = s.follow_tracks[static_cast<std::size_t>(k)];
     // The point moves like the whole pixel next to it: the same sub-pixel offset.
     if (t.converged) {
       s.followed[k] = {t.u + (s.follow_from[k][0] - from[0]),

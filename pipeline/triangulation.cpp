@@ -1,5 +1,6 @@
 #include "pipeline/triangulation.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <utility>
@@ -26,7 +27,11 @@ bool Triangulator::point(double u, double v, Eigen::Vector3d& xyz) const {
 }
 
 void Triangulator::fill(Profile& profile) const {
-  for (ProfilePoint& p : profile.mutable_points()) {
+  fill(profile, 0, profile.size());
+}
+
+void Triangulator::fill(Profile& profile, std::size_t first, std::size_t end) const {
+  for (ProfilePoint& p : profile.mutable_points().subspan(first, end - first)) {
     Eigen::Vector3d xyz;
     const auto [x, y] = profile.image_point(p);
     if (p.valid && point(x, y, xyz)) {
@@ -49,17 +54,35 @@ class TriangulatingDetector final : public Detector {
   std::size_t max_points(int width, int height) const override {
     return detector_->max_points(width, height);
   }
-  void reset(int width, int height) override { detector_->reset(width, height); }
+  void reset(int width, int height) override {
+    detector_->reset(width, height);
+    parts_ = std::clamp(runner_->parts(), 1, kMaxParts);
+  }
+  void use_parts(PartRunner& runner) override {
+    runner_ = &runner;
+    detector_->use_parts(runner);
+  }
   void set_region(const DetectionRegion& region) override { detector_->set_region(region); }
   DetectionRegion region() const override { return detector_->region(); }
   void detect(const ImageView& image, const FrameContext& frame, Profile& out) override {
     detector_->detect(image, frame, out);
-    triangulator_.fill(out);
+    // The points in parts (each its own range).
+    auto part = [&](int p) {
+      const auto [first, end] = part_range(static_cast<int>(out.size()), p, parts_);
+      triangulator_.fill(out, static_cast<std::size_t>(first), static_cast<std::size_t>(end));
+    };
+    if (parts_ > 1 && runner_->parts() == parts_) {
+      runner_->run(PartWork(part));
+    } else {
+      triangulator_.fill(out);
+    }
   }
 
  private:
   std::unique_ptr<Detector> detector_;
   Triangulator triangulator_;
+  PartRunner* runner_ = &one_part();
+  int parts_ = 1;
 };
 
 }  // namespace

@@ -23,6 +23,8 @@ class Triangulator {
   // Fills xyz of every valid point of the profile (its points mapped to the frame by its axes);
   // NaN for rejected ones and for misses.
   void fill(Profile& profile) const;
+  // fill() of the points [first, end) only.
+  void fill(Profile& profile, std::size_t first, std::size_t end) const;
 
  private:
   ScannerGeometry geometry_;
