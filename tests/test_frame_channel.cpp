@@ -41,6 +41,28 @@ TEST(FrameChannel, ColourChannels) {
   EXPECT_EQ(convert(bgra, "red - (green + blue) / 2").at<std::uint8_t>(0, 0), 145);
 }
 
+// A laser that saturates the sensor is white at its core (every colour clipped): a weighted
+// difference takes it for the laser where its colour is clipped, as the cameras' conversion does,
+// not for white light.
+TEST(FrameChannel, ClippedLaserColourGives255) {
+  cv::Mat bgr(1, 4, CV_8UC3);
+  bgr.at<cv::Vec3b>(0, 0) = {255, 255, 255};  // the clipped white core
+  bgr.at<cv::Vec3b>(0, 1) = {90, 120, 255};   // red clipped, a fringe
+  bgr.at<cv::Vec3b>(0, 2) = {254, 254, 254};  // bright white light, not clipped
+  bgr.at<cv::Vec3b>(0, 3) = {255, 255, 40};   // blue and green clipped, red not
+  const cv::Mat difference = convert(bgr, "red - (green + blue) / 2");
+  EXPECT_EQ(difference.at<std::uint8_t>(0, 0), 255);
+  EXPECT_EQ(difference.at<std::uint8_t>(0, 1), 255);
+  EXPECT_EQ(difference.at<std::uint8_t>(0, 2), 0);
+  EXPECT_EQ(difference.at<std::uint8_t>(0, 3), 0);
+  cv::Mat deep(1, 2, CV_16UC3);
+  deep.at<cv::Vec3w>(0, 0) = {65535, 65535, 65535};
+  deep.at<cv::Vec3w>(0, 1) = {60000, 60000, 60000};
+  const cv::Mat deep_difference = convert(deep, "red - (green + blue) / 2");
+  EXPECT_EQ(deep_difference.at<std::uint8_t>(0, 0), 255);
+  EXPECT_EQ(deep_difference.at<std::uint8_t>(0, 1), 0);
+}
+
 TEST(FrameChannel, MonoAnd16Bit) {
   const cv::Mat grey(1, 1, CV_8UC1, cv::Scalar(77));
   EXPECT_EQ(convert(grey, "red").at<std::uint8_t>(0, 0), 77);  // mono: as it is

@@ -9,6 +9,8 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "hal/pixel_conversion.hpp"
+
 namespace laserline::tools {
 
 namespace {
@@ -166,17 +168,23 @@ bool to_laser_mono8(const cv::Mat& raw, const hal::LaserChannel& channel, cv::Ma
     }
     return true;
   }
-  cv::Matx<float, 1, 4> weights(static_cast<float>(channel.blue * scale),
-                                static_cast<float>(channel.green * scale),
-                                static_cast<float>(channel.red * scale), 0.0f);
-  cv::Mat mixed;
-  if (channels == 3) {
-    cv::transform(raw, mixed, cv::Matx<float, 1, 3>(weights(0), weights(1), weights(2)));
+  // A weighted sum: through the cameras' own conversion (hal::PixelConverter), so that a pixel
+  // whose positively weighted colour is clipped gives 255 here too. (A saturated laser is white
+  // at its core: red - (green + blue) / 2 would make it a dark gap between two red fringes, and
+  // the line would be found on a fringe, pixels off its centre.)
+  cv::Mat bgr;
+  if (channels == 4) {
+    cv::Mat planes[4];
+    cv::split(raw, planes);
+    cv::merge(planes, 3, bgr);
   } else {
-    cv::transform(raw, mixed, weights);
+    bgr = raw;
   }
-  // transform() saturates to the input depth; a 16-bit result is then scaled already (weights).
-  mixed.convertTo(out, CV_8U);
+  // 16 bit: onto 0..255 first; the top codes become 255, clipped as 8-bit samples are.
+  if (scale != 1.0) bgr.convertTo(bgr, CV_8U, scale);
+  const hal::PixelConverter converter({hal::PixelLayout::kBgr, 8}, bgr.cols, bgr.rows, channel);
+  out.create(bgr.rows, bgr.cols, CV_8UC1);
+  converter.convert(bgr.data, bgr.step, out.data, out.step);
   return true;
 }
 
