@@ -219,7 +219,9 @@ TEST_F(LiveView, EventStreamDeliversStatusProfilesAndFrames) {
     }
     if (e.name == "frame" && !frame_checked) {
       frame_checked = true;
-      EXPECT_NE(e.data.find("\"width\":640,\"height\":480"), std::string::npos) << e.data;
+      EXPECT_NE(e.data.find("\"width\":640,\"height\":480,\"roi_x\":0,\"roi_y\":0,\"downscale\":1"),
+                std::string::npos)
+          << e.data;
       EXPECT_NE(e.data.find("\"profile\":true"), std::string::npos) << "paired: " << e.data;
       EXPECT_EQ(e.data.find("\"points\":[]"), std::string::npos) << e.data;
     }

@@ -141,15 +141,16 @@ def screenshot(page, path):
 
 
 def drag(page, frame_pixels):
-    """Presses the mouse at one frame pixel, moves it in a few steps, releases it at another."""
+    """Presses the mouse at one camera pixel, moves it in a few steps, releases it at another."""
     place = evaluate(page, "JSON.stringify({rect: document.getElementById('frame')"
                            ".getBoundingClientRect(), geometry: document.getElementById('frame')"
                            ".dataset.geometry})")
-    x0, y0, scale = (float(v) for v in place["geometry"].split(","))
+    x0, y0, scale, roi_x, roi_y, k = (float(v) for v in place["geometry"].split(","))
     left, top = place["rect"]["left"], place["rect"]["top"]
 
-    def at(fx, fy):  # the pixel's centre
-        return {"x": left + x0 + (fx + 0.5) * scale, "y": top + y0 + (fy + 0.5) * scale}
+    def at(fx, fy):  # the camera pixel's centre
+        return {"x": left + x0 + (fx + 0.5 - roi_x) / k * scale,
+                "y": top + y0 + (fy + 0.5 - roi_y) / k * scale}
 
     (fx0, fy0, fx1, fy1) = frame_pixels
     page.call("Input.dispatchMouseEvent", type="mousePressed", button="left", clickCount=1,

@@ -142,9 +142,12 @@ function redrawFrame() {
   const scale = Math.min(cw / image.naturalWidth, ch / image.naturalHeight);
   const w = image.naturalWidth * scale, h = image.naturalHeight * scale;
   const x0 = (cw - w) / 2, y0 = (ch - h) / 2;
-  frameGeometry = {x0: x0, y0: y0, scale: scale, width: image.naturalWidth,
-    height: image.naturalHeight};
-  frameCanvas.dataset.geometry = [x0, y0, scale].join(',');
+  // The image may be a part of the camera's frame, downscaled: a camera pixel's edge X lies at
+  // (X - roi_x) / downscale in the image.
+  frameGeometry = {x0: x0, y0: y0, scale: scale, roiX: f.roi_x, roiY: f.roi_y, k: f.downscale,
+    width: f.roi_x + f.downscale * image.naturalWidth,
+    height: f.roi_y + f.downscale * image.naturalHeight};
+  frameCanvas.dataset.geometry = [x0, y0, scale, f.roi_x, f.roi_y, f.downscale].join(',');
   frameContext.fillStyle = '#000';
   frameContext.fillRect(0, 0, cw, ch);
   frameContext.imageSmoothingEnabled = scale < 1;
@@ -160,11 +163,12 @@ function redrawFrame() {
   dots(f.candidates, '#35a7ff');
   dots(f.points, '#ff3b30');
   const outline = (r, colour, dash) => {
+    const s = scale / f.downscale;
     frameContext.strokeStyle = colour;
     frameContext.lineWidth = 1;
     frameContext.setLineDash(dash);
-    frameContext.strokeRect(x0 + r[0] * scale + 0.5, y0 + r[1] * scale + 0.5, r[2] * scale - 1,
-      r[3] * scale - 1);
+    frameContext.strokeRect(x0 + (r[0] - f.roi_x) * s + 0.5, y0 + (r[1] - f.roi_y) * s + 0.5,
+      r[2] * s - 1, r[3] * s - 1);
     frameContext.setLineDash([]);
   };
   if (regionInForce) outline(regionInForce, '#ffcc00', []);
@@ -413,13 +417,14 @@ function sendCommand(name, value) {
 }
 
 // A rectangle dragged on the frame fills in the region's fields (sent with "set"): from the
-// pixel under the pointer where it was pressed to the one where it was released.
+// camera pixel under the pointer where it was pressed to the one where it was released.
 function framePixel(e) {
   const box = frameCanvas.getBoundingClientRect();
   const g = frameGeometry;
-  const clamp = (v, limit) => Math.min(Math.max(Math.floor(v), 0), limit);
-  return [clamp(((e.clientX - box.left) * frameCanvas.width / box.width - g.x0) / g.scale, g.width),
-    clamp(((e.clientY - box.top) * frameCanvas.height / box.height - g.y0) / g.scale, g.height)];
+  const pixel = (canvas, origin, roi, limit) =>
+    Math.min(Math.max(Math.floor(roi + g.k * (canvas - origin) / g.scale), roi), limit);
+  return [pixel((e.clientX - box.left) * frameCanvas.width / box.width, g.x0, g.roiX, g.width),
+    pixel((e.clientY - box.top) * frameCanvas.height / box.height, g.y0, g.roiY, g.height)];
 }
 function enableRegionDragging() {
   frameCanvas.classList.add('controlled');
