@@ -128,20 +128,18 @@ void CommandServer::answer(const Command& given) {
   Command command = given;
   hal::SettingResult& r = command.result;
   // The detector's settings are known here, not on the threads that carried the command out.
+  // Refused, the one in force stays and is answered as such.
   if (command.kind == CommandKind::kThreshold) {
     hal::write_setting_text(r.old_value,
                             threshold_value(config_.detector, detector_options_).c_str());
-    if (r.accepted) {
-      detector_options_ = pending_options_;
-      hal::write_setting_text(r.in_force,
-                              threshold_value(config_.detector, detector_options_).c_str());
-    }
+    if (r.accepted) detector_options_ = pending_options_;
+    hal::write_setting_text(r.in_force,
+                            threshold_value(config_.detector, detector_options_).c_str());
   } else if (command.kind == CommandKind::kRegion) {
     hal::write_setting_text(r.old_value, region_in_force().c_str());
-    if (r.accepted) {
-      detector_options_.roi = command.region;  // as the worker read it back
-      hal::write_setting_text(r.in_force, command.region.text().c_str());
-    }
+    if (r.accepted) detector_options_.roi = command.region;  // as the worker read it back
+    hal::write_setting_text(r.in_force,
+                            r.accepted ? command.region.text().c_str() : region_in_force().c_str());
   } else if (command.kind == CommandKind::kGet && r.accepted) {
     const std::size_t used = std::strlen(r.in_force);
     hal::write_setting_line(std::span<char>(r.in_force).subspan(used), " %s=%s detector.roi=%s",

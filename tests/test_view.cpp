@@ -19,6 +19,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -218,7 +219,9 @@ TEST_F(LiveView, EventStreamDeliversStatusProfilesAndFrames) {
     }
     if (e.name == "frame" && !frame_checked) {
       frame_checked = true;
-      EXPECT_NE(e.data.find("\"width\":640,\"height\":480"), std::string::npos) << e.data;
+      EXPECT_NE(e.data.find("\"width\":640,\"height\":480,\"roi_x\":0,\"roi_y\":0,\"downscale\":1"),
+                std::string::npos)
+          << e.data;
       EXPECT_NE(e.data.find("\"profile\":true"), std::string::npos) << "paired: " << e.data;
       EXPECT_EQ(e.data.find("\"points\":[]"), std::string::npos) << e.data;
     }
@@ -404,10 +407,20 @@ TEST_F(LiveView, ChromiumShowsTheLiveViewWithoutErrors) {
   EXPECT_GT(cv::mean(a(frame))[0], 20.0);
 }
 
+// The text of `key` in the report of step `step` of view_browser.py --control.
+std::string step_value(const std::string& report, int step, const std::string& key) {
+  const std::size_t at = report.find("{\"step\": " + std::to_string(step) + ",");
+  return at == std::string::npos ? "<no step " + std::to_string(step) + ">"
+                                 : json_value(report, key, at);
+}
+
 // Controls only behind --allow-control and its token: the plain view has none; with them, a
-// command without the token is refused by the view; typed into the page in Chromium with the
-// token, the exposure changes in the daemon and the daemon's answer appears on the page.
-TEST_F(LiveView, ControlsChangeTheExposureOnlyWithTheToken) {
+// command without the token, or naming no setting, is refused by the view. In Chromium with the
+// token, each control of the page sends its command and the daemon's answer appears: accepted
+// (the exposure, a region dragged on the frame, the threshold, every value in force) or refused
+// with the daemon's reason (the simulated camera's frame rate and features, a threshold out of
+// range, a region beyond the frame); the profiles that follow lie inside the region.
+TEST_F(LiveView, ControlsSendEachCommandOnlyWithTheToken) {
   httplib::Client plain(kHost, kPort);
   const auto not_allowed = plain.Get("/control");
   ASSERT_TRUE(not_allowed) << logs();
@@ -439,15 +452,48 @@ TEST_F(LiveView, ControlsChangeTheExposureOnlyWithTheToken) {
   EXPECT_EQ(no_token->status, 403);
   EXPECT_EQ(json_value(no_token->body, "reason"),
             "token: not the one laserline-view was started with");
+  for (const char* name : {"exposure", "genicam:", "laser"}) {
+    const auto unknown =
+        client.Post("/command", std::string("name=") + name + "&value=1&token=t0ken",
+                    "application/x-www-form-urlencoded");
+    ASSERT_TRUE(unknown);
+    EXPECT_EQ(unknown->status, 400) << name;
+    EXPECT_EQ(json_value(unknown->body, "reason")
+                  .rfind(std::string("name: '") + name + "' is not a setting the page sends (", 0),
+              0u)
+        << unknown->body;
+  }
 
+  // Around the middle of the frame, where the swept line is.
+  constexpr int kX = 160, kY = 40, kWidth = 320, kHeight = 400;
+  const std::string region = "160,40,320,400";
+  const std::string steps = R"([
+    {"fields": {"exposure": "1700"}, "click": "set-exposure"},
+    {"fields": {"frame-rate": "20"}, "click": "set-frame-rate"},
+    {"fields": {"threshold": "300"}, "click": "set-threshold"},
+    {"fields": {"roi-x": "600", "roi-y": "0", "roi-w": "80", "roi-h": "10"}, "click": "set-roi"},
+    {"drag": [160, 40, 480, 440]},
+    {"click": "set-roi", "settle_s": 1.5, "screenshot": "controls.png"},
+    {"fields": {"feature-prefix": "genicam:", "feature-name": "Gain", "feature-value": "3"},
+     "click": "set-feature"},
+    {"fields": {"threshold": "70", "exposure": ""}, "click": "set-threshold"},
+    {"click": "get-all"}])";
   const std::string out_dir = VIEW_SCREENSHOT_DIR;
   std::filesystem::create_directories(out_dir);
   const auto r = laserline::test_support::run_command(
       std::string("/usr/bin/python3 ") + VIEW_BROWSER_SCRIPT + " http://" + kHost + ":" +
-      std::to_string(kControlPort) + "/ " + out_dir + " 1 --control t0ken 1700");
+      std::to_string(kControlPort) + "/ " + out_dir + " 1 --control t0ken '" + steps + "'");
+  // The frames (and their profiles' points) the view shows with the region in force.
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  const std::vector<Event> events = read_events(1.5);
   // Back as it was for the rest of the suite, and the view stopped.
-  const auto restore = client.Post("/command", "name=exposure_us&value=1000&token=t0ken",
-                                   "application/x-www-form-urlencoded");
+  std::vector<std::string> restored;
+  for (const char* setting : {"name=detector.roi&value=full", "name=exposure_us&value=1000",
+                              "name=detector.maxvalue.threshold&value=60"}) {
+    const auto answer = client.Post("/command", std::string(setting) + "&token=t0ken",
+                                    "application/x-www-form-urlencoded");
+    restored.push_back(answer ? answer->body : "no answer");
+  }
   kill(view, SIGTERM);
   waitpid(view, nullptr, 0);
   ASSERT_EQ(r.exit_code, 0) << r.out;
@@ -458,12 +504,67 @@ TEST_F(LiveView, ControlsChangeTheExposureOnlyWithTheToken) {
   const std::size_t control = r.out.find("\"control\":");
   ASSERT_NE(control, std::string::npos) << r.out;
   EXPECT_EQ(json_value(r.out, "shown", control), "true") << r.out;
-  EXPECT_EQ(json_value(r.out, "acks", control), "1") << r.out;
-  EXPECT_EQ(json_value(r.out, "class", control), "ok") << r.out;
-  EXPECT_EQ(json_value(r.out, "text", control).rfind("exposure_us = 1700 (was ", 0), 0u) << r.out;
-  ASSERT_TRUE(restore);
-  EXPECT_EQ(json_value(restore->body, "value"), "1000") << restore->body;
-  EXPECT_EQ(json_value(restore->body, "old_value"), "1700") << restore->body;
+  struct Expected {
+    int step;
+    const char* css_class;
+    std::string text;  // the start of the answer's text
+  };
+  const Expected expected[] = {
+      {0, "ok", "exposure_us = 1700 (was "},
+      {1, "bad",
+       "refused: frame_rate_hz: the simulated camera's frame rate is its scene's time base, "
+       "fixed at start (camera.frame_rate_hz)"},
+      {2, "bad",
+       "refused: detector.maxvalue.threshold: must be between 1 and 255, got 300 (in force: "
+       "60)"},
+      {3, "bad",
+       "refused: detector.roi: [600, 0, 80, 10] reaches beyond the 640x480 frame (in force: "
+       "0,0,640,480)"},
+      {5, "ok", "detector.roi = " + region + " (was 0,0,640,480)"},
+      {6, "bad",
+       "refused: genicam:Gain: not a setting of the simulated camera (exposure_us, gain_db)"},
+      {7, "ok", "detector.maxvalue.threshold = 70 (was 60)"},
+      {8, "ok", "in force: exposure_us=1700 "},
+  };
+  for (const Expected& e : expected) {
+    EXPECT_EQ(step_value(r.out, e.step, "acks"), std::to_string(e.step < 4 ? e.step + 1 : e.step))
+        << "step " << e.step << ": " << r.out;
+    EXPECT_EQ(step_value(r.out, e.step, "class"), e.css_class) << "step " << e.step;
+    EXPECT_EQ(step_value(r.out, e.step, "text").substr(0, e.text.size()), e.text)
+        << "step " << e.step;
+  }
+  // The drag filled the region's fields; "get" filled every field with the values in force.
+  EXPECT_EQ(step_value(r.out, 4, "region"), region) << r.out;
+  EXPECT_NE(
+      step_value(r.out, 8, "text").find(" detector.maxvalue.threshold=70 detector.roi=" + region),
+      std::string::npos)
+      << r.out;
+  EXPECT_EQ(step_value(r.out, 8, "exposure"), "1700") << r.out;
+
+  int frames = 0, points = 0;
+  for (const auto& e : events) {
+    if (e.name != "frame" || e.data.find("\"profile\":true") == std::string::npos) continue;
+    ++frames;
+    const std::size_t list = e.data.find("\"points\":[");
+    ASSERT_NE(list, std::string::npos) << e.data;
+    std::istringstream in(e.data.substr(list + 10, e.data.find(']', list) - list - 10));
+    double u = 0, v = 0;
+    char comma = 0;
+    while (in >> u) {
+      in >> comma >> v;
+      in >> comma;
+      ++points;
+      const long row = std::lround(v);
+      EXPECT_TRUE(u >= kX && u < kX + kWidth && row >= kY && row < kY + kHeight)
+          << "point " << u << ", " << v << " outside " << region << ": " << e.data.substr(0, 200);
+    }
+  }
+  std::printf("with the region in force: %d frames, %d points\n", frames, points);
+  EXPECT_GE(frames, 3 / kSlowdown) << logs();
+  EXPECT_GT(points, frames * kWidth / 2) << "the line within the region";
+  EXPECT_EQ(json_value(restored[0], "value"), "0,0,640,480") << restored[0];
+  EXPECT_EQ(json_value(restored[1], "value"), "1000") << restored[1];
+  EXPECT_EQ(json_value(restored[2], "value"), "60") << restored[2];
 }
 
 }  // namespace

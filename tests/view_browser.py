@@ -5,11 +5,15 @@ messages and exceptions at warning level or worse (the browser's own log too: bl
 failed requests), the page's state (body data attributes, the frame canvas's place), the load
 time, and two screenshots some seconds apart (PNG files in OUT_DIR).
 
-With --control TOKEN EXPOSURE_US (laserline-view --allow-control): types the token and the
-exposure into the page's controls, presses "set", waits for the daemon's answer to appear and
-reports it ("control": its text and class) with a screenshot of the page then (controls.png).
+With --control TOKEN STEPS (laserline-view --allow-control): types the token into the page's
+controls, then for each step of STEPS (a JSON list) in turn: types "fields" ({element id: text}),
+drags the mouse over the frame from one frame pixel's centre to another's ("drag": [x0, y0, x1,
+y1]), presses "click" (a button's id) and waits for the daemon's answer to appear, waits
+"settle_s" and takes a screenshot when the step names one ("screenshot": file name). Reports
+each step ("control": "steps": the answer's text and class, the exposure's and the region's
+fields after it).
 
-usage: view_browser.py URL OUT_DIR [SECONDS_BETWEEN_SCREENSHOTS] [--control TOKEN EXPOSURE_US]
+usage: view_browser.py URL OUT_DIR [SECONDS_BETWEEN_SCREENSHOTS] [--control TOKEN STEPS]
 """
 import base64
 import json
@@ -126,12 +130,82 @@ def problems(events):
     return found
 
 
+def evaluate(page, expression):
+    return json.loads(page.call("Runtime.evaluate", expression=expression)["result"]["value"])
+
+
+def screenshot(page, path):
+    data = page.call("Page.captureScreenshot", format="png")["data"]
+    with open(path, "wb") as f:
+        f.write(base64.b64decode(data))
+
+
+def drag(page, frame_pixels):
+    """Presses the mouse at one camera pixel, moves it in a few steps, releases it at another."""
+    place = evaluate(page, "JSON.stringify({rect: document.getElementById('frame')"
+                           ".getBoundingClientRect(), geometry: document.getElementById('frame')"
+                           ".dataset.geometry})")
+    x0, y0, scale, roi_x, roi_y, k = (float(v) for v in place["geometry"].split(","))
+    left, top = place["rect"]["left"], place["rect"]["top"]
+
+    def at(fx, fy):  # the camera pixel's centre
+        return {"x": left + x0 + (fx + 0.5 - roi_x) / k * scale,
+                "y": top + y0 + (fy + 0.5 - roi_y) / k * scale}
+
+    (fx0, fy0, fx1, fy1) = frame_pixels
+    page.call("Input.dispatchMouseEvent", type="mousePressed", button="left", clickCount=1,
+              **at(fx0, fy0))
+    for i in range(1, 5):
+        page.call("Input.dispatchMouseEvent", type="mouseMoved", button="left",
+                  **at(fx0 + (fx1 - fx0) * i / 4, fy0 + (fy1 - fy0) * i / 4))
+    page.call("Input.dispatchMouseEvent", type="mouseReleased", button="left", clickCount=1,
+              **at(fx1, fy1))
+
+
+def run_controls(page, out_dir, token, steps):
+    page.call("Runtime.evaluate",
+              expression=f"document.getElementById('token').value = {json.dumps(token)};")
+    ack_js = "JSON.stringify({acks: document.body.dataset.acks, " \
+             "shown: !document.getElementById('controls').hidden, " \
+             "text: document.getElementById('ack').textContent, " \
+             "class: document.getElementById('ack').className, " \
+             "exposure: document.getElementById('exposure').value, " \
+             "region: ['roi-x', 'roi-y', 'roi-w', 'roi-h'].map(" \
+             "(id) => document.getElementById(id).value).join(',')})"
+    results = []
+    for number, step in enumerate(steps):
+        before = evaluate(page, ack_js)
+        for element, text in step.get("fields", {}).items():
+            page.call("Runtime.evaluate", expression=(
+                f"document.getElementById({json.dumps(element)}).value = {json.dumps(text)};"))
+        if "drag" in step:
+            drag(page, step["drag"])
+        answer = evaluate(page, ack_js)
+        if "click" in step:
+            page.call("Runtime.evaluate", expression=(
+                f"document.getElementById({json.dumps(step['click'])}).click();"))
+            deadline = time.monotonic() + 10
+            while time.monotonic() < deadline:
+                page.wait(0.05)
+                answer = evaluate(page, ack_js)
+                if answer.get("acks") != before.get("acks"):
+                    break
+        if step.get("settle_s"):
+            page.wait(step["settle_s"])
+        answer = {"step": number, **answer}
+        if "screenshot" in step:
+            answer["screenshot"] = os.path.join(out_dir, step["screenshot"])
+            screenshot(page, answer["screenshot"])
+        results.append(answer)
+    return {"shown": results[-1]["shown"] if results else False, "steps": results}
+
+
 def main():
     args = sys.argv[1:]
     control = None
     if "--control" in args:
         at = args.index("--control")
-        control = args[at + 1:at + 3]
+        control = args[at + 1:at + 3]  # the token, the steps
         del args[at:at + 3]
     url, out_dir = args[0], args[1]
     between_s = float(args[2]) if len(args) > 2 else 3.0
@@ -191,30 +265,7 @@ def main():
         second = json.loads(page.call("Runtime.evaluate", expression=state_js)["result"]["value"])
         report = {"load_s": load_s, "first": first, "second": second, "screenshots": shots}
         if control is not None:
-            token, exposure = control
-            page.call("Runtime.evaluate", expression=(
-                f"document.getElementById('token').value = {json.dumps(token)};"
-                f"document.getElementById('exposure').value = {json.dumps(exposure)};"
-                "document.getElementById('set-exposure').click();"))
-            ack_js = "JSON.stringify({acks: document.body.dataset.acks, " \
-                     "shown: !document.getElementById('controls').hidden, " \
-                     "text: document.getElementById('ack').textContent, " \
-                     "class: document.getElementById('ack').className})"
-            answer = {}
-            deadline = time.monotonic() + 10
-            while time.monotonic() < deadline:
-                page.wait(0.2)
-                answer = json.loads(
-                    page.call("Runtime.evaluate", expression=ack_js)["result"]["value"])
-                if answer.get("acks") not in (None, "0"):
-                    break
-            page.wait(1.5)  # a frame or two taken at the new exposure
-            data = page.call("Page.captureScreenshot", format="png")["data"]
-            path = os.path.join(out_dir, "controls.png")
-            with open(path, "wb") as f:
-                f.write(base64.b64decode(data))
-            answer["screenshot"] = path
-            report["control"] = answer
+            report["control"] = run_controls(page, out_dir, control[0], json.loads(control[1]))
         report["problems"] = problems(page.events)
         print(json.dumps(report))
         return 0

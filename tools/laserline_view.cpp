@@ -52,8 +52,9 @@ constexpr const char* kUsage =
     "  --history S         seconds of points in the 3-D view (default 5)\n"
     "  --frame-rate HZ     raw frames sent to each browser at most this often (default 5)\n"
     "  --profile-rate HZ   profiles sent to each browser at most this often (default 10)\n"
-    "  --allow-control     controls on the page: exposure, gain, the laser's mode; each use\n"
-    "                      needs the --token typed into the page (the laser is a Class 3B hazard)\n"
+    "  --allow-control     controls on the page: exposure, gain, frame rate, the laser's mode,\n"
+    "                      the detector's threshold and region, camera features by name; each\n"
+    "                      use needs the --token typed into the page (the laser: Class 3B)\n"
     "  --token TEXT        that token, also sent with each command: the daemon's\n"
     "                      lcm.command_token when it has one\n"
     "  --command-channel C the daemon's lcm.command_channel (default LASERLINE_COMMAND; answers\n"
@@ -284,6 +285,10 @@ int run_view(int argc, char** argv) {
       }
       if (name.empty() || name.size() > 255 || req.get_param_value("value").size() > 255) {
         reply(400, false, name, "", "", "name: 1 to 255 characters, value: at most 255");
+        return;
+      }
+      if (const std::string problem = laserline::view::relay_problem(name); !problem.empty()) {
+        reply(400, false, name, "", "", problem);
         return;
       }
       const auto ack = relay.send(name, req.get_param_value("value"), kCommandTimeout);

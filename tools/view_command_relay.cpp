@@ -6,6 +6,38 @@
 
 namespace laserline::view {
 
+namespace {
+
+constexpr const char* kSettings[] = {"exposure_us",
+                                     "gain_db",
+                                     "frame_rate_hz",
+                                     "laser.mode",
+                                     "detector.maxvalue.threshold",
+                                     "detector.frontend.snr_threshold_db",
+                                     "detector.roi",
+                                     "get"};
+// A camera's own settings by name: GenICam features (aravis), V4L2 controls (v4l2).
+constexpr const char* kCameraPrefixes[] = {"genicam:", "v4l2:"};
+
+}  // namespace
+
+std::string relay_problem(const std::string& name) {
+  for (const char* setting : kSettings) {
+    if (name == setting) return "";
+  }
+  for (const std::string prefix : kCameraPrefixes) {
+    if (name.size() > prefix.size() && name.compare(0, prefix.size(), prefix) == 0) return "";
+  }
+  std::string printable = name;
+  for (char& c : printable) {
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = '?';
+  }
+  return "name: '" + printable +
+         "' is not a setting the page sends (exposure_us, gain_db, frame_rate_hz, laser.mode, "
+         "detector.maxvalue.threshold, detector.frontend.snr_threshold_db, detector.roi, "
+         "genicam:<Feature>, v4l2:<control>, get)";
+}
+
 std::optional<laserline::command_ack_t> CommandRelay::send(const std::string& name,
                                                            const std::string& value,
                                                            std::chrono::milliseconds timeout) {

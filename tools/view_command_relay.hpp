@@ -14,6 +14,10 @@
 
 namespace laserline::view {
 
+// Whether `name` is one of the settings the page sends (laserlined's, see laserline-ctl --help):
+// the view relays nothing else. Empty when it is, else the one line why not.
+std::string relay_problem(const std::string& name);
+
 // Sends the page's commands to the daemon and waits for their answers. Thread context: send()
 // from the HTTP threads, on_ack() from the LCM thread.
 class CommandRelay {

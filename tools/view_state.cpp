@@ -210,6 +210,9 @@ std::string LiveState::frame_json(const laserline::image_t& image) const {
       .boolean("laser_on", image.laser_on)
       .integer("width", image.width)
       .integer("height", image.height)
+      .integer("roi_x", image.roi_x)  // where the image lies in the camera's frame
+      .integer("roi_y", image.roi_y)
+      .integer("downscale", image.downscale > 1 ? image.downscale : 1)
       .boolean("profile", match != nullptr)
       .raw("points", numbers(points, 1))
       .raw("candidates", numbers(candidates, 1));

@@ -44,6 +44,7 @@ let lastStatusAt = 0;
 function showStatus(s) {
   lastStatusAt = performance.now();
   document.body.dataset.statuses = String(Number(document.body.dataset.statuses) + 1);
+  controlsKnowStatus(s);
   const cameraClass = s.camera_state === 'streaming' ? 'ok' : 'bad';
   const dropped = s.frames_dropped + s.profiles_dropped + s.images_dropped;
   setRows($('status'), [
@@ -118,11 +119,35 @@ function loadFrame() {
   image.src = 'frame.jpg?sequence=' + f.sequence;
 }
 
+// The region in force and one being dragged (frame pixels x, y, width, height), outlined on
+// the frame; where the frame lies on the canvas.
+let regionInForce = null;
+let dragged = null;
+let frameGeometry = null;
+let lastFrame = null;
+
 function drawFrame(image, f) {
+  lastFrame = {image: image, f: f};
+  redrawFrame();
+  document.body.dataset.frames = String(Number(document.body.dataset.frames) + 1);
+  $('frame-info').textContent = 'frame ' + f.sequence + ', ' + f.width + '×' + f.height +
+    ', laser ' + (f.laser_on ? 'on' : 'off') + ', ' +
+    (f.profile ? (f.points.length / 2) + ' points' : 'its profile not received');
+}
+
+function redrawFrame() {
+  if (!lastFrame) return;
+  const {image, f} = lastFrame;
   const cw = frameCanvas.width, ch = frameCanvas.height;
   const scale = Math.min(cw / image.naturalWidth, ch / image.naturalHeight);
   const w = image.naturalWidth * scale, h = image.naturalHeight * scale;
   const x0 = (cw - w) / 2, y0 = (ch - h) / 2;
+  // The image may be a part of the camera's frame, downscaled: a camera pixel's edge X lies at
+  // (X - roi_x) / downscale in the image.
+  frameGeometry = {x0: x0, y0: y0, scale: scale, roiX: f.roi_x, roiY: f.roi_y, k: f.downscale,
+    width: f.roi_x + f.downscale * image.naturalWidth,
+    height: f.roi_y + f.downscale * image.naturalHeight};
+  frameCanvas.dataset.geometry = [x0, y0, scale, f.roi_x, f.roi_y, f.downscale].join(',');
   frameContext.fillStyle = '#000';
   frameContext.fillRect(0, 0, cw, ch);
   frameContext.imageSmoothingEnabled = scale < 1;
@@ -137,10 +162,17 @@ function drawFrame(image, f) {
   };
   dots(f.candidates, '#35a7ff');
   dots(f.points, '#ff3b30');
-  document.body.dataset.frames = String(Number(document.body.dataset.frames) + 1);
-  $('frame-info').textContent = 'frame ' + f.sequence + ', ' + f.width + '×' + f.height +
-    ', laser ' + (f.laser_on ? 'on' : 'off') + ', ' +
-    (f.profile ? (f.points.length / 2) + ' points' : 'its profile not received');
+  const outline = (r, colour, dash) => {
+    const s = scale / f.downscale;
+    frameContext.strokeStyle = colour;
+    frameContext.lineWidth = 1;
+    frameContext.setLineDash(dash);
+    frameContext.strokeRect(x0 + (r[0] - f.roi_x) * s + 0.5, y0 + (r[1] - f.roi_y) * s + 0.5,
+      r[2] * s - 1, r[3] * s - 1);
+    frameContext.setLineDash([]);
+  };
+  if (regionInForce) outline(regionInForce, '#ffcc00', []);
+  if (dragged) outline(dragged, '#ffffff', [4, 3]);
 }
 
 // --- profile plot ---------------------------------------------------------------------------
@@ -321,6 +353,46 @@ listen();
 $('source').textContent = location.host;
 
 // --- controls: shown when laserline-view runs with --allow-control ---------------------------
+// The detector's threshold is named by the detector (status.detector).
+let detectorName = null;
+let prefixChosen = false;
+function controlsKnowStatus(s) {
+  detectorName = s.detector;
+  $('threshold-label').textContent = s.detector === 'maxvalue' ? 'threshold (grey level)'
+                                                               : 'threshold (SNR dB)';
+  if (!prefixChosen) {
+    prefixChosen = true;
+    $('feature-prefix').value = s.camera_backend === 'v4l2' ? 'v4l2:' : 'genicam:';
+  }
+}
+function thresholdName() {
+  return detectorName === 'maxvalue' ? 'detector.maxvalue.threshold'
+                                     : 'detector.frontend.snr_threshold_db';
+}
+
+// "x,y,width,height" into the region's fields and the outline on the frame.
+function showRegion(text) {
+  const parts = text.split(',').map(Number);
+  if (parts.length !== 4 || parts.some((n) => !Number.isInteger(n))) return;
+  ['roi-x', 'roi-y', 'roi-w', 'roi-h'].forEach((id, i) => { $(id).value = String(parts[i]); });
+  regionInForce = parts;
+  redrawFrame();
+}
+
+// The answer of "get": "name=value" for each setting in force, into the fields.
+function showValuesInForce(text) {
+  const fields = {exposure_us: 'exposure', gain_db: 'gain', frame_rate_hz: 'frame-rate',
+    'laser.mode': 'laser-mode'};
+  fields[thresholdName()] = 'threshold';
+  for (const pair of text.split(' ')) {
+    const at = pair.indexOf('=');
+    if (at < 0) continue;
+    const name = pair.slice(0, at), value = pair.slice(at + 1);
+    if (name === 'detector.roi') showRegion(value);
+    else if (fields[name]) $(fields[name]).value = value;
+  }
+}
+
 function sendCommand(name, value) {
   const ack = $('ack');
   ack.textContent = name + ' ' + value + ' …';
@@ -329,21 +401,75 @@ function sendCommand(name, value) {
   fetch('command', {method: 'POST', body: body})
     .then((response) => response.json())
     .then((a) => {
-      ack.textContent = a.accepted ? a.name + ' = ' + a.value + ' (was ' + a.old_value + ')'
-                                   : 'refused: ' + a.reason;
+      if (!a.accepted) {
+        ack.textContent = 'refused: ' + a.reason + (a.value ? ' (in force: ' + a.value + ')' : '');
+      } else if (a.name === 'get') {
+        ack.textContent = 'in force: ' + a.value;
+        showValuesInForce(a.value);
+      } else {
+        ack.textContent = a.name + ' = ' + a.value + ' (was ' + a.old_value + ')';
+        if (a.name === 'detector.roi') showRegion(a.value);
+      }
       ack.className = a.accepted ? 'ok' : 'bad';
       document.body.dataset.acks = String(Number(document.body.dataset.acks) + 1);
     })
     .catch((error) => noteError('command: ' + error));
 }
+
+// A rectangle dragged on the frame fills in the region's fields (sent with "set"): from the
+// camera pixel under the pointer where it was pressed to the one where it was released.
+function framePixel(e) {
+  const box = frameCanvas.getBoundingClientRect();
+  const g = frameGeometry;
+  const pixel = (canvas, origin, roi, limit) =>
+    Math.min(Math.max(Math.floor(roi + g.k * (canvas - origin) / g.scale), roi), limit);
+  return [pixel((e.clientX - box.left) * frameCanvas.width / box.width, g.x0, g.roiX, g.width),
+    pixel((e.clientY - box.top) * frameCanvas.height / box.height, g.y0, g.roiY, g.height)];
+}
+function enableRegionDragging() {
+  frameCanvas.classList.add('controlled');
+  let from = null;
+  frameCanvas.addEventListener('mousedown', (e) => {
+    if (!frameGeometry) return;
+    from = framePixel(e);
+    e.preventDefault();
+  });
+  frameCanvas.addEventListener('mousemove', (e) => {
+    if (!from) return;
+    const to = framePixel(e);
+    dragged = [Math.min(from[0], to[0]), Math.min(from[1], to[1]), Math.abs(to[0] - from[0]),
+      Math.abs(to[1] - from[1])];
+    redrawFrame();
+  });
+  window.addEventListener('mouseup', () => {
+    if (!from) return;
+    from = null;
+    if (dragged && dragged[2] >= 1 && dragged[3] >= 1) {
+      ['roi-x', 'roi-y', 'roi-w', 'roi-h'].forEach((id, i) => { $(id).value = String(dragged[i]); });
+    }
+    dragged = null;
+    redrawFrame();
+  });
+}
+
 fetch('control')
   .then((response) => response.json())
   .then((control) => {
     if (!control.allowed) return;
     $('controls').hidden = false;
-    $('set-exposure').addEventListener('click', () => sendCommand('exposure_us', $('exposure').value));
-    $('set-gain').addEventListener('click', () => sendCommand('gain_db', $('gain').value));
-    $('set-laser').addEventListener('click', () => sendCommand('laser.mode', $('laser-mode').value));
+    const on = (id, send) => $(id).addEventListener('click', send);
+    on('set-exposure', () => sendCommand('exposure_us', $('exposure').value));
+    on('set-gain', () => sendCommand('gain_db', $('gain').value));
+    on('set-frame-rate', () => sendCommand('frame_rate_hz', $('frame-rate').value));
+    on('set-laser', () => sendCommand('laser.mode', $('laser-mode').value));
+    on('set-threshold', () => sendCommand(thresholdName(), $('threshold').value));
+    on('set-roi', () => sendCommand('detector.roi',
+      ['roi-x', 'roi-y', 'roi-w', 'roi-h'].map((id) => $(id).value.trim()).join(',')));
+    on('full-roi', () => sendCommand('detector.roi', 'full'));
+    on('set-feature', () => sendCommand($('feature-prefix').value + $('feature-name').value.trim(),
+      $('feature-value').value));
+    on('get-all', () => sendCommand('get', ''));
+    enableRegionDragging();
   })
   .catch((error) => noteError('control: ' + error));
 
