@@ -668,5 +668,7 @@ int main(int argc, char** argv) {
   fuse_remove_signal_handlers(fuse_get_session(fs));
   fuse_unmount(fs);
   fuse_destroy(fs);
+  fuse_opt_free_args(&args);
+  if (g_device.control_log != nullptr) std::fclose(g_device.control_log);
   return result == 0 ? 0 : 1;
 }
