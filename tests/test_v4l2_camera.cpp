@@ -4,8 +4,11 @@
 // pixel is compared with the per-pixel reference conversion of it, pixel_reference.hpp), the
 // timestamps, every pixel format with a laser channel, clear errors, and reconnection when the
 // device goes away and comes back.
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <linux/videodev2.h>
 #include <signal.h>
+#include <sys/ioctl.h>
 #include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -472,6 +475,56 @@ TEST(V4l2, SixtyFourBitControlsAndTheDriversRefusals) {
   EXPECT_EQ(camera.check_setting(setting("v4l2:integer_64_bits", "1e16")),
             "v4l2:integer_64_bits: must be a whole number (the control's value, a menu's index; "
             "at most 2^53 in size), got '1e16'");
+}
+
+// The stand-in answers an extended-control request as the kernel's control framework does, for a
+// client that calls ioctl() itself: S_EXT_CTRLS checks every control before changing any
+// (error_idx = count when it refuses), TRY names the control it refuses, integers are clamped
+// to their range and the values in force are written back into the caller's array.
+TEST(V4l2, StandInAnswersExtendedControlsAsTheKernel) {
+  StandIn device("GREY", 160, 120, 50);
+  if (const std::string problem = device.wait_ready(); !problem.empty()) GTEST_SKIP() << problem;
+  const int fd = open(device.device().c_str(), O_RDWR);
+  ASSERT_GE(fd, 0);
+  v4l2_ext_control controls[2] = {};
+  v4l2_ext_controls request{};
+  request.which = V4L2_CTRL_WHICH_CUR_VAL;
+  request.count = 2;
+  request.controls = controls;
+  auto run = [&](unsigned long cmd, std::uint32_t first, std::int32_t first_value,
+                 std::uint32_t second, std::int32_t second_value) {
+    controls[0] = {};
+    controls[0].id = first;
+    controls[0].value = first_value;
+    controls[1] = {};
+    controls[1].id = second;
+    controls[1].value = second_value;
+    request.error_idx = 99;
+    return ioctl(fd, cmd, &request) == 0 ? 0 : errno;
+  };
+  constexpr std::uint32_t kUnknown = V4L2_CID_USER_BASE + 0x999;
+  EXPECT_EQ(run(VIDIOC_S_EXT_CTRLS, V4L2_CID_GAIN, 60, kUnknown, 1), EINVAL);
+  EXPECT_EQ(request.error_idx, 2u) << "refused before any control was changed";
+  EXPECT_EQ(run(VIDIOC_TRY_EXT_CTRLS, V4L2_CID_GAIN, 60, kUnknown, 1), EINVAL);
+  EXPECT_EQ(request.error_idx, 1u) << "TRY names the control it refuses";
+  EXPECT_EQ(run(VIDIOC_G_EXT_CTRLS, V4L2_CID_GAIN, 0, V4L2_CID_EXPOSURE_ABSOLUTE, 0), 0);
+  EXPECT_EQ(controls[0].value, 32) << "the gain was not changed by the refused request";
+  EXPECT_EQ(controls[1].value, 100);
+
+  EXPECT_EQ(run(VIDIOC_S_EXT_CTRLS, V4L2_CID_GAIN, 400, V4L2_CID_EXPOSURE_ABSOLUTE, 20), 0);
+  EXPECT_EQ(controls[0].value, 255) << "clamped to the range, written back";
+  EXPECT_EQ(controls[1].value, 20);
+  EXPECT_EQ(run(VIDIOC_G_EXT_CTRLS, V4L2_CID_GAIN, 0, V4L2_CID_EXPOSURE_ABSOLUTE, 0), 0);
+  EXPECT_EQ(controls[0].value, 255);
+  EXPECT_EQ(controls[1].value, 20);
+
+  // A control class for `which`: every control must be of that class.
+  request.which = V4L2_CTRL_CLASS_USER;
+  EXPECT_EQ(run(VIDIOC_TRY_EXT_CTRLS, V4L2_CID_GAIN, 1, V4L2_CID_EXPOSURE_ABSOLUTE, 1), EINVAL);
+  EXPECT_EQ(request.error_idx, 1u);
+  EXPECT_EQ(run(VIDIOC_S_EXT_CTRLS, V4L2_CID_GAIN, 1, V4L2_CID_EXPOSURE_ABSOLUTE, 1), EINVAL);
+  EXPECT_EQ(request.error_idx, 2u);
+  close(fd);
 }
 
 // A driver without the extended-control ioctls (ENOTTY, as before the control framework): its
