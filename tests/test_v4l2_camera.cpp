@@ -477,6 +477,21 @@ TEST(V4l2, SixtyFourBitControlsAndTheDriversRefusals) {
             "at most 2^53 in size), got '1e16'");
 }
 
+// A value the driver took but could not write to the sensor (EIO, error_idx naming the control)
+// is told apart from a request refused before any change.
+TEST(V4l2, AFailedWriteIsToldApartFromARefusal) {
+  StandIn device("GREY", 160, 120, 50, {"--control-writes", "fail"});
+  if (const std::string problem = device.wait_ready(); !problem.empty()) GTEST_SKIP() << problem;
+  V4l2Camera camera(options(device.device(), "GREY", 160, 120));
+  std::string error;
+  ASSERT_TRUE(camera.open(&error)) << error;
+  laserline::hal::SettingResult gain = apply(camera, setting("v4l2:gain", "40"));
+  EXPECT_FALSE(gain.accepted);
+  EXPECT_STREQ(gain.reason,
+               "v4l2:gain: the driver failed while setting it (VIDIOC_S_EXT_CTRLS: Input/output "
+               "error)");
+}
+
 // The stand-in answers an extended-control request as the kernel's control framework does, for a
 // client that calls ioctl() itself: S_EXT_CTRLS checks every control before changing any
 // (error_idx = count when it refuses), TRY names the control it refuses, integers are clamped

@@ -23,7 +23,8 @@
 //
 //   v4l2_fuse_device MOUNTPOINT [--format NAME] [--width W] [--height H] [--fps F]
 //                    [--padding BYTES] [--yuv 601-limited|709-full]
-//                    [--controls extended|legacy] [--control-log FILE]
+//                    [--controls extended|legacy] [--control-writes work|fail]
+//                    [--control-log FILE]
 //
 // NAME: GREY, Y16, YUYV, RGB24, BGR24, or a Bayer mosaic SRGGB8, SGRBG8, SGBRG8, SBGGR8 (also 12
 // and 16 bit: SRGGB12, SRGGB16, ...), as the V4L2_PIX_FMT_ macros. --padding: bytes after each
@@ -31,7 +32,9 @@
 // stated in: 601-limited (the default: colorspace SMPTE170M, encoding and quantization left at
 // their defaults, as most webcams) or 709-full (stated explicitly). --controls legacy: a driver
 // older than the control framework, whose extended ioctls (and QUERY_EXT_CTRL) answer ENOTTY.
-// --control-log: each control written is appended as "IOCTL ID VALUE" (S_CTRL or S_EXT_CTRLS),
+// --control-writes fail: a control's value passes validation but writing it to the sensor fails
+// (EIO, as when a sensor stops answering on its I2C bus), error_idx naming it. --control-log: each
+// control written is appended as "IOCTL ID VALUE" (S_CTRL or S_EXT_CTRLS),
 // so that a test sees which ioctl a client set it with.
 //
 // MOUNTPOINT/video0 is the device until SIGTERM/SIGINT (then it disappears, as when a USB
@@ -115,6 +118,7 @@ struct Device {
   fuse* fs = nullptr;
   std::atomic<bool> running{true};
   bool extended_controls = true;
+  bool control_writes_fail = false;
   FILE* control_log = nullptr;
   Control controls[5] = {
       {V4L2_CID_EXPOSURE_ABSOLUTE, "Exposure Time, Absolute", V4L2_CTRL_TYPE_INTEGER, 0, 1, 10000,
@@ -270,7 +274,9 @@ int ext_controls_in_place(unsigned int cmd, v4l2_ext_controls* cs) {
         controls[i].value = static_cast<std::int32_t>(v);
       }
       cs->error_idx = i;
-      if (set) {
+      if (set && g_device.control_writes_fail) {
+        result = -EIO;
+      } else if (set) {
         c.value = v;
         log_control("S_EXT_CTRLS", c);
       }
@@ -448,6 +454,7 @@ int do_ioctl(const char* path, unsigned int cmd, void* arg, fuse_file_info* fi,
       if (cmd == VIDIOC_S_CTRL) {
         if ((c->flags & V4L2_CTRL_FLAG_READ_ONLY) != 0) return -EACCES;
         if (grabbed(*c)) return -EBUSY;
+        if (d.control_writes_fail) return -EIO;
         c->value = clamped(*c, v->value);
         log_control("S_CTRL", *c);
       }
@@ -601,7 +608,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr,
                  "usage: v4l2_fuse_device MOUNTPOINT [--format NAME] [--width W] [--height H] "
                  "[--fps F] [--padding BYTES] [--yuv 601-limited|709-full] "
-                 "[--controls extended|legacy] [--control-log FILE]\n");
+                 "[--controls extended|legacy] [--control-writes work|fail] "
+                 "[--control-log FILE]\n");
     return 2;
   }
   const std::string mountpoint = argv[1];
@@ -626,6 +634,8 @@ int main(int argc, char** argv) {
       g_device.yuv_709_full = value == "709-full";
     } else if (key == "--controls" && (value == "extended" || value == "legacy")) {
       g_device.extended_controls = value == "extended";
+    } else if (key == "--control-writes" && (value == "work" || value == "fail")) {
+      g_device.control_writes_fail = value == "fail";
     } else if (key == "--control-log") {
       g_device.control_log = std::fopen(value.c_str(), "a");
       if (g_device.control_log == nullptr) {
