@@ -392,6 +392,7 @@ namespace {
 constexpr const char* kControlPrefix = "v4l2:";
 constexpr std::size_t kControlPrefixBytes = 5;
 constexpr double kExposureUnitUs = 100;  // V4L2_CID_EXPOSURE_ABSOLUTE counts 100 us
+constexpr double kExactWholeNumbers = 9007199254740992.0;  // 2^53: a setting's number is a double
 
 // A control's name as v4l2-ctl writes it: lower case, every run of other characters one '_',
 // none at the end ("Exposure Time, Absolute" -> "exposure_time_absolute").
@@ -411,17 +412,37 @@ void control_key(const char* name, std::span<char> out) {
   out[n] = '\0';
 }
 
+// A control as VIDIOC_QUERY_EXT_CTRL describes it (64-bit range); for a driver without that ioctl
+// (ENOTTY: older than Linux 3.17 or the control framework) VIDIOC_QUERYCTRL's answer, widened.
+bool query_control(int fd, v4l2_query_ext_ctrl* q) {
+  if (xioctl(fd, VIDIOC_QUERY_EXT_CTRL, q) == 0) return true;
+  if (errno != ENOTTY) return false;
+  v4l2_queryctrl old{};
+  old.id = q->id;
+  if (xioctl(fd, VIDIOC_QUERYCTRL, &old) != 0) return false;
+  *q = v4l2_query_ext_ctrl{};
+  q->id = old.id;
+  q->type = old.type;
+  std::memcpy(q->name, old.name, sizeof old.name);
+  q->minimum = old.minimum;
+  q->maximum = old.maximum;
+  q->step = static_cast<std::uint32_t>(old.step);
+  q->default_value = old.default_value;
+  q->flags = old.flags;
+  return true;
+}
+
 // The control `name` names (as v4l2-ctl writes it or as the driver reports it), found by walking
 // the driver's controls; false when there is none.
-bool find_control(int fd, const char* name, v4l2_queryctrl* found) {
+bool find_control(int fd, const char* name, v4l2_query_ext_ctrl* found) {
   char wanted[64];
   char key[64];
   control_key(name, wanted);
-  v4l2_queryctrl q{};
+  v4l2_query_ext_ctrl q{};
   q.id = V4L2_CTRL_FLAG_NEXT_CTRL;
-  while (xioctl(fd, VIDIOC_QUERYCTRL, &q) == 0) {
+  while (query_control(fd, &q)) {
     if ((q.flags & V4L2_CTRL_FLAG_DISABLED) == 0) {
-      control_key(reinterpret_cast<const char*>(q.name), key);
+      control_key(q.name, key);
       if (std::strcmp(key, wanted) == 0) {
         *found = q;
         return true;
@@ -432,9 +453,82 @@ bool find_control(int fd, const char* name, v4l2_queryctrl* found) {
   return false;
 }
 
-bool integral_control(const v4l2_queryctrl& q) {
+bool integral_control(const v4l2_query_ext_ctrl& q) {
   return q.type == V4L2_CTRL_TYPE_INTEGER || q.type == V4L2_CTRL_TYPE_BOOLEAN ||
-         q.type == V4L2_CTRL_TYPE_MENU || q.type == V4L2_CTRL_TYPE_INTEGER_MENU;
+         q.type == V4L2_CTRL_TYPE_MENU || q.type == V4L2_CTRL_TYPE_INTEGER_MENU ||
+         q.type == V4L2_CTRL_TYPE_INTEGER64;
+}
+
+// One control in an extended-control request on the value in force (V4L2_CTRL_WHICH_CUR_VAL).
+struct ControlRequest {
+  v4l2_ext_control control{};
+  v4l2_ext_controls request{};
+
+  ControlRequest(const v4l2_query_ext_ctrl& q, std::int64_t value) {
+    control.id = q.id;
+    if (q.type == V4L2_CTRL_TYPE_INTEGER64) {
+      control.value64 = value;
+    } else {
+      control.value = static_cast<std::int32_t>(value);
+    }
+    request.which = V4L2_CTRL_WHICH_CUR_VAL;
+    request.count = 1;
+    request.controls = &control;
+  }
+  std::int64_t value(const v4l2_query_ext_ctrl& q) const {
+    return q.type == V4L2_CTRL_TYPE_INTEGER64 ? control.value64 : control.value;
+  }
+};
+
+// The value in force: VIDIOC_G_EXT_CTRLS, or G_CTRL where the driver has no extended controls.
+bool get_control(int fd, const v4l2_query_ext_ctrl& q, std::int64_t* value) {
+  ControlRequest get(q, 0);
+  if (xioctl(fd, VIDIOC_G_EXT_CTRLS, &get.request) == 0) {
+    *value = get.value(q);
+    return true;
+  }
+  if (errno != ENOTTY || q.type == V4L2_CTRL_TYPE_INTEGER64) return false;
+  v4l2_control old{q.id, 0};
+  if (xioctl(fd, VIDIOC_G_CTRL, &old) != 0) return false;
+  *value = old.value;
+  return true;
+}
+
+// VIDIOC_S_EXT_CTRLS, or S_CTRL where the driver has no extended controls; false with the
+// driver's refusal in `reason`. error_idx tells whether the driver refused the request before
+// changing anything (it then equals count) or failed while applying it.
+bool set_control(int fd, const v4l2_query_ext_ctrl& q, std::int64_t value, const char* name,
+                 std::span<char> reason) {
+  ControlRequest set(q, value);
+  if (xioctl(fd, VIDIOC_S_EXT_CTRLS, &set.request) == 0) return true;
+  if (errno == ENOTTY && q.type != V4L2_CTRL_TYPE_INTEGER64) {
+    v4l2_control old{q.id, static_cast<std::int32_t>(value)};
+    if (xioctl(fd, VIDIOC_S_CTRL, &old) == 0) return true;
+    write_setting_line(reason, "%s: the driver refused it (VIDIOC_S_CTRL: %s)", name,
+                       std::strerror(errno));
+    return false;
+  }
+  const int error = errno;
+  if (set.request.error_idx == set.request.count) {
+    write_setting_line(reason,
+                       "%s: the driver refused it before changing anything "
+                       "(VIDIOC_S_EXT_CTRLS: %s)",
+                       name, std::strerror(error));
+  } else {
+    write_setting_line(reason, "%s: the driver failed while setting it (VIDIOC_S_EXT_CTRLS: %s)",
+                       name, std::strerror(error));
+  }
+  return false;
+}
+
+// The control a setting names (exposure_us: the absolute exposure), as the driver describes it.
+bool setting_control(int fd, const char* name, v4l2_query_ext_ctrl* q) {
+  if (std::strcmp(name, "exposure_us") == 0) {
+    q->id = V4L2_CID_EXPOSURE_ABSOLUTE;
+    return query_control(fd, q);
+  }
+  if (std::strncmp(name, kControlPrefix, kControlPrefixBytes) != 0) return false;
+  return find_control(fd, name + kControlPrefixBytes, q) && integral_control(*q);
 }
 
 }  // namespace
@@ -442,7 +536,7 @@ bool integral_control(const v4l2_queryctrl& q) {
 std::string V4l2Camera::check_setting(const CameraSetting& setting) const {
   const std::string name = setting.name;
   if (name == "exposure_us") {
-    // The range is the device's (QUERYCTRL), checked where the device is.
+    // The range is the device's (QUERY_EXT_CTRL), checked where the device is.
     return range_problem(setting.name, setting.value, setting.number,
                          {kExposureUnitUs, std::numeric_limits<double>::max()});
   }
@@ -455,8 +549,10 @@ std::string V4l2Camera::check_setting(const CameraSetting& setting) const {
   if (name.rfind(kControlPrefix, 0) == 0) {
     if (name.size() == kControlPrefixBytes) return name + ": a control name is missing";
     const double v = setting.number;
-    if (!(v == std::floor(v) && v >= INT32_MIN && v <= INT32_MAX)) {
-      return name + ": must be a whole number (the control's value, a menu's index), got '" +
+    if (!(v == std::floor(v) && std::fabs(v) <= kExactWholeNumbers)) {
+      return name +
+             ": must be a whole number (the control's value, a menu's index; at most 2^53 in "
+             "size), got '" +
              setting.value + "'";
     }
     return "";
@@ -476,19 +572,14 @@ bool V4l2Camera::read_setting(const char* name, std::span<char> value) {
                                    parm.parm.capture.timeperframe.numerator);
     return true;
   }
-  const bool exposure = std::strcmp(name, "exposure_us") == 0;
-  v4l2_control control{};
-  if (exposure) {
-    control.id = V4L2_CID_EXPOSURE_ABSOLUTE;
-  } else if (std::strncmp(name, kControlPrefix, kControlPrefixBytes) == 0) {
-    v4l2_queryctrl q{};
-    if (!find_control(fd_, name + kControlPrefixBytes, &q) || !integral_control(q)) return false;
-    control.id = q.id;
+  v4l2_query_ext_ctrl q{};
+  std::int64_t current = 0;
+  if (!setting_control(fd_, name, &q) || !get_control(fd_, q, &current)) return false;
+  if (std::strcmp(name, "exposure_us") == 0) {
+    write_setting_value(value, static_cast<double>(current) * kExposureUnitUs);
   } else {
-    return false;
+    write_setting_line(value, "%lld", static_cast<long long>(current));
   }
-  if (xioctl(fd_, VIDIOC_G_CTRL, &control) != 0) return false;
-  write_setting_value(value, exposure ? control.value * kExposureUnitUs : control.value);
   return true;
 }
 
@@ -501,7 +592,10 @@ void V4l2Camera::apply_setting(const CameraSetting& setting, SettingResult& resu
   }
   if (!read_setting(name, result.old_value)) {
     write_setting_line(result.reason,
-                       "%s: the device has no such control (integer, boolean or menu)", name);
+                       std::strcmp(name, "exposure_us") == 0
+                           ? "%s: the device has no absolute exposure"
+                           : "%s: the device has no such control (integer, boolean or menu)",
+                       name);
     return;
   }
   if (std::strcmp(name, "frame_rate_hz") == 0) {
@@ -517,30 +611,22 @@ void V4l2Camera::apply_setting(const CameraSetting& setting, SettingResult& resu
     }
   } else {
     const bool exposure = std::strcmp(name, "exposure_us") == 0;
-    v4l2_queryctrl q{};
-    if (exposure) {
-      q.id = V4L2_CID_EXPOSURE_ABSOLUTE;
-      if (xioctl(fd_, VIDIOC_QUERYCTRL, &q) != 0) {
-        write_setting_text(result.reason, "exposure_us: the device has no absolute exposure");
-        return;
-      }
-    } else {
-      find_control(fd_, name + kControlPrefixBytes, &q);
-    }
+    v4l2_query_ext_ctrl q{};
+    setting_control(fd_, name, &q);
     const double wanted = exposure ? std::round(setting.number / kExposureUnitUs) : setting.number;
-    const double scale = exposure ? kExposureUnitUs : 1;
-    if (wanted < q.minimum || wanted > q.maximum) {
+    const long long scale = exposure ? static_cast<long long>(kExposureUnitUs) : 1;
+    if ((q.flags & V4L2_CTRL_FLAG_READ_ONLY) != 0) {
+      write_setting_line(result.reason, "%s: the control is read-only", name);
+      return;
+    }
+    if (wanted < static_cast<double>(q.minimum) || wanted > static_cast<double>(q.maximum)) {
       write_setting_line(result.reason,
-                         "%s: must be between %g and %g (the device's range), got %s", name,
-                         q.minimum * scale, q.maximum * scale, setting.value);
+                         "%s: must be between %lld and %lld (the device's range), got %s", name,
+                         static_cast<long long>(q.minimum) * scale,
+                         static_cast<long long>(q.maximum) * scale, setting.value);
       return;
     }
-    v4l2_control control{q.id, static_cast<std::int32_t>(wanted)};
-    if (xioctl(fd_, VIDIOC_S_CTRL, &control) != 0) {
-      write_setting_line(result.reason, "%s: the driver refused it (S_CTRL: %s)", name,
-                         std::strerror(errno));
-      return;
-    }
+    if (!set_control(fd_, q, static_cast<std::int64_t>(wanted), name, result.reason)) return;
   }
   if (!read_setting(name, result.in_force)) {
     write_setting_line(result.reason, "%s: written but cannot be read back", name);

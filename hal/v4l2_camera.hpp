@@ -74,9 +74,11 @@ class V4l2Camera final : public Camera {
   void stop() override;
   CameraHealth health() const override;
   // exposure_us (V4L2_CID_EXPOSURE_ABSOLUTE, in its 100 us units, within the device's range),
-  // frame_rate_hz (S_PARM, where the driver takes it while streaming) and any integer, boolean or
-  // menu control by name ("v4l2:gain"; the name as v4l2-ctl writes it or as the driver reports
-  // it), found with VIDIOC_QUERYCTRL and set with VIDIOC_S_CTRL, read back with VIDIOC_G_CTRL.
+  // frame_rate_hz (S_PARM, where the driver takes it while streaming) and any integer, 64-bit,
+  // boolean or menu control by name ("v4l2:gain"; the name as v4l2-ctl writes it or as the
+  // driver reports it), found with VIDIOC_QUERY_EXT_CTRL, set with VIDIOC_S_EXT_CTRLS on the
+  // value in force and read back with VIDIOC_G_EXT_CTRLS, as v4l2-ctl and libcamera do. A driver
+  // without the extended ioctls (ENOTTY) gets QUERYCTRL/S_CTRL/G_CTRL for its 32-bit controls.
   std::string check_setting(const CameraSetting& setting) const override;
   void apply_setting(const CameraSetting& setting, SettingResult& result) override;
   bool read_setting(const char* name, std::span<char> value) override;

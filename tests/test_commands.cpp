@@ -1,7 +1,8 @@
-// End-to-end: settings changed while laserlined runs. The real daemon (simulated scanner, and
-// Aravis's fake GigE camera), LCM over UDP multicast inside a private network namespace made by
-// this test binary, laserline-ctl and the Python example as real processes: each answer, what the
-// next frames carry, refusals in one line, garbage on the command channel counted and survived.
+// End-to-end: settings changed while laserlined runs. The real daemon (simulated scanner,
+// Aravis's fake GigE camera and the V4L2 stand-in device), LCM over UDP multicast inside a private
+// network namespace made by this test binary, laserline-ctl and the Python example as real
+// processes: each answer, what the next frames carry, refusals in one line, garbage on the command
+// channel counted and survived.
 #include <arv.h>
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -519,6 +520,90 @@ lcm: {url: ")") + kUrl + R"(", image_every_n: 0, status_period_s: 0.25}
   EXPECT_EQ(get.out,
             "exposure_us=5000 gain_db=3 frame_rate_hz=10 laser.mode=on "
             "detector.maxvalue.threshold=40 detector.roi=0,0,512,512\n");
+  EXPECT_EQ(daemon.stop(), 0) << daemon.log();
+}
+
+// The V4L2 stand-in device (tests/standins/v4l2_fuse_device.cpp), mounted until destroyed; its
+// control log names the ioctl that wrote each control.
+class V4l2Device {
+ public:
+  V4l2Device() {
+    std::filesystem::create_directories(mountpoint_);
+    pid_ = spawn_tied_child(
+        {V4L2_FUSE_DEVICE_PATH, mountpoint_.string(), "--format", "GREY", "--width", "320",
+         "--height", "240", "--fps", "20", "--control-log", control_log_.string()},
+        output_.string());
+  }
+  ~V4l2Device() {
+    kill(pid_, SIGTERM);
+    waitpid(pid_, nullptr, 0);
+  }
+  // "" when the device is there, else why not (no FUSE here, for example).
+  std::string wait_ready() const {
+    for (int i = 0; i < 100; ++i) {
+      if (read_text(output_).find("ready") != std::string::npos) return "";
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    return "the V4L2 stand-in is not ready after 5 s: " + read_text(output_);
+  }
+  std::string device() const { return (mountpoint_ / "video0").string(); }
+  std::string control_log() const { return read_text(control_log_); }
+
+ private:
+  std::filesystem::path mountpoint_ = g_dir / "v4l2";
+  std::filesystem::path output_ = g_dir / "v4l2-device.out";
+  std::filesystem::path control_log_ = g_dir / "v4l2-controls.log";
+  pid_t pid_ = -1;
+};
+
+// V4L2 controls by name through laserline-ctl: set with VIDIOC_S_EXT_CTRLS (the stand-in's log),
+// the value read back in the answer, the exposure carried by the next frames, the device's range
+// and unknown names refused in one line.
+TEST_F(CommandTest, V4l2DeviceTakesControlsByNameThroughTheExtendedIoctls) {
+  V4l2Device device;
+  if (const std::string problem = device.wait_ready(); !problem.empty()) GTEST_SKIP() << problem;
+  Listener listener;
+  Daemon daemon("v4l2", std::string(R"(camera:
+  {backend: v4l2, device: ")") +
+                            device.device() + R"(", pixel_format: GREY, frame_rate_hz: 20}
+calibration: {camera: {width: 320, height: 240, fx: 350, fy: 350}}
+laser: {mode: on}
+detector: {name: maxvalue}
+lcm: {url: ")" + kUrl + R"(", image_every_n: 0, status_period_s: 0.25}
+)");
+  ASSERT_TRUE(listener.wait_for([](const Received& r) { return !r.profiles.empty(); }, 15))
+      << daemon.log();
+
+  const auto gain = ctl("set v4l2:gain 50");
+  EXPECT_EQ(gain.exit_code, 0) << gain.out;
+  EXPECT_EQ(gain.out, "v4l2:gain = 50 (was 32)\n");
+  const auto exposure = ctl("set exposure_us 1500");
+  EXPECT_EQ(exposure.exit_code, 0) << exposure.out;
+  EXPECT_EQ(exposure.out, "exposure_us = 1500 (was 10000)\n");
+  listener.clear();
+  ASSERT_TRUE(listener.wait_for(
+      [](const Received& r) {
+        return !r.profiles.empty() && r.profiles.back().exposure_us == 1500;
+      },
+      5))
+      << daemon.log();
+
+  const auto too_high = ctl("set v4l2:gain 300");
+  EXPECT_EQ(too_high.exit_code, 1) << too_high.out;
+  EXPECT_EQ(too_high.out,
+            "refused: v4l2:gain: must be between 0 and 255 (the device's range), got 300\n");
+  const auto missing = ctl("set v4l2:brightness 3");
+  EXPECT_EQ(missing.exit_code, 1) << missing.out;
+  EXPECT_EQ(missing.out,
+            "refused: v4l2:brightness: the device has no such control (integer, boolean or "
+            "menu)\n");
+  const auto wide = ctl("set v4l2:integer_64_bits 6000000000");
+  EXPECT_EQ(wide.exit_code, 0) << wide.out;
+  EXPECT_EQ(wide.out, "v4l2:integer_64_bits = 6000000000 (was 0)\n");
+  EXPECT_EQ(device.control_log(),
+            "S_EXT_CTRLS 0x00980913 50\n"
+            "S_EXT_CTRLS 0x009a0902 15\n"
+            "S_EXT_CTRLS 0x0098f900 6000000000\n");
   EXPECT_EQ(daemon.stop(), 0) << daemon.log();
 }
 

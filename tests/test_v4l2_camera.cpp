@@ -4,8 +4,11 @@
 // pixel is compared with the per-pixel reference conversion of it, pixel_reference.hpp), the
 // timestamps, every pixel format with a laser channel, clear errors, and reconnection when the
 // device goes away and comes back.
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <linux/videodev2.h>
 #include <signal.h>
+#include <sys/ioctl.h>
 #include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -354,11 +357,33 @@ TEST(V4l2, ProbeReadsTheDeviceWithoutConfiguringIt) {
   ASSERT_TRUE(camera.open(&error)) << error;
 }
 
-// Settings while streaming (laserlined's commands): controls found by name with QUERYCTRL, set
-// with S_CTRL and read back; exposure_us in the absolute exposure's 100 us units, carried by
-// the frames from then on; the device's range and unknown names refused in one line.
+laserline::hal::CameraSetting setting(const char* name, const char* value) {
+  laserline::hal::CameraSetting s;
+  std::snprintf(s.name, sizeof s.name, "%s", name);
+  std::snprintf(s.value, sizeof s.value, "%s", value);
+  s.number = std::strtod(value, nullptr);
+  return s;
+}
+
+laserline::hal::SettingResult apply(V4l2Camera& camera, const laserline::hal::CameraSetting& s) {
+  EXPECT_EQ(camera.check_setting(s), "") << s.name;
+  laserline::hal::SettingResult result;
+  camera.apply_setting(s, result);
+  return result;
+}
+
+std::string read_text(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// Settings while streaming (laserlined's commands): controls found by name with QUERY_EXT_CTRL,
+// set with S_EXT_CTRLS and read back with G_EXT_CTRLS (the stand-in's log names the ioctl that
+// wrote each value); exposure_us in the absolute exposure's 100 us units, carried by the frames
+// from then on; the device's range and unknown names refused in one line.
 TEST(V4l2, ControlsAreSetByNameAndReadBack) {
-  StandIn device("GREY", 160, 120, 50);
+  const std::filesystem::path log = g_dir / "controls.log";
+  StandIn device("GREY", 160, 120, 50, {"--control-log", log.string()});
   if (const std::string problem = device.wait_ready(); !problem.empty()) GTEST_SKIP() << problem;
   V4l2Camera camera(options(device.device(), "GREY", 160, 120));
   std::string error;
@@ -368,49 +393,175 @@ TEST(V4l2, ControlsAreSetByNameAndReadBack) {
   ASSERT_EQ(camera.grab(pixels, info, std::chrono::milliseconds(1000)), GrabStatus::kOk);
   EXPECT_TRUE(std::isnan(info.exposure_us)) << "not known before it is set";
 
-  auto setting = [](const char* name, const char* value) {
-    laserline::hal::CameraSetting s;
-    std::snprintf(s.name, sizeof s.name, "%s", name);
-    std::snprintf(s.value, sizeof s.value, "%s", value);
-    s.number = std::strtod(value, nullptr);
-    return s;
-  };
-  auto apply = [&](const laserline::hal::CameraSetting& s) {
-    EXPECT_EQ(camera.check_setting(s), "") << s.name;
-    laserline::hal::SettingResult result;
-    camera.apply_setting(s, result);
-    return result;
-  };
-  laserline::hal::SettingResult gain = apply(setting("v4l2:gain", "50"));
+  laserline::hal::SettingResult gain = apply(camera, setting("v4l2:gain", "50"));
   EXPECT_TRUE(gain.accepted) << gain.reason;
   EXPECT_STREQ(gain.old_value, "32");
   EXPECT_STREQ(gain.in_force, "50");
   // The driver's own name works too.
-  laserline::hal::SettingResult raw = apply(setting("v4l2:Exposure Time, Absolute", "30"));
+  laserline::hal::SettingResult raw = apply(camera, setting("v4l2:Exposure Time, Absolute", "30"));
   EXPECT_TRUE(raw.accepted) << raw.reason;
   EXPECT_STREQ(raw.old_value, "100");
-  laserline::hal::SettingResult exposure = apply(setting("exposure_us", "2000"));
+  laserline::hal::SettingResult exposure = apply(camera, setting("exposure_us", "2000"));
   EXPECT_TRUE(exposure.accepted) << exposure.reason;
   EXPECT_STREQ(exposure.old_value, "3000");
   EXPECT_STREQ(exposure.in_force, "2000");
   ASSERT_EQ(camera.grab(pixels, info, std::chrono::milliseconds(1000)), GrabStatus::kOk);
   EXPECT_EQ(info.exposure_us, 2000);
+  const std::string written =
+      "S_EXT_CTRLS 0x00980913 50\n"
+      "S_EXT_CTRLS 0x009a0902 30\n"
+      "S_EXT_CTRLS 0x009a0902 20\n";
+  EXPECT_EQ(read_text(log), written);
 
-  laserline::hal::SettingResult too_high = apply(setting("v4l2:gain", "300"));
+  laserline::hal::SettingResult too_high = apply(camera, setting("v4l2:gain", "300"));
   EXPECT_FALSE(too_high.accepted);
   EXPECT_STREQ(too_high.reason,
                "v4l2:gain: must be between 0 and 255 (the device's range), got 300");
-  laserline::hal::SettingResult missing = apply(setting("v4l2:brightness", "3"));
+  laserline::hal::SettingResult too_long = apply(camera, setting("exposure_us", "1000100"));
+  EXPECT_FALSE(too_long.accepted);
+  EXPECT_STREQ(too_long.reason,
+               "exposure_us: must be between 100 and 1000000 (the device's range), got 1000100");
+  laserline::hal::SettingResult missing = apply(camera, setting("v4l2:brightness", "3"));
   EXPECT_FALSE(missing.accepted);
   EXPECT_STREQ(missing.reason,
                "v4l2:brightness: the device has no such control (integer, boolean or menu)");
   EXPECT_EQ(camera.check_setting(setting("gain_db", "3")),
             "gain_db: V4L2's gain has no unit; set the driver's control, e.g. v4l2:gain");
   EXPECT_EQ(camera.check_setting(setting("v4l2:gain", "2.5")),
-            "v4l2:gain: must be a whole number (the control's value, a menu's index), got '2.5'");
+            "v4l2:gain: must be a whole number (the control's value, a menu's index; at most "
+            "2^53 in size), got '2.5'");
   char value[64];
   ASSERT_TRUE(camera.read_setting("v4l2:gain", value));
   EXPECT_STREQ(value, "50");
+  EXPECT_EQ(read_text(log), written) << "refused settings reached the device";
+}
+
+// 64-bit controls (their range only QUERY_EXT_CTRL states; G/S_CTRL cannot carry them), a
+// read-only control, and the driver's own refusal (a flip grabbed while streaming) in one line.
+TEST(V4l2, SixtyFourBitControlsAndTheDriversRefusals) {
+  StandIn device("GREY", 160, 120, 50);
+  if (const std::string problem = device.wait_ready(); !problem.empty()) GTEST_SKIP() << problem;
+  V4l2Camera camera(options(device.device(), "GREY", 160, 120));
+  std::string error;
+  ASSERT_TRUE(camera.open(&error)) << error;
+  std::vector<std::uint8_t> pixels(camera.format().bytes());
+  FrameInfo info;
+  ASSERT_EQ(camera.grab(pixels, info, std::chrono::milliseconds(1000)), GrabStatus::kOk);
+
+  char value[64];
+  ASSERT_TRUE(camera.read_setting("v4l2:pixel_rate", value));
+  EXPECT_STREQ(value, "8000000000");
+  laserline::hal::SettingResult wide =
+      apply(camera, setting("v4l2:integer_64_bits", "-5000000001"));
+  EXPECT_TRUE(wide.accepted) << wide.reason;
+  EXPECT_STREQ(wide.old_value, "0");
+  EXPECT_STREQ(wide.in_force, "-5000000001");
+  laserline::hal::SettingResult beyond =
+      apply(camera, setting("v4l2:integer_64_bits", "2000000000000"));
+  EXPECT_FALSE(beyond.accepted);
+  EXPECT_STREQ(beyond.reason,
+               "v4l2:integer_64_bits: must be between -1099511627776 and 1099511627776 (the "
+               "device's range), got 2000000000000");
+  laserline::hal::SettingResult read_only = apply(camera, setting("v4l2:pixel_rate", "1000"));
+  EXPECT_FALSE(read_only.accepted);
+  EXPECT_STREQ(read_only.reason, "v4l2:pixel_rate: the control is read-only");
+  laserline::hal::SettingResult grabbed = apply(camera, setting("v4l2:horizontal_flip", "1"));
+  EXPECT_FALSE(grabbed.accepted);
+  EXPECT_STREQ(grabbed.reason,
+               "v4l2:horizontal_flip: the driver refused it before changing anything "
+               "(VIDIOC_S_EXT_CTRLS: Device or resource busy)");
+  ASSERT_TRUE(camera.read_setting("v4l2:horizontal_flip", value));
+  EXPECT_STREQ(value, "0");
+  EXPECT_EQ(camera.check_setting(setting("v4l2:integer_64_bits", "1e16")),
+            "v4l2:integer_64_bits: must be a whole number (the control's value, a menu's index; "
+            "at most 2^53 in size), got '1e16'");
+}
+
+// A value the driver took but could not write to the sensor (EIO, error_idx naming the control)
+// is told apart from a request refused before any change.
+TEST(V4l2, AFailedWriteIsToldApartFromARefusal) {
+  StandIn device("GREY", 160, 120, 50, {"--control-writes", "fail"});
+  if (const std::string problem = device.wait_ready(); !problem.empty()) GTEST_SKIP() << problem;
+  V4l2Camera camera(options(device.device(), "GREY", 160, 120));
+  std::string error;
+  ASSERT_TRUE(camera.open(&error)) << error;
+  laserline::hal::SettingResult gain = apply(camera, setting("v4l2:gain", "40"));
+  EXPECT_FALSE(gain.accepted);
+  EXPECT_STREQ(gain.reason,
+               "v4l2:gain: the driver failed while setting it (VIDIOC_S_EXT_CTRLS: Input/output "
+               "error)");
+}
+
+// The stand-in answers an extended-control request as the kernel's control framework does, for a
+// client that calls ioctl() itself: S_EXT_CTRLS checks every control before changing any
+// (error_idx = count when it refuses), TRY names the control it refuses, integers are clamped
+// to their range and the values in force are written back into the caller's array.
+TEST(V4l2, StandInAnswersExtendedControlsAsTheKernel) {
+  StandIn device("GREY", 160, 120, 50);
+  if (const std::string problem = device.wait_ready(); !problem.empty()) GTEST_SKIP() << problem;
+  const int fd = open(device.device().c_str(), O_RDWR);
+  ASSERT_GE(fd, 0);
+  v4l2_ext_control controls[2] = {};
+  v4l2_ext_controls request{};
+  request.which = V4L2_CTRL_WHICH_CUR_VAL;
+  request.count = 2;
+  request.controls = controls;
+  auto run = [&](unsigned long cmd, std::uint32_t first, std::int32_t first_value,
+                 std::uint32_t second, std::int32_t second_value) {
+    controls[0] = {};
+    controls[0].id = first;
+    controls[0].value = first_value;
+    controls[1] = {};
+    controls[1].id = second;
+    controls[1].value = second_value;
+    request.error_idx = 99;
+    return ioctl(fd, cmd, &request) == 0 ? 0 : errno;
+  };
+  constexpr std::uint32_t kUnknown = V4L2_CID_USER_BASE + 0x999;
+  EXPECT_EQ(run(VIDIOC_S_EXT_CTRLS, V4L2_CID_GAIN, 60, kUnknown, 1), EINVAL);
+  EXPECT_EQ(request.error_idx, 2u) << "refused before any control was changed";
+  EXPECT_EQ(run(VIDIOC_TRY_EXT_CTRLS, V4L2_CID_GAIN, 60, kUnknown, 1), EINVAL);
+  EXPECT_EQ(request.error_idx, 1u) << "TRY names the control it refuses";
+  EXPECT_EQ(run(VIDIOC_G_EXT_CTRLS, V4L2_CID_GAIN, 0, V4L2_CID_EXPOSURE_ABSOLUTE, 0), 0);
+  EXPECT_EQ(controls[0].value, 32) << "the gain was not changed by the refused request";
+  EXPECT_EQ(controls[1].value, 100);
+
+  EXPECT_EQ(run(VIDIOC_S_EXT_CTRLS, V4L2_CID_GAIN, 400, V4L2_CID_EXPOSURE_ABSOLUTE, 20), 0);
+  EXPECT_EQ(controls[0].value, 255) << "clamped to the range, written back";
+  EXPECT_EQ(controls[1].value, 20);
+  EXPECT_EQ(run(VIDIOC_G_EXT_CTRLS, V4L2_CID_GAIN, 0, V4L2_CID_EXPOSURE_ABSOLUTE, 0), 0);
+  EXPECT_EQ(controls[0].value, 255);
+  EXPECT_EQ(controls[1].value, 20);
+
+  // A control class for `which`: every control must be of that class.
+  request.which = V4L2_CTRL_CLASS_USER;
+  EXPECT_EQ(run(VIDIOC_TRY_EXT_CTRLS, V4L2_CID_GAIN, 1, V4L2_CID_EXPOSURE_ABSOLUTE, 1), EINVAL);
+  EXPECT_EQ(request.error_idx, 1u);
+  EXPECT_EQ(run(VIDIOC_S_EXT_CTRLS, V4L2_CID_GAIN, 1, V4L2_CID_EXPOSURE_ABSOLUTE, 1), EINVAL);
+  EXPECT_EQ(request.error_idx, 2u);
+  close(fd);
+}
+
+// A driver without the extended-control ioctls (ENOTTY, as before the control framework): its
+// 32-bit controls are found with QUERYCTRL, set with S_CTRL and read back with G_CTRL.
+TEST(V4l2, DriversWithoutExtendedControlsGetTheOldIoctls) {
+  const std::filesystem::path log = g_dir / "legacy.log";
+  StandIn device("GREY", 160, 120, 50, {"--controls", "legacy", "--control-log", log.string()});
+  if (const std::string problem = device.wait_ready(); !problem.empty()) GTEST_SKIP() << problem;
+  V4l2Camera camera(options(device.device(), "GREY", 160, 120));
+  std::string error;
+  ASSERT_TRUE(camera.open(&error)) << error;
+  laserline::hal::SettingResult gain = apply(camera, setting("v4l2:gain", "70"));
+  EXPECT_TRUE(gain.accepted) << gain.reason;
+  EXPECT_STREQ(gain.old_value, "32");
+  EXPECT_STREQ(gain.in_force, "70");
+  laserline::hal::SettingResult exposure = apply(camera, setting("exposure_us", "1500"));
+  EXPECT_TRUE(exposure.accepted) << exposure.reason;
+  EXPECT_STREQ(exposure.in_force, "1500");
+  laserline::hal::SettingResult too_high = apply(camera, setting("v4l2:gain", "256"));
+  EXPECT_STREQ(too_high.reason,
+               "v4l2:gain: must be between 0 and 255 (the device's range), got 256");
+  EXPECT_EQ(read_text(log), "S_CTRL 0x00980913 70\nS_CTRL 0x009a0902 15\n");
 }
 
 TEST(V4l2, ReconnectsWhenTheDeviceDisappearsAndReturns) {

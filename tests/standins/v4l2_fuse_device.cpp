@@ -1,20 +1,41 @@
 // A stand-in V4L2 capture device for tests: a FUSE file (libfuse3) that answers the V4L2 ioctls
 // a capture client uses and serves frames through mmap, so that a V4L2 client runs its real code
 // path (open, QUERYCAP, S_FMT, S_PARM, REQBUFS, QUERYBUF, mmap, QBUF, STREAMON, poll, DQBUF) on
-// this machine, which has no video device. Two integer controls, "Exposure Time, Absolute" and
-// "Gain", answer QUERYCTRL, G_CTRL and S_CTRL (the extended-control ioctls carry a pointer to
-// their array, which a FUSE file's ioctl cannot follow). The kernel passes a FUSE file's ioctls on
-// when their argument size is encoded in the command number, which holds for every V4L2 ioctl used
-// here. Test-only: never installed.
+// this machine, which has no video device. The kernel passes a FUSE file's ioctls on when their
+// argument size is encoded in the command number, which holds for every V4L2 ioctl used here.
+// Test-only: never installed.
+//
+// Controls, as the kernel's control framework (v4l2-ctrls) answers for a driver: "Exposure Time,
+// Absolute" and "Gain" (integers), "Pixel Rate" (64-bit, read-only, as sensors report it),
+// "Integer 64 Bits" (64-bit, as the vivid test driver has) and "Horizontal Flip" (boolean, grabbed
+// while streaming: EBUSY, as sensor drivers do), through QUERYCTRL, QUERY_EXT_CTRL,
+// G_CTRL, S_CTRL and G/S/TRY_EXT_CTRLS. An extended-control request holds a pointer to its array
+// of controls; the kernel hands a plain FUSE file only the fixed-size struct (its ioctls are
+// "restricted": fs/fuse/ioctl.c refuses FUSE_IOCTL_RETRY, with which CUSE asks for more of the
+// caller's memory, and /dev/cuse is not available here). So the array is read from and written
+// back to the calling thread's memory with process_vm_readv/writev (its id is in the request,
+// fuse_get_context()): the client's unmodified ioctl goes through the kernel, for any client
+// (v4l2-ctl, OpenCV, laserlined), with no LD_PRELOAD. That needs ptrace access to the caller:
+// the same user, and Yama's ptrace_scope 0 (Debian's default) or the caller run as root.
+// Validation is the framework's: all of a request's controls checked before any is changed
+// (error_idx = count when S_EXT_CTRLS refuses then; TRY names the control), integers clamped to
+// their range, a read-only control refused with EACCES, a 64-bit one refused by G/S_CTRL.
 //
 //   v4l2_fuse_device MOUNTPOINT [--format NAME] [--width W] [--height H] [--fps F]
 //                    [--padding BYTES] [--yuv 601-limited|709-full]
+//                    [--controls extended|legacy] [--control-writes work|fail]
+//                    [--control-log FILE]
 //
 // NAME: GREY, Y16, YUYV, RGB24, BGR24, or a Bayer mosaic SRGGB8, SGRBG8, SGBRG8, SBGGR8 (also 12
 // and 16 bit: SRGGB12, SRGGB16, ...), as the V4L2_PIX_FMT_ macros. --padding: bytes after each
 // row (bytesperline says so, as drivers that align rows do). --yuv: the Y'CbCr encoding YUYV is
 // stated in: 601-limited (the default: colorspace SMPTE170M, encoding and quantization left at
-// their defaults, as most webcams) or 709-full (stated explicitly).
+// their defaults, as most webcams) or 709-full (stated explicitly). --controls legacy: a driver
+// older than the control framework, whose extended ioctls (and QUERY_EXT_CTRL) answer ENOTTY.
+// --control-writes fail: a control's value passes validation but writing it to the sensor fails
+// (EIO, as when a sensor stops answering on its I2C bus), error_idx naming it. --control-log: each
+// control written is appended as "IOCTL ID VALUE" (S_CTRL or S_EXT_CTRLS),
+// so that a test sees which ioctl a client set it with.
 //
 // MOUNTPOINT/video0 is the device until SIGTERM/SIGINT (then it disappears, as when a USB
 // camera is unplugged). Frame n carries the pattern of v4l2_test_pattern.hpp at sequence n, a
@@ -29,8 +50,10 @@
 #include <fuse.h>
 #include <linux/videodev2.h>
 #include <poll.h>
+#include <sys/uio.h>
 #include <time.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -62,15 +85,20 @@ struct Buffer {
   v4l2_buffer info{};
 };
 
-// The controls it has (VIDIOC_QUERYCTRL, G_CTRL, S_CTRL; integers), named as drivers name them.
+// The controls it has, named as drivers name them.
 struct Control {
   std::uint32_t id;
   const char* name;
-  std::int32_t minimum;
-  std::int32_t maximum;
-  std::int32_t default_value;
-  std::int32_t value;
+  std::uint32_t type;  // V4L2_CTRL_TYPE_INTEGER or _INTEGER64
+  std::uint32_t flags;
+  std::int64_t minimum;
+  std::int64_t maximum;
+  std::int64_t default_value;
+  std::int64_t value;
+  bool grabbed_while_streaming = false;  // as sensors grab their flips (they move the mosaic)
 };
+
+constexpr std::uint32_t kInteger64Id = V4L2_CID_USER_BASE | 0xf000;  // a driver-private control
 
 struct Device {
   std::mutex mutex;
@@ -89,9 +117,18 @@ struct Device {
   fuse_pollhandle* poll_handle = nullptr;
   fuse* fs = nullptr;
   std::atomic<bool> running{true};
-  Control controls[2] = {
-      {V4L2_CID_EXPOSURE_ABSOLUTE, "Exposure Time, Absolute", 1, 10000, 100, 100},
-      {V4L2_CID_GAIN, "Gain", 0, 255, 32, 32}};
+  bool extended_controls = true;
+  bool control_writes_fail = false;
+  FILE* control_log = nullptr;
+  Control controls[5] = {
+      {V4L2_CID_EXPOSURE_ABSOLUTE, "Exposure Time, Absolute", V4L2_CTRL_TYPE_INTEGER, 0, 1, 10000,
+       100, 100},
+      {V4L2_CID_GAIN, "Gain", V4L2_CTRL_TYPE_INTEGER, 0, 0, 255, 32, 32},
+      {V4L2_CID_PIXEL_RATE, "Pixel Rate", V4L2_CTRL_TYPE_INTEGER64, V4L2_CTRL_FLAG_READ_ONLY, 1,
+       INT64_MAX, 8'000'000'000, 8'000'000'000},
+      {kInteger64Id, "Integer 64 Bits", V4L2_CTRL_TYPE_INTEGER64, 0, -(std::int64_t{1} << 40),
+       std::int64_t{1} << 40, 0, 0},
+      {V4L2_CID_HFLIP, "Horizontal Flip", V4L2_CTRL_TYPE_BOOLEAN, 0, 0, 1, 0, 0, true}};
 
   std::uint32_t bytes_per_line() const {
     return width * laserline::test::pattern_bytes_per_pixel(fourcc) + padding;
@@ -129,17 +166,136 @@ void fill_format(v4l2_format* f) {
 }
 
 // The control with this id, or with V4L2_CTRL_FLAG_NEXT_CTRL the first one after it.
-const Control* find_control(std::uint32_t id) {
+Control* find_control(std::uint32_t id) {
   const bool next = (id & V4L2_CTRL_FLAG_NEXT_CTRL) != 0;
   id &= ~V4L2_CTRL_FLAG_NEXT_CTRL;
-  const Control* best = nullptr;
-  for (const Control& c : g_device.controls) {
+  Control* best = nullptr;
+  for (Control& c : g_device.controls) {
     if (next ? c.id > id && (best == nullptr || c.id < best->id) : c.id == id) best = &c;
   }
   return best;
 }
 
-int do_ioctl(const char* path, unsigned int cmd, void* /*arg*/, fuse_file_info* fi,
+bool grabbed(const Control& c) {
+  return c.grabbed_while_streaming && g_device.streaming;
+}
+
+std::uint32_t flags(const Control& c) {
+  return c.flags | (grabbed(c) ? V4L2_CTRL_FLAG_GRABBED : 0u);
+}
+
+// A new value as the framework takes it: an integer (step 1) clamped to the control's range.
+std::int64_t clamped(const Control& c, std::int64_t value) {
+  return std::clamp(value, c.minimum, c.maximum);
+}
+
+void log_control(const char* ioctl, const Control& c) {
+  if (g_device.control_log == nullptr) return;
+  std::fprintf(g_device.control_log, "%s 0x%08x %lld\n", ioctl, c.id,
+               static_cast<long long>(c.value));
+  std::fflush(g_device.control_log);
+}
+
+// Bytes in the calling thread's memory: the array of an extended-control request.
+bool copy_caller(void* ours, void* callers, std::size_t bytes, bool to_caller) {
+  iovec local{ours, bytes};
+  iovec remote{callers, bytes};
+  const pid_t caller = fuse_get_context()->pid;
+  const ssize_t n = to_caller ? process_vm_writev(caller, &local, 1, &remote, 1, 0)
+                              : process_vm_readv(caller, &local, 1, &remote, 1, 0);
+  if (n != static_cast<ssize_t>(bytes)) {
+    std::fprintf(stderr, "v4l2_fuse_device: cannot %s the memory of thread %d: %s\n",
+                 to_caller ? "write" : "read", static_cast<int>(caller), std::strerror(errno));
+    return false;
+  }
+  return true;
+}
+
+// VIDIOC_G/S/TRY_EXT_CTRLS as v4l2-ioctl.c (check_ext_ctrls) and the control framework
+// (v4l2-ctrls-api.c) carry them out: every control found and validated before any is changed.
+int ext_controls_in_place(unsigned int cmd, v4l2_ext_controls* cs) {
+  const bool get = cmd == VIDIOC_G_EXT_CTRLS;
+  const bool set = cmd == VIDIOC_S_EXT_CTRLS;
+  cs->error_idx = cs->count;
+  if (cs->which == V4L2_CTRL_WHICH_REQUEST_VAL) return -EINVAL;  // no media device
+  if (cs->which == V4L2_CTRL_WHICH_DEF_VAL && !get) return -EINVAL;
+  if (cs->count > V4L2_CID_MAX_CTRLS) return -EINVAL;
+  const bool by_class =
+      cs->which != V4L2_CTRL_WHICH_CUR_VAL && cs->which != V4L2_CTRL_WHICH_DEF_VAL;
+  if (cs->count == 0) {
+    if (!by_class) return 0;
+    for (const Control& c : g_device.controls)
+      if (V4L2_CTRL_ID2WHICH(c.id) == cs->which) return 0;
+    return -EINVAL;
+  }
+  std::vector<v4l2_ext_control> controls(cs->count);
+  const std::size_t bytes = controls.size() * sizeof(v4l2_ext_control);
+  if (!copy_caller(controls.data(), cs->controls, bytes, false)) return -EFAULT;
+  std::vector<Control*> found(cs->count);
+  int result = 0;
+  for (std::uint32_t i = 0; i < cs->count && result == 0; ++i) {
+    if (by_class && V4L2_CTRL_ID2WHICH(controls[i].id) != cs->which) {
+      cs->error_idx = cmd == VIDIOC_TRY_EXT_CTRLS ? i : cs->count;
+      result = -EINVAL;
+    }
+  }
+  for (std::uint32_t i = 0; i < cs->count && result == 0; ++i) {
+    cs->error_idx = i;
+    found[i] = find_control(controls[i].id);
+    if (found[i] == nullptr) result = -EINVAL;
+  }
+  if (result != 0 && cmd != VIDIOC_TRY_EXT_CTRLS) cs->error_idx = cs->count;
+  if (result == 0 && get) {
+    for (std::uint32_t i = 0; i < cs->count; ++i) {
+      const Control& c = *found[i];
+      const std::int64_t v = cs->which == V4L2_CTRL_WHICH_DEF_VAL ? c.default_value : c.value;
+      if (c.type == V4L2_CTRL_TYPE_INTEGER64) {
+        controls[i].value64 = v;
+      } else {
+        controls[i].value = static_cast<std::int32_t>(v);
+      }
+      cs->error_idx = i;
+    }
+  }
+  if (result == 0 && !get) {
+    for (std::uint32_t i = 0; i < cs->count && result == 0; ++i) {
+      cs->error_idx = i;
+      if ((found[i]->flags & V4L2_CTRL_FLAG_READ_ONLY) != 0) result = -EACCES;
+      if (set && grabbed(*found[i])) result = -EBUSY;
+    }
+    if (result != 0 && set) cs->error_idx = cs->count;
+    for (std::uint32_t i = 0; i < cs->count && result == 0; ++i) {
+      Control& c = *found[i];
+      const bool wide = c.type == V4L2_CTRL_TYPE_INTEGER64;
+      const std::int64_t v = clamped(c, wide ? controls[i].value64 : controls[i].value);
+      if (wide) {
+        controls[i].value64 = v;
+      } else {
+        controls[i].value = static_cast<std::int32_t>(v);
+      }
+      cs->error_idx = i;
+      if (set && g_device.control_writes_fail) {
+        result = -EIO;
+      } else if (set) {
+        c.value = v;
+        log_control("S_EXT_CTRLS", c);
+      }
+    }
+  }
+  // The kernel copies the array back whatever the outcome (video_usercopy's always_copy).
+  if (!copy_caller(controls.data(), cs->controls, bytes, true)) return -EFAULT;
+  return result;
+}
+
+int ext_controls(unsigned int cmd, v4l2_ext_controls* cs, void* callers_struct) {
+  const int result = ext_controls_in_place(cmd, cs);
+  // The kernel copies the struct back when it refuses too (video_usercopy's always_copy), so that
+  // error_idx reaches the caller; libfuse sends no reply data with an error, so it goes directly.
+  if (result != 0 && !copy_caller(cs, callers_struct, sizeof *cs, true)) return -EFAULT;
+  return result;
+}
+
+int do_ioctl(const char* path, unsigned int cmd, void* arg, fuse_file_info* fi,
              unsigned int /*flags*/, void* data) {
   if (std::strcmp(path, kName) != 0) return -ENOTTY;
   Device& d = g_device;
@@ -261,28 +417,55 @@ int do_ioctl(const char* path, unsigned int cmd, void* /*arg*/, fuse_file_info* 
       if (c == nullptr) return -EINVAL;
       std::memset(q, 0, sizeof(*q));
       q->id = c->id;
-      q->type = V4L2_CTRL_TYPE_INTEGER;
+      q->type = c->type;
+      q->flags = flags(*c);
       std::snprintf(reinterpret_cast<char*>(q->name), sizeof(q->name), "%s", c->name);
+      if (c->type != V4L2_CTRL_TYPE_INTEGER64) {  // a 64-bit range only through QUERY_EXT_CTRL
+        q->minimum = static_cast<std::int32_t>(c->minimum);
+        q->maximum = static_cast<std::int32_t>(c->maximum);
+        q->step = 1;
+        q->default_value = static_cast<std::int32_t>(c->default_value);
+      }
+      return 0;
+    }
+    case VIDIOC_QUERY_EXT_CTRL: {
+      if (!d.extended_controls) return -ENOTTY;
+      auto* q = static_cast<v4l2_query_ext_ctrl*>(data);
+      const Control* c = find_control(q->id);
+      if (c == nullptr) return -EINVAL;
+      std::memset(q, 0, sizeof(*q));
+      q->id = c->id;
+      q->type = c->type;
+      q->flags = flags(*c);
+      std::snprintf(q->name, sizeof(q->name), "%s", c->name);
       q->minimum = c->minimum;
       q->maximum = c->maximum;
       q->step = 1;
       q->default_value = c->default_value;
+      q->elem_size = c->type == V4L2_CTRL_TYPE_INTEGER64 ? 8 : 4;
+      q->elems = 1;
       return 0;
     }
     case VIDIOC_G_CTRL:
     case VIDIOC_S_CTRL: {
       auto* v = static_cast<v4l2_control*>(data);
-      Control* c = nullptr;
-      for (Control& control : d.controls)
-        if (control.id == v->id) c = &control;
-      if (c == nullptr) return -EINVAL;
+      Control* c = find_control(v->id);
+      if (c == nullptr || c->type == V4L2_CTRL_TYPE_INTEGER64) return -EINVAL;
       if (cmd == VIDIOC_S_CTRL) {
-        if (v->value < c->minimum || v->value > c->maximum) return -ERANGE;
-        c->value = v->value;
+        if ((c->flags & V4L2_CTRL_FLAG_READ_ONLY) != 0) return -EACCES;
+        if (grabbed(*c)) return -EBUSY;
+        if (d.control_writes_fail) return -EIO;
+        c->value = clamped(*c, v->value);
+        log_control("S_CTRL", *c);
       }
-      v->value = c->value;
+      v->value = static_cast<std::int32_t>(c->value);
       return 0;
     }
+    case VIDIOC_G_EXT_CTRLS:
+    case VIDIOC_S_EXT_CTRLS:
+    case VIDIOC_TRY_EXT_CTRLS:
+      if (!d.extended_controls) return -ENOTTY;
+      return ext_controls(cmd, static_cast<v4l2_ext_controls*>(data), arg);
     default:
       return -ENOTTY;
   }
@@ -424,7 +607,9 @@ int main(int argc, char** argv) {
   if (argc < 2) {
     std::fprintf(stderr,
                  "usage: v4l2_fuse_device MOUNTPOINT [--format NAME] [--width W] [--height H] "
-                 "[--fps F] [--padding BYTES] [--yuv 601-limited|709-full]\n");
+                 "[--fps F] [--padding BYTES] [--yuv 601-limited|709-full] "
+                 "[--controls extended|legacy] [--control-writes work|fail] "
+                 "[--control-log FILE]\n");
     return 2;
   }
   const std::string mountpoint = argv[1];
@@ -447,6 +632,17 @@ int main(int argc, char** argv) {
       g_device.padding = static_cast<std::uint32_t>(std::stoul(value));
     } else if (key == "--yuv" && (value == "601-limited" || value == "709-full")) {
       g_device.yuv_709_full = value == "709-full";
+    } else if (key == "--controls" && (value == "extended" || value == "legacy")) {
+      g_device.extended_controls = value == "extended";
+    } else if (key == "--control-writes" && (value == "work" || value == "fail")) {
+      g_device.control_writes_fail = value == "fail";
+    } else if (key == "--control-log") {
+      g_device.control_log = std::fopen(value.c_str(), "a");
+      if (g_device.control_log == nullptr) {
+        std::fprintf(stderr, "v4l2_fuse_device: --control-log: cannot open %s: %s\n", value.c_str(),
+                     std::strerror(errno));
+        return 2;
+      }
     } else {
       std::fprintf(stderr, "v4l2_fuse_device: unknown argument '%s'\n", key.c_str());
       return 2;
@@ -482,5 +678,7 @@ int main(int argc, char** argv) {
   fuse_remove_signal_handlers(fuse_get_session(fs));
   fuse_unmount(fs);
   fuse_destroy(fs);
+  fuse_opt_free_args(&args);
+  if (g_device.control_log != nullptr) std::fclose(g_device.control_log);
   return result == 0 ? 0 : 1;
 }
