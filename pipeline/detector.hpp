@@ -30,7 +30,10 @@ struct FrontendOptions {
   int noise_columns = 9;
   double snr_threshold_db = 6.0;  // III-E: paper 3 - 6 dB
   int max_candidates_per_column = 8;
-  int saturation_level = 255;  // a run at or above this is a clipped core: its centre is the peak
+  // A run at or above this is a clipped core: its centre is the peak. Below 255: a camera's
+  // processing (white balance after the sensor clipped, lossy compression) leaves clipped pixels a
+  // few levels under it, and a single such pixel would break the run.
+  int saturation_level = 250;
   // Which candidate of each epipolar line is the laser point (the others stay, not valid).
   LineSelectionOptions selection;
 

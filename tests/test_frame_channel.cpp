@@ -9,10 +9,11 @@
 namespace laserline::tools {
 namespace {
 
-cv::Mat convert(const cv::Mat& raw, const std::string& channel) {
+cv::Mat convert(const cv::Mat& raw, const std::string& channel, int clipped_from = 255) {
   cv::Mat out;
   std::string problem;
-  EXPECT_TRUE(to_laser_mono8(raw, hal::parse_laser_channel(channel), out, problem)) << problem;
+  EXPECT_TRUE(to_laser_mono8(raw, hal::parse_laser_channel(channel), clipped_from, out, problem))
+      << problem;
   EXPECT_EQ(out.type(), CV_8UC1);
   return out;
 }
@@ -61,6 +62,17 @@ TEST(FrameChannel, ClippedLaserColourGives255) {
   const cv::Mat deep_difference = convert(deep, "red - (green + blue) / 2");
   EXPECT_EQ(deep_difference.at<std::uint8_t>(0, 0), 255);
   EXPECT_EQ(deep_difference.at<std::uint8_t>(0, 1), 0);
+  // From a level below the top (the detector's saturation_level): red at 251 is clipped, at 249
+  // it is not; white light at 251 in every colour is taken for clipped too.
+  cv::Mat near(1, 3, CV_8UC3);
+  near.at<cv::Vec3b>(0, 0) = {240, 245, 251};
+  near.at<cv::Vec3b>(0, 1) = {240, 245, 249};
+  near.at<cv::Vec3b>(0, 2) = {251, 251, 251};
+  const cv::Mat from_250 = convert(near, "red - (green + blue) / 2", 250);
+  EXPECT_EQ(from_250.at<std::uint8_t>(0, 0), 255);
+  EXPECT_EQ(from_250.at<std::uint8_t>(0, 1), 7);  // 249 - 242.5, rounded half up
+  EXPECT_EQ(from_250.at<std::uint8_t>(0, 2), 255);
+  EXPECT_EQ(convert(near, "red - (green + blue) / 2").at<std::uint8_t>(0, 0), 9);  // 251 - 242.5
 }
 
 TEST(FrameChannel, MonoAnd16Bit) {
@@ -78,11 +90,11 @@ TEST(FrameChannel, MonoAnd16Bit) {
 TEST(FrameChannel, Problems) {
   cv::Mat out;
   std::string problem;
-  EXPECT_FALSE(to_laser_mono8(cv::Mat(), {}, out, problem));
+  EXPECT_FALSE(to_laser_mono8(cv::Mat(), {}, 255, out, problem));
   EXPECT_EQ(problem, "empty image");
-  EXPECT_FALSE(to_laser_mono8(cv::Mat(2, 2, CV_32FC1), {}, out, problem));
+  EXPECT_FALSE(to_laser_mono8(cv::Mat(2, 2, CV_32FC1), {}, 255, out, problem));
   EXPECT_EQ(problem, "unsupported pixel type (only 8 and 16 bit unsigned integers)");
-  EXPECT_FALSE(to_laser_mono8(cv::Mat(2, 2, CV_8UC(5)), {}, out, problem));
+  EXPECT_FALSE(to_laser_mono8(cv::Mat(2, 2, CV_8UC(5)), {}, 255, out, problem));
   EXPECT_EQ(problem, "unsupported number of channels (5)");
 }
 

@@ -58,7 +58,8 @@ void Extractor::frame(const cv::Mat& raw, const std::string& where,
   const bool laser_on = recorded_laser_on ? *recorded_laser_on : pattern_laser_on();
   ++position_;
   std::string problem;
-  if (!laserline::tools::to_laser_mono8(raw, options_.channel, mono_, problem)) {
+  if (!laserline::tools::to_laser_mono8(raw, options_.channel, options_.clipped_from, mono_,
+                                        problem)) {
     fail(where + ": " + problem + "; skipped");
     return;
   }

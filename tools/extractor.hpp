@@ -65,8 +65,9 @@ struct Options {
   // As given; checked once the calibration and the detector are known.
   std::string threshold, roi, mask;
   laserline::hal::LaserChannel channel;  // the laser's light in colour frames
-  std::string laser_pattern;             // as given, for messages
-  std::vector<bool> laser_on_pattern;    // empty: every frame the input says nothing of is "on"
+  int clipped_from = 255;     // colours at this level or above are clipped (the detector's)
+  std::string laser_pattern;  // as given, for messages
+  std::vector<bool> laser_on_pattern;  // empty: every frame the input says nothing of is "on"
   bool all_candidates = false;
   std::vector<std::string> inputs;
 };

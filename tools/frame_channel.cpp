@@ -122,8 +122,8 @@ bool read_image_file(const std::string& path, cv::Mat& out, std::string& problem
   return true;
 }
 
-bool to_laser_mono8(const cv::Mat& raw, const hal::LaserChannel& channel, cv::Mat& out,
-                    std::string& problem) {
+bool to_laser_mono8(const cv::Mat& raw, const hal::LaserChannel& channel, int clipped_from,
+                    cv::Mat& out, std::string& problem) {
   if (raw.empty()) {
     problem = "empty image";
     return false;
@@ -172,16 +172,21 @@ bool to_laser_mono8(const cv::Mat& raw, const hal::LaserChannel& channel, cv::Ma
   // whose positively weighted colour is clipped gives 255 here too. (A saturated laser is white
   // at its core: red - (green + blue) / 2 would make it a dark gap between two red fringes, and
   // the line would be found on a fringe, pixels off its centre.)
-  cv::Mat bgr;
-  if (channels == 4) {
-    cv::Mat planes[4];
-    cv::split(raw, planes);
-    cv::merge(planes, 3, bgr);
-  } else {
-    bgr = raw;
+  cv::Mat planes[4];
+  cv::split(raw, planes);
+  // Blue, green, red as OpenCV orders them; a positively weighted one at clipped_from or above is
+  // raised to 255, where the conversion's rule takes it.
+  const float weights[3] = {channel.blue, channel.green, channel.red};
+  for (int i = 0; i < 3; ++i) {
+    // 16 bit: onto 0..255 first; the top codes become 255, clipped as 8-bit samples are.
+    if (scale != 1.0) planes[i].convertTo(planes[i], CV_8U, scale);
+    if (weights[i] > 0.0f && clipped_from < 255) {
+      planes[i] = planes[i].clone();
+      planes[i].setTo(255, planes[i] >= clipped_from);
+    }
   }
-  // 16 bit: onto 0..255 first; the top codes become 255, clipped as 8-bit samples are.
-  if (scale != 1.0) bgr.convertTo(bgr, CV_8U, scale);
+  cv::Mat bgr;
+  cv::merge(planes, 3, bgr);
   const hal::PixelConverter converter({hal::PixelLayout::kBgr, 8}, bgr.cols, bgr.rows, channel);
   out.create(bgr.rows, bgr.cols, CV_8UC1);
   converter.convert(bgr.data, bgr.step, out.data, out.step);

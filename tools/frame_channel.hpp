@@ -13,10 +13,13 @@ namespace laserline::tools {
 // channel. Mono frames are taken as they are (grey + alpha: the grey); colour frames (OpenCV's
 // BGR or BGRA order) give the weighted sum of `channel`, clipped to 0..255, and 255 where a
 // positively weighted colour is clipped (as hal::PixelConverter gives camera frames: a saturated
-// laser's white core); 16-bit frames are scaled from their full range onto 0..255. False with a
-// one-line reason in `problem` for an empty image or a pixel type the detectors cannot take.
-bool to_laser_mono8(const cv::Mat& raw, const hal::LaserChannel& channel, cv::Mat& out,
-                    std::string& problem);
+// laser's white core); 16-bit frames are scaled from their full range onto 0..255. A colour counts
+// as clipped at `clipped_from` or above (8-bit units; the detector's saturation_level): files are
+// processed images, whose clipped samples often come out a few levels below 255 (white balance
+// after the sensor clipped, lossy compression). False with a one-line reason in `problem` for an
+// empty image or a pixel type the detectors cannot take.
+bool to_laser_mono8(const cv::Mat& raw, const hal::LaserChannel& channel, int clipped_from,
+                    cv::Mat& out, std::string& problem);
 
 // Why the bytes of an encoded image are not a whole image, or "" when they are (as far as can be
 // told without decoding): a JPEG must reach its end-of-image marker (FF D9) through its segments

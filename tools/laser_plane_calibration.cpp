@@ -222,7 +222,7 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
   std::vector<ViewImages> images(views.size());
   std::vector<BoardView> boards;
   for (std::size_t i = 0; i < views.size(); ++i) {
-    images[i] = images_of(views[i], o.channel, board_light);
+    images[i] = images_of(views[i], o.channel, board_light, o.frontend.saturation_level);
     const ViewImages& im = images[i];
     BoardView b;
     b.index = i;

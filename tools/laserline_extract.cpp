@@ -371,6 +371,7 @@ int run_extract(int argc, char** argv) {
     fatal(e.what());
   }
   apply_threshold(options, detector_options);
+  options.clipped_from = detector_options.frontend.saturation_level;
   const Region region = region_of(options, calibration.camera.width, calibration.camera.height,
                                   &detector_options.roi);
   std::unique_ptr<laserline::pipeline::Detector> detector;

@@ -254,12 +254,12 @@ void find_laser(BoardView& bv, const ViewImages& images, const PlaneCalibrationO
 }
 
 ViewImages images_of(const CalibrationView& v, const hal::LaserChannel& laser,
-                     const hal::LaserChannel& board) {
+                     const hal::LaserChannel& board, int clipped_from) {
   ViewImages im;
   std::string problem;
   auto convert = [&](const cv::Mat& raw, const hal::LaserChannel& channel, cv::Mat& out,
                      const char* which) {
-    if (!to_laser_mono8(raw, channel, out, problem)) {
+    if (!to_laser_mono8(raw, channel, clipped_from, out, problem)) {
       throw PlaneCalibrationError(v.name + which + ": " + problem);
     }
   };

@@ -80,9 +80,9 @@ class LineFinder {
 void find_laser(BoardView& bv, const ViewImages& images, const PlaneCalibrationOptions& o,
                 const hal::CameraIntrinsics& cam, LineFinder& finder, ViewReport& report);
 
-// The view's images in the laser's channel and the board's; throws PlaneCalibrationError naming
-// the view when one does not convert.
+// The view's images in the laser's channel and the board's (colours clipped from `clipped_from`,
+// as to_laser_mono8 says); throws PlaneCalibrationError naming the view when one does not convert.
 ViewImages images_of(const CalibrationView& v, const hal::LaserChannel& laser,
-                     const hal::LaserChannel& board);
+                     const hal::LaserChannel& board, int clipped_from);
 
 }  // namespace laserline::tools
