@@ -156,14 +156,20 @@ inline SimGroundTruth truth_along(const SimScene& scene, std::uint64_t sequence,
   return truth;
 }
 
-// A small scene keeps the tests quick; the camera holds still unless a test moves it.
-inline SimSceneOptions still_options() {
+// A small scene keeps the tests quick.
+inline SimSceneOptions small_options() {
   SimSceneOptions o;
   o.calibration.camera.width = 320;
   o.calibration.camera.height = 256;
   o.calibration.camera.fx = o.calibration.camera.fy = 350;
   o.calibration.camera.cx = 159.5;
   o.calibration.camera.cy = 127.5;
+  return o;
+}
+
+// ... with the camera holding still unless a test moves it.
+inline SimSceneOptions still_options() {
+  SimSceneOptions o = small_options();
   o.sway_m = 0;
   o.sway_deg = 0;
   return o;

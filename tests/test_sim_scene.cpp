@@ -59,17 +59,6 @@ constexpr bool kSanitized = false;
 
 using namespace sim_reference;
 
-// A small scene keeps the tests quick.
-SimSceneOptions small_options() {
-  SimSceneOptions o;
-  o.calibration.camera.width = 320;
-  o.calibration.camera.height = 256;
-  o.calibration.camera.fx = o.calibration.camera.fy = 350;
-  o.calibration.camera.cx = 159.5;
-  o.calibration.camera.cy = 127.5;
-  return o;
-}
-
 // Sub-pixel row of the brightest pixel of column u by a 3-point Gaussian (ln-parabola) fit.
 double gaussian_peak(const Image& img, int u) {
   int best = 0;
