@@ -8,6 +8,9 @@
 #include <cstdint>
 #include <cstring>
 #include <span>
+#include <utility>
+
+#include <Eigen/Dense>
 
 #include "pipeline/frontend.hpp"
 #include "pipeline/frontend_common.hpp"
@@ -100,6 +103,73 @@ class ColumnSampler {
   const ImageView* background_;
   int u_, v0_;
   float x0_ = 0, y0_ = 0, dx_ = 0, dy_ = 0, x_max_ = 0, y_max_ = 0;
+};
+
+// Where the glow in front of the line ends, walking from row `from` by `step` (+1 or -1) at most
+// `span` rows within [0, last]: the centroid of the fall between neighbouring samples around the
+// sharpest one (a blurred step spreads its fall over two or three rows). `from` when nothing falls.
+template <class Sample>
+float glow_end_after(const Sample& sample, int from, int step, int span, int last) {
+  std::array<float, 48> falls;  // falls[k]: from row from + k step to the next
+  const int n = std::min({span, static_cast<int>(falls.size()), step > 0 ? last - from : from});
+  int sharpest = -1;
+  float largest = 0.0f, previous = sample(from);
+  for (int k = 0; k < n; ++k) {
+    const float value = sample(from + (k + 1) * step);
+    falls[static_cast<std::size_t>(k)] = previous - value;
+    previous = value;
+    if (falls[static_cast<std::size_t>(k)] > largest) {
+      largest = falls[static_cast<std::size_t>(k)];
+      sharpest = k;
+    }
+  }
+  if (sharpest < 0) return static_cast<float>(from);
+  float sum = 0.0f, moment = 0.0f;
+  for (int k = std::max(sharpest - 1, 0); k <= std::min(sharpest + 1, n - 1); ++k) {
+    const float fall = std::max(falls[static_cast<std::size_t>(k)], 0.0f);
+    sum += fall;
+    moment += fall * (static_cast<float>(k) + 0.5f);
+  }
+  return static_cast<float>(from) + static_cast<float>(step) * moment / sum;
+}
+
+// A line in glowing water along rows [first, last]: the glow's level in front of the centre c,
+// the surface's behind it (meeting at c, the centre pixel taking each side's share), and a
+// Gaussian line of the model's sigma at c of amplitude >= 0.
+struct GlowingLineModel {
+  float sigma;
+  int near;  // the side of the glow (+1: rows further down)
+  int first, last;
+
+  // The sum of squared residuals of the least-squares fit with the centre at c.
+  template <class Sample>
+  double residual(const Sample& sample, float c) const {
+    std::array<std::array<double, 3>, 3> normal{};
+    std::array<double, 3> right{};
+    double squares = 0;
+    const double inverse_variance = 1.0 / (2.0 * static_cast<double>(sigma) * sigma);
+    for (int v = first; v <= last; ++v) {
+      const double d = static_cast<double>(v) - static_cast<double>(c);
+      const double front = std::clamp(0.5 + static_cast<double>(near) * d, 0.0, 1.0);
+      const std::array<double, 3> basis{1.0 - front, front, std::exp(-d * d * inverse_variance)};
+      const double y = sample(v);
+      squares += y * y;
+      for (std::size_t i = 0; i < 3; ++i) {
+        right[i] += basis[i] * y;
+        for (std::size_t j = 0; j < 3; ++j)
+          normal[i][j] += basis[i] * basis[j];
+      }
+    }
+    // With the line (if its amplitude comes out >= 0), else the two levels alone.
+    const Eigen::Matrix3d n{{normal[0][0], normal[0][1], normal[0][2]},
+                            {normal[1][0], normal[1][1], normal[1][2]},
+                            {normal[2][0], normal[2][1], normal[2][2]}};
+    const Eigen::Vector3d r{right[0], right[1], right[2]};
+    const Eigen::Vector3d x = n.ldlt().solve(r);
+    if (x[2] >= 0.0 && x.allFinite()) return squares - x.dot(r);
+    const Eigen::Vector2d levels = n.topLeftCorner<2, 2>().ldlt().solve(r.head<2>());
+    return squares - levels.dot(r.head<2>());
+  }
 };
 
 }  // namespace
@@ -208,30 +278,65 @@ float Frontend::refine_row(int u, float v_guess) const {
     // straight line through two samples beyond the line on that side), meeting at the line's
     // centre, the centre pixel taking each side's share; the fit is centred again on its result.
     const int near = rows_.near_side();
-    float estimate = static_cast<float>(best);
-    for (int pass = 0; pass < 3; ++pass) {
-      const int middle = static_cast<int>(std::lround(estimate));
-      auto side_line = [&](int side) {
-        const float close = sample(middle + side * edge), far = sample(middle + side * 2 * edge);
-        return std::array<float, 2>{close, (far - close) / static_cast<float>(edge)};
-      };
-      const auto front = side_line(near), back = side_line(-near);
-      auto baseline = [&](int v) {
-        const float into_front = static_cast<float>(near) * (static_cast<float>(v) - estimate);
-        const float share = std::clamp(0.5f + into_front, 0.0f, 1.0f);
-        const float distance = static_cast<float>(std::abs(v - middle));
-        const float f = front[0] + front[1] * (distance - static_cast<float>(edge));
-        const float b = back[0] + back[1] * (distance - static_cast<float>(edge));
-        return b + share * (f - b);
-      };
-      const float a = sample(middle - spacing) - baseline(middle - spacing);
-      const float b = sample(middle) - baseline(middle);
-      const float c = sample(middle + spacing) - baseline(middle + spacing);
-      estimate =
-          static_cast<float>(middle) + static_cast<float>(spacing) * gaussian_offset(a, b, c);
-      if (std::abs(estimate - static_cast<float>(middle)) < 0.5f) break;  // centred where it is
-    }
-    return estimate;
+    auto fit_from = [&](float start) {
+      float estimate = start;
+      bool peaked = false;
+      for (int pass = 0; pass < 3; ++pass) {
+        const int middle = static_cast<int>(std::lround(estimate));
+        auto side_line = [&](int side) {
+          const float close = sample(middle + side * edge), far = sample(middle + side * 2 * edge);
+          return std::array<float, 2>{close, (far - close) / static_cast<float>(edge)};
+        };
+        const auto front = side_line(near), back = side_line(-near);
+        auto baseline = [&](int v) {
+          const float into_front = static_cast<float>(near) * (static_cast<float>(v) - estimate);
+          const float share = std::clamp(0.5f + into_front, 0.0f, 1.0f);
+          const float distance = static_cast<float>(std::abs(v - middle));
+          const float f = front[0] + front[1] * (distance - static_cast<float>(edge));
+          const float b = back[0] + back[1] * (distance - static_cast<float>(edge));
+          return b + share * (f - b);
+        };
+        const float a = sample(middle - spacing) - baseline(middle - spacing);
+        const float b = sample(middle) - baseline(middle);
+        const float c = sample(middle + spacing) - baseline(middle + spacing);
+        peaked = b > 1.0f && b * b > std::max(a, 1.0f) * std::max(c, 1.0f);
+        estimate =
+            static_cast<float>(middle) + static_cast<float>(spacing) * gaussian_offset(a, b, c);
+        if (std::abs(estimate - static_cast<float>(middle)) < 0.5f) break;  // centred there
+      }
+      return std::pair<float, bool>{estimate, peaked};
+    };
+    const float from_brightest = fit_from(static_cast<float>(best)).first;
+    // The sheet meets the surface at the line's centre, so the glow ends there. On a dark patch
+    // the line hardly rises above the glow, and the brightest sample can be noise on the glow,
+    // pixels before its end. So the glow's end (the sharpest fall on the far side, located at the
+    // centroid of the fall around it) is a second guess, refined the same way where a line rises
+    // there; of the two, the one the model of a line in glowing water fits better is taken.
+    // (The fit's samples, up to 2 edge + 1 rows beyond its centre, and its passes' steps stay in
+    // the frame.)
+    const int room = (near > 0 ? best : last - best) - 2 * edge - 2 - 3 * spacing;
+    const int walk = std::min(hi - lo + 1 + edge, std::max(room, 0));
+    const float glow_end = glow_end_after(sample, best, -near, walk, last);
+    const auto [at_end, peaked] = fit_from(glow_end);
+    // (No line above the glow where it ends, or one that noise drew away from it: the end is all
+    // there is.)
+    const float from_glow_end =
+        peaked && std::abs(at_end - glow_end) <= static_cast<float>(spacing) ? at_end : glow_end;
+    if (std::abs(from_glow_end - from_brightest) < 0.5f) return from_brightest;
+    // On the glow the samples stay at its level up to its end, where they fall by its step; a
+    // line whose far flank is the sharpest fall stands above the samples just before that fall.
+    // Then it is the line.
+    const float inside = sample(static_cast<int>(std::lround(glow_end + 2.0f * near)));
+    const float past = sample(static_cast<int>(std::lround(glow_end - 2.0f * near)));
+    if (best_value - inside > 0.5f * (inside - past)) return from_brightest;
+    const auto sigma = static_cast<float>(rows_.width_px(v_guess) * kSigmaPerFwhm);
+    const int first =
+        static_cast<int>(std::floor(std::min(from_glow_end, from_brightest))) - 2 * edge;
+    const int end = static_cast<int>(std::ceil(std::max(from_glow_end, from_brightest))) + 2 * edge;
+    const GlowingLineModel model{sigma, near, std::max(first, 0), std::min(end, last)};
+    return model.residual(sample, from_glow_end) < model.residual(sample, from_brightest)
+               ? from_glow_end
+               : from_brightest;
   }
   const float before = sample(best - edge), after = sample(best + edge);
   const float slope = (after - before) / static_cast<float>(2 * edge);

@@ -436,6 +436,61 @@ TEST(Frontend, LineAtTheEdgeOfTheBackgroundStaysSubPixel) {
   EXPECT_LT(worst, 0.05);  // (taken as dark, they moved it by 0.16 rows)
 }
 
+// In glowing water the sheet lights the water in front of the surface, and its glow ends at the
+// line. On a dark patch the line hardly rises above the glow: the brightest sample is noise on the
+// glow, pixels before its end, and the line is where the glow ends.
+TEST(Frontend, LineOnADarkPatchInGlowingWaterIsWhereTheGlowEnds) {
+  ScannerGeometry g = small_geometry();
+  g.sheet_width_m = 0.015;  // a line 3.7 px wide where it runs
+  Frontend frontend(g, {});
+  frontend.reset(g.width, g.height);
+  const int near = frontend.rows().near_side();
+  auto centre = [](int u) { return 128.3 + 0.011 * u; };  // sweeps the sub-pixel phase
+  auto dark = [](int u) { return u >= 100 && u < 220; };
+  std::uint32_t state = 12345;
+  auto noise = [&] {  // uniform in [-3, 3]: sigma about 1.7 grey levels
+    state = state * 1664525u + 1013904223u;
+    return static_cast<double>(state >> 8) / static_cast<double>(1u << 24) * 6.0 - 3.0;
+  };
+  auto render = [&](bool with_dark_patch) {
+    Image image(g.width, g.height, 0);
+    for (int u = 0; u < g.width; ++u) {
+      const bool patch = with_dark_patch && dark(u);
+      const double sigma = frontend.rows().width_px(centre(u)) / 2.3548;
+      for (int v = 0; v < g.height; ++v) {
+        const double d = v - centre(u);
+        const double surface = patch ? 12.0 : 30.0;
+        const double line = (patch ? 2.0 : 50.0) * std::exp(-d * d / (2 * sigma * sigma));
+        // The glow in front of the surface: strongest at the line, fading with distance from it.
+        const double in_front = near * d;
+        const double glow = in_front > 0 ? 20.0 * std::exp(-in_front / 150.0) : 0.0;
+        image.pixels[v * g.width + u] = static_cast<std::uint8_t>(
+            std::clamp(std::round(surface + line + glow + noise()), 0.0, 255.0));
+      }
+    }
+    return image;
+  };
+  Profile out(static_cast<std::size_t>(g.width) * 4);
+  const Image lit = render(false);  // where the line was last found, and that the water glows
+  frontend.set_frame(lit.view());
+  frontend.find_candidates(out);
+  const Image patched = render(true);
+  frontend.set_frame(patched.view());
+  frontend.find_candidates(out);
+  int on_patch = 0, near_centre = 0;
+  double sum = 0;
+  for (const ProfilePoint& p : out.points()) {
+    if (!p.valid || !dark(p.u)) continue;
+    ++on_patch;
+    if (std::abs(p.v - centre(p.u)) <= 1.0) ++near_centre;
+    sum += p.v - centre(p.u);
+  }
+  ASSERT_GT(on_patch, 100);
+  // (Fitted from the brightest sample: half within a pixel, 1.5 px toward the glow on average.)
+  EXPECT_GE(near_centre, on_patch * 9 / 10);
+  EXPECT_LT(std::abs(sum / on_patch), 0.3);
+}
+
 TEST(Detectors, AreMadeByNameAndRefuseImpossibleOptions) {
   DetectorOptions o;
   o.geometry = small_geometry();
