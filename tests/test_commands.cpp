@@ -314,11 +314,13 @@ TEST_F(CommandTest, ThresholdChangesThePointsFoundFromTheNextFrame) {
   EXPECT_EQ(too_high.exit_code, 1) << too_high.out;
   EXPECT_EQ(too_high.out.rfind("refused: detector.maxvalue.threshold: ", 0), 0u) << too_high.out;
   EXPECT_NE(too_high.out.find("300"), std::string::npos) << too_high.out;
+  // The one in force stays, and is said.
+  EXPECT_NE(too_high.out.find(" (in force: 60)\n"), std::string::npos) << too_high.out;
   const auto other = ctl("set detector.frontend.snr_threshold_db 3");
   EXPECT_EQ(other.exit_code, 1) << other.out;
   EXPECT_EQ(other.out,
             "refused: detector.frontend.snr_threshold_db: the detector is maxvalue, its threshold "
-            "is detector.maxvalue.threshold\n");
+            "is detector.maxvalue.threshold (in force: 60)\n");
   EXPECT_EQ(daemon.stop(), 0) << daemon.log();
 }
 
@@ -380,12 +382,14 @@ TEST_F(CommandTest, RegionLimitsThePointsFoundFromTheNextFrame) {
   const auto outside = ctl("set detector.roi 300,0,40,10");
   EXPECT_EQ(outside.exit_code, 1) << outside.out;
   EXPECT_EQ(outside.out,
-            "refused: detector.roi: [300, 0, 40, 10] reaches beyond the 320x240 frame\n");
+            "refused: detector.roi: [300, 0, 40, 10] reaches beyond the 320x240 frame (in force: " +
+                region + ")\n");
   const auto malformed = ctl("set detector.roi 10,10,40");
   EXPECT_EQ(malformed.exit_code, 1) << malformed.out;
   EXPECT_EQ(malformed.out,
             "refused: detector.roi: expected x,y,width,height in pixels (or full), got "
-            "'10,10,40'\n");
+            "'10,10,40' (in force: " +
+                region + ")\n");
 
   const auto full = ctl("set detector.roi full");
   EXPECT_EQ(full.exit_code, 0) << full.out;
@@ -434,6 +438,11 @@ TEST_F(CommandTest, PythonSendsTheSameThroughTheGeneratedTypes) {
   const auto get = run_command(python + "get");
   EXPECT_EQ(get.exit_code, 0) << get.out;
   EXPECT_NE(get.out.find(" detector.roi=100,50,200,150\n"), std::string::npos) << get.out;
+  const auto outside = run_command(python + "set detector.roi 300,0,40,10");
+  EXPECT_EQ(outside.exit_code, 1) << outside.out;
+  EXPECT_EQ(outside.out,
+            "refused: detector.roi: [300, 0, 40, 10] reaches beyond the 320x240 frame (in force: "
+            "100,50,200,150)\n");
 }
 
 // Aravis's fake GigE camera, running until destroyed; ready once Aravis discovers it.

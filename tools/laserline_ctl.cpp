@@ -169,7 +169,13 @@ int run_ctl(int argc, char** argv) {
   }
   const laserline::command_ack_t& ack = answer.ack;
   if (!ack.accepted) {
-    std::printf("refused: %s\n", ack.reason.c_str());
+    // The value that stays in force, where the daemon says it (the operator's next try starts
+    // from it).
+    if (ack.value.empty()) {
+      std::printf("refused: %s\n", ack.reason.c_str());
+    } else {
+      std::printf("refused: %s (in force: %s)\n", ack.reason.c_str(), ack.value.c_str());
+    }
     return 1;
   }
   if (o.name == "get") {

@@ -120,7 +120,10 @@ def main():
         if ack.id != command.id:
             continue  # another sender's
         if not ack.accepted:
-            print("refused: %s" % ack.reason)
+            if ack.value:
+                print("refused: %s (in force: %s)" % (ack.reason, ack.value))
+            else:
+                print("refused: %s" % ack.reason)
             return 1
         if name == "get":
             print(ack.value)
