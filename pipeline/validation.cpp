@@ -17,10 +17,14 @@ namespace {
 constexpr double kChainCodeWeight = 4.0;
 constexpr double kShiftMargin = 0.05;
 
-double box_distance(const LineSegment& a, const LineSegment& b) {
+// Whether the bounding boxes of a and b lie more than `distance` apart.
+bool boxes_farther_than(const LineSegment& a, const LineSegment& b, double distance) {
   const double du = std::max({0, a.u_min - b.u_max, b.u_min - a.u_max});
   const double dv = std::max({0.0f, a.v_min - b.v_max, b.v_min - a.v_max});
-  return std::hypot(du, dv);
+  // hypot(du, dv) is at least the larger of them, rounded too: most pairs of a frame's segments
+  // are told apart without it (it was a tenth of `backprojection`'s time).
+  if (du > distance || dv > distance) return true;
+  return std::hypot(du, dv) > distance;
 }
 
 using Vector3 = Eigen::Vector3d;
@@ -175,7 +179,7 @@ void match_by_chain_code(const SegmentedFrame& previous, const SegmentedFrame& c
   const double w = kChainCodeWeight;
   for (std::size_t t = 0; t < previous.segments.size(); ++t) {
     const LineSegment& other = previous.segments[t];
-    if (box_distance(s, other) > options.max_box_distance_px) continue;
+    if (boxes_farther_than(s, other, options.max_box_distance_px)) continue;
     const float* b = previous.chain_code.data() + other.code_first - other.u_min;
     const double shorter = std::min(s.u_max - s.u_min, other.u_max - other.u_min);
     SegmentMatch best;
