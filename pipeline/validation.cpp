@@ -52,8 +52,9 @@ void SegmentedFrame::clear() {
 }
 
 void SegmentationScratch::reset(std::size_t max_points) {
-  for (std::vector<int>* v : {&order, &next, &head, &tail, &count, &active})
+  for (std::vector<int>* v : {&order, &next, &head, &tail, &count, &active, &active_u})
     v->assign(max_points, 0);
+  active_v.assign(max_points, 0.0f);
 }
 
 void segment_candidates(const Profile& profile, const ValidationOptions& options,
@@ -80,6 +81,10 @@ void segment_candidates(const Profile& profile, const ValidationOptions& options
   int* tail = scratch.tail.data();
   int* count = scratch.count.data();
   int* active = scratch.active.data();
+  // Where each active segment ends (its tail's u and v), beside it: the scan below reads them for
+  // every candidate.
+  int* active_u = scratch.active_u.data();
+  float* active_v = scratch.active_v.data();
   int building = 0, active_count = 0;
   for (int i = 0; i < n; ++i) {
     const int p = order[i];
@@ -88,29 +93,39 @@ void segment_candidates(const Profile& profile, const ValidationOptions& options
     if (i == 0 || pts[order[i - 1]].u != point.u) {
       // New column: segments that ended too far to the left can no longer grow.
       int kept = 0;
-      for (int a = 0; a < active_count; ++a)
-        if (pts[tail[active[a]]].u >= point.u - column_gap) active[kept++] = active[a];
+      for (int a = 0; a < active_count; ++a) {
+        if (active_u[a] >= point.u - column_gap) {
+          active[kept] = active[a];
+          active_u[kept] = active_u[a];
+          active_v[kept] = active_v[a];
+          ++kept;
+        }
+      }
       active_count = kept;
     }
     int best = -1;
     double best_d2 = gap2;
     for (int a = 0; a < active_count; ++a) {
-      const ProfilePoint& end = pts[tail[active[a]]];
-      if (end.u >= point.u) continue;  // already extended in this column
-      const double du = point.u - end.u, dv = point.v - end.v;
+      if (active_u[a] >= point.u) continue;  // already extended in this column
+      const double du = point.u - active_u[a], dv = point.v - active_v[a];
       const double d2 = du * du + dv * dv;
       if (d2 <= best_d2) {
         best_d2 = d2;
-        best = active[a];
+        best = a;
       }
     }
     if (best >= 0) {
-      next[tail[best]] = p;
-      tail[best] = p;
-      ++count[best];
+      const int segment = active[best];
+      next[tail[segment]] = p;
+      tail[segment] = p;
+      ++count[segment];
+      active_u[best] = point.u;
+      active_v[best] = point.v;
     } else {
       head[building] = tail[building] = p;
       count[building] = 1;
+      active_u[active_count] = point.u;
+      active_v[active_count] = point.v;
       active[active_count++] = building++;
     }
   }

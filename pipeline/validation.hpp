@@ -130,6 +130,8 @@ struct SegmentedFrame {
 struct SegmentationScratch {
   std::vector<int> order, next;                // per candidate
   std::vector<int> head, tail, count, active;  // per segment being built
+  std::vector<int> active_u;                   // per active segment: where it ends
+  std::vector<float> active_v;
   void reset(std::size_t max_points);
 };
 
