@@ -194,6 +194,8 @@ void match_by_chain_code(const SegmentedFrame& previous, const SegmentedFrame& c
   const double w = kChainCodeWeight;
   for (std::size_t t = 0; t < previous.segments.size(); ++t) {
     const LineSegment& other = previous.segments[t];
+    // (By first column: the segments from here on all start too far right.)
+    if (other.u_min - s.u_max > options.max_box_distance_px) break;
     if (boxes_farther_than(s, other, options.max_box_distance_px)) continue;
     const float* b = previous.chain_code.data() + other.code_first - other.u_min;
     const double shorter = std::min(s.u_max - s.u_min, other.u_max - other.u_min);
