@@ -40,7 +40,6 @@ void LineSelector::reset(int lines, int per_line) {
   line_best_.assign(lanes, 0.0f);
   line_from_.assign(lanes, -1);
   line_unary_.assign(lanes, 0.0f);
-  gap_reach_.assign(static_cast<std::size_t>(options_.max_gap) + 1, 0.0f);
   has_previous_ = false;
 }
 
@@ -123,21 +122,13 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
     }
     // The candidates of the line all at once against each line before it: a line before can only
     // improve a candidate whose best is below that line's best total less the gap's cost (the jump
-    // costs nothing at best), nor can any line beyond it when none of them is above (reach[gap]).
+    // costs nothing at best).
     const int gaps = std::min(o.max_gap, line - 1);
     if (n > 0 && gaps >= 0) {
       float least = best[0];
       for (int i = 1; i < n; ++i)
         least = std::min(least, best[i]);
-      float* reach = gap_reach_.data();
-      reach[gaps] = column_best_[static_cast<std::size_t>(line - 1 - gaps)] -
-                    gap_cost * static_cast<float>(gaps);
-      for (int gap = gaps - 1; gap >= 0; --gap) {
-        reach[gap] =
-            std::max(reach[gap + 1], column_best_[static_cast<std::size_t>(line - 1 - gap)] -
-                                         gap_cost * static_cast<float>(gap));
-      }
-      for (int gap = 0; gap <= gaps && reach[gap] > least; ++gap) {
+      for (int gap = 0; gap <= gaps; ++gap) {
         const int before = line - 1 - gap;
         const float skipped = gap_cost * static_cast<float>(gap);
         if (column_best_[static_cast<std::size_t>(before)] - skipped <= least) continue;

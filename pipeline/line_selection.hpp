@@ -82,7 +82,6 @@ class LineSelector {
   // before its own amplitude, from where, its amplitude's part.
   std::vector<float> line_position_, line_best_, line_unary_;
   std::vector<std::int32_t> line_from_;
-  std::vector<float> gap_reach_;  // per gap: the most any line that far back or farther can give
   bool has_previous_ = false;
 };
 
