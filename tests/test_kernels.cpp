@@ -398,6 +398,31 @@ TEST(Kernels, ColumnMaximaMatchTheReference) {
   });
 }
 
+TEST(Kernels, DownsampleRowMatchesTheReference) {
+  for_each_target([] {
+    std::mt19937 random(8);
+    for (const int width : kWidths) {
+      const auto a =
+          random_values<std::uint8_t>(random, 2 * static_cast<std::size_t>(width), 0, 255);
+      const auto b =
+          random_values<std::uint8_t>(random, 2 * static_cast<std::size_t>(width), 0, 255);
+      std::vector<std::uint8_t> out(static_cast<std::size_t>(width) + 1, 7), expected = out;
+      reference::downsample_row(a.data(), b.data(), width, expected.data());
+      downsample_row(a.data(), b.data(), width, out.data());
+      ASSERT_EQ(out, expected) << "width " << width;
+    }
+    // Four pixels at 255 and at 0, and sums just under and at a multiple of 4 (rounding).
+    const std::vector<std::uint8_t> high(64, 255), low(64, 0), odd(64, 1);
+    std::vector<std::uint8_t> out(32);
+    downsample_row(high.data(), high.data(), 32, out.data());
+    EXPECT_EQ(out[0], 255);
+    downsample_row(low.data(), odd.data(), 32, out.data());
+    EXPECT_EQ(out[31], 1);  // (2 + 2) / 4
+    downsample_row(low.data(), low.data(), 32, out.data());
+    EXPECT_EQ(out[5], 0);
+  });
+}
+
 TEST(Kernels, Transpose16MatchesTheReference) {
   for_each_target([] {
     std::mt19937 random(8);

@@ -178,12 +178,17 @@ void column_maxima(const std::uint8_t* image, std::ptrdiff_t stride, int begin, 
 void transpose16(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
                  std::ptrdiff_t dst_stride);
 
+// The 2 x 2 box average (rounded half up) of rows a and b into `count` pixels of out: out[u] from
+// a and b at 2u and 2u + 1.
+void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std::uint8_t* out);
+
 namespace reference {
 void column_maxima(const std::uint8_t* image, std::ptrdiff_t stride, int begin, int end, int height,
                    std::uint8_t* max, std::uint16_t* first, std::uint16_t* last,
                    std::uint32_t* sum);
 void transpose16(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
                  std::ptrdiff_t dst_stride);
+void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std::uint8_t* out);
 void refine_columns(const RefineColumns& columns, int n, float* rows);
 // (Reads and writes only the candidates i < n.)
 void best_priors(const PriorLine& line, int n, float* best, std::int32_t* from,
