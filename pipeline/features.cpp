@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "pipeline/kernels/kernels.hpp"
 #include "pipeline/motion.hpp"
 #include "pipeline/motion_internal.hpp"
 
@@ -30,23 +31,12 @@ template <typename Body>
     body(i);
 }
 
-// 2x2 box average (rounded) of rows a and b into `count` pixels of out.
-[[gnu::noinline]] void downsample_row(const std::uint8_t* __restrict a,
-                                      const std::uint8_t* __restrict b,
-                                      std::uint8_t* __restrict out, int count) {
-  for_each_index(0, count, [&](int u) {
-    const unsigned sum = 2u + a[2 * u] + a[2 * u + 1] + b[2 * u] + b[2 * u + 1];
-    out[u] = static_cast<std::uint8_t>(sum >> 2);
-  });
-}
-
 // Rows [first, end) of `coarse`, from the rows twice as far down of the finer image.
 void downsample_rows(const std::uint8_t* fine, std::ptrdiff_t stride, Level& coarse, int first,
                      int end) {
   for (int v = first; v < end; ++v) {
-    downsample_row(fine + 2 * v * stride, fine + (2 * v + 1) * stride,
-                   coarse.pixels.data() + static_cast<std::ptrdiff_t>(v) * coarse.width,
-                   coarse.width);
+    kernels::downsample_row(fine + 2 * v * stride, fine + (2 * v + 1) * stride, coarse.width,
+                            coarse.pixels.data() + static_cast<std::ptrdiff_t>(v) * coarse.width);
   }
 }
 

@@ -5,11 +5,19 @@
 #include <limits>
 #include <stdexcept>
 
+#include "pipeline/kernels/kernels.hpp"
+
 namespace laserline::pipeline {
 
 namespace {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+// The scratch of the line in hand holds whole vectors of candidates (kernels::best_priors()).
+std::size_t whole_lanes(int candidates) {
+  constexpr int lanes = kernels::kSelectionLanes;
+  return static_cast<std::size_t>((candidates + lanes - 1) / lanes * lanes);
+}
 
 }  // namespace
 
@@ -24,11 +32,14 @@ void LineSelector::reset(int lines, int per_line) {
   score_.assign(candidates, 0.0f);
   position_.assign(candidates, 0.0f);
   from_.assign(candidates, -1);
-  prefix_best_.assign(static_cast<std::size_t>(lines), 0.0f);
   column_best_.assign(static_cast<std::size_t>(lines), 0.0f);
-  prefix_at_.assign(static_cast<std::size_t>(lines), -1);
   previous_.assign(candidates, kNaN);
   previous_count_.assign(static_cast<std::size_t>(lines), 0);
+  const std::size_t lanes = whole_lanes(per_line);
+  line_position_.assign(lanes, 0.0f);
+  line_best_.assign(lanes, 0.0f);
+  line_from_.assign(lanes, -1);
+  line_unary_.assign(lanes, 0.0f);
   has_previous_ = false;
 }
 
@@ -65,76 +76,84 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
 
   float running_best = 0.0f;  // the best total of any path so far (the empty path: 0)
   std::int32_t running_at = -1;
+  float* __restrict best = line_best_.data();
+  std::int32_t* __restrict from = line_from_.data();
+  float* __restrict unary = line_unary_.data();
   for (int line = 0; line < lines_; ++line) {
-    prefix_best_[static_cast<std::size_t>(line)] = running_best;
-    prefix_at_[static_cast<std::size_t>(line)] = running_at;
     const int n = counts[static_cast<std::size_t>(line)];
+    float* __restrict position = line_position_.data();
     for (int i = 0; i < n; ++i) {
-      position_[static_cast<std::size_t>(line * k + i)] =
-          candidates[static_cast<std::size_t>(line * k + i)].position;
+      position[i] = candidates[static_cast<std::size_t>(line * k + i)].position;
+      position_[static_cast<std::size_t>(line * k + i)] = position[i];
     }
     const float* previous = previous_.data() + static_cast<std::ptrdiff_t>(line) * k;
     const int previous_count = previous_count_[static_cast<std::size_t>(line)];
+    // Both this line's and the previous frame's candidates are sorted by position: a previous one
+    // too far below a candidate is too far below the candidates after it as well.
+    int previous_first = 0;
     for (int i = 0; i < n; ++i) {
-      const std::int32_t at = line * k + i;
-      const LineCandidate& c = candidates[static_cast<std::size_t>(at)];
-      float unary = std::min(c.amplitude_db - threshold_db, cap);
+      const LineCandidate& c = candidates[static_cast<std::size_t>(line * k + i)];
+      unary[i] = std::min(c.amplitude_db - threshold_db, cap);
+      while (previous_first < previous_count && previous[previous_first] < c.position &&
+             std::abs(c.position - previous[previous_first]) > tolerance) {
+        ++previous_first;
+      }
       bool persistent = false;
-      for (int j = 0; j < previous_count; ++j) {
+      for (int j = previous_first; j < previous_count; ++j) {
         if (std::abs(c.position - previous[j]) <= tolerance) {
           persistent = true;
           break;
         }
+        if (previous[j] > c.position) break;  // and farther above from here on
       }
-      if (persistent) unary += bonus;
+      if (persistent) unary[i] += bonus;
       // A new piece of curve after the best path so far, or the continuation of a piece that
       // ended at most max_gap lines before. A new piece far from where that path ended pays the
       // jump cost too, up to a second restart: glints and texture edges start anywhere, the
       // laser resumes near where it was seen (beyond an occlusion, or after a depth jump).
-      float best = running_best - restart;
+      best[i] = running_best - restart;
       if (running_at >= 0) {
         const float lines_between = static_cast<float>(line - running_at / k);
         const float jump =
             std::abs(c.position - candidates[static_cast<std::size_t>(running_at)].position);
-        best -= std::min(restart, jump_cost * std::max(0.0f, jump - free * lines_between));
+        best[i] -= std::min(restart, jump_cost * std::max(0.0f, jump - free * lines_between));
       }
-      std::int32_t from = running_at;
-      for (int gap = 0; gap <= o.max_gap && line - 1 - gap >= 0; ++gap) {
+      from[i] = running_at;
+    }
+    // The candidates of the line all at once against each line before it: a line before can only
+    // improve a candidate whose best is below that line's best total less the gap's cost (the jump
+    // costs nothing at best).
+    const int gaps = std::min(o.max_gap, line - 1);
+    if (n > 0 && gaps >= 0) {
+      float least = best[0];
+      for (int i = 1; i < n; ++i)
+        least = std::min(least, best[i]);
+      for (int gap = 0; gap <= gaps; ++gap) {
         const int before = line - 1 - gap;
         const float skipped = gap_cost * static_cast<float>(gap);
-        // (No candidate of that line can do better: the jump costs nothing at best.)
-        if (column_best_[static_cast<std::size_t>(before)] - skipped <= best) continue;
-        const int m = counts[static_cast<std::size_t>(before)];
-        const float allowed = free * static_cast<float>(gap + 1);
-        const float* prior_score = score_.data() + static_cast<std::ptrdiff_t>(before) * k;
-        const float* prior_position = position_.data() + static_cast<std::ptrdiff_t>(before) * k;
-        // The best prior first (a branch-free reduction), its index only when it improves.
-        float best_here = -std::numeric_limits<float>::infinity();
-        for (int j = 0; j < m; ++j) {
-          const float jump = std::abs(c.position - prior_position[j]);
-          best_here =
-              std::max(best_here, prior_score[j] - jump_cost * std::max(0.0f, jump - allowed));
-        }
-        if (best_here - skipped > best) {
-          best = best_here - skipped;
-          for (int j = 0; j < m; ++j) {
-            const float jump = std::abs(c.position - prior_position[j]);
-            if (prior_score[j] - jump_cost * std::max(0.0f, jump - allowed) == best_here) {
-              from = before * k + j;
-              break;
-            }
-          }
-        }
+        if (column_best_[static_cast<std::size_t>(before)] - skipped <= least) continue;
+        const kernels::PriorLine prior{position_.data() + static_cast<std::ptrdiff_t>(before) * k,
+                                       score_.data() + static_cast<std::ptrdiff_t>(before) * k,
+                                       counts[static_cast<std::size_t>(before)],
+                                       free * static_cast<float>(gap + 1),
+                                       jump_cost,
+                                       skipped,
+                                       before * k};
+        kernels::best_priors(prior, n, best, from, position);
+        least = best[0];
+        for (int i = 1; i < n; ++i)
+          least = std::min(least, best[i]);
       }
-      score_[static_cast<std::size_t>(at)] = unary + best;
-      from_[static_cast<std::size_t>(at)] = from;
     }
     float column_best = -std::numeric_limits<float>::infinity();
     for (int i = 0; i < n; ++i) {
       const std::int32_t at = line * k + i;
-      column_best = std::max(column_best, score_[static_cast<std::size_t>(at)]);
-      if (score_[static_cast<std::size_t>(at)] > running_best) {
-        running_best = score_[static_cast<std::size_t>(at)];
+      const float score = unary[i] + best[i];
+      score_[static_cast<std::size_t>(at)] = score;
+      from_[static_cast<std::size_t>(at)] = from[i];
+      column_best = std::max(column_best, score);
+      if (score > running_best) {
+        running_best = score;
         running_at = at;
       }
     }

@@ -72,14 +72,16 @@ class LineSelector {
  private:
   LineSelectionOptions options_;
   int lines_ = 0, per_line_ = 0;
-  std::vector<float> score_;             // per candidate: the best total of a path ending there
-  std::vector<float> position_;          // per candidate: its position (contiguous per line)
-  std::vector<std::int32_t> from_;       // per candidate: its predecessor on that path, -1 none
-  std::vector<float> column_best_;       // per line: the best total of a path ending on it
-  std::vector<float> prefix_best_;       // per line: the best total of any path before it (>= 0)
-  std::vector<std::int32_t> prefix_at_;  // ... and the candidate it ends at, -1 the empty path
-  std::vector<float> previous_;          // per line: the previous frame's candidates' positions
+  std::vector<float> score_;        // per candidate: the best total of a path ending there
+  std::vector<float> position_;     // per candidate: its position (contiguous per line)
+  std::vector<std::int32_t> from_;  // per candidate: its predecessor on that path, -1 none
+  std::vector<float> column_best_;  // per line: the best total of a path ending on it
+  std::vector<float> previous_;     // per line: the previous frame's candidates' positions
   std::vector<std::uint8_t> previous_count_;
+  // The line in hand, per candidate (in whole groups of lanes): its position, its best total
+  // before its own amplitude, from where, its amplitude's part.
+  std::vector<float> line_position_, line_best_, line_unary_;
+  std::vector<std::int32_t> line_from_;
   bool has_previous_ = false;
 };
 

@@ -111,8 +111,8 @@ struct SegmentPoint {
 
 // The segments of one frame. Capacity fixed by reset(); filling it does not allocate.
 struct SegmentedFrame {
-  std::vector<SegmentPoint> points;  // grouped by segment, each by increasing column
-  std::vector<LineSegment> segments;
+  std::vector<SegmentPoint> points;   // grouped by segment, each by increasing column
+  std::vector<LineSegment> segments;  // by first column (u_min), as segment_candidates() makes
   // Per segment, from code_first: its row at every column of its box (linear between candidates)
   // and its chain code, the row step from each column to the next.
   std::vector<float> rows;
@@ -130,6 +130,8 @@ struct SegmentedFrame {
 struct SegmentationScratch {
   std::vector<int> order, next;                // per candidate
   std::vector<int> head, tail, count, active;  // per segment being built
+  std::vector<int> active_u;                   // per active segment: where it ends
+  std::vector<float> active_v;
   void reset(std::size_t max_points);
 };
 

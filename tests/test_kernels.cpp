@@ -270,6 +270,48 @@ TEST(Kernels, WindowSumMatchesTheReference) {
   });
 }
 
+// Candidates against the candidates of a line before, on a coarse grid of positions and totals
+// so that priors tie (the first of equals is chosen) and totals tie with the best so far (kept).
+TEST(Kernels, BestPriorsMatchTheReference) {
+  for_each_target([] {
+    std::mt19937 random(7);
+    auto grid = [&](int steps, float step) { return step * static_cast<float>(random() % steps); };
+    for (const int n : {0, 1, 3, 7, 8, 9, 16, 17, 40}) {
+      for (const int m : {0, 1, 2, 8, 33}) {
+        for (int trial = 0; trial < 20; ++trial) {
+          const std::size_t padded =
+              static_cast<std::size_t>((n + kSelectionLanes - 1) / kSelectionLanes) *
+              kSelectionLanes;
+          std::vector<float> position(padded), prior(static_cast<std::size_t>(m)),
+              score(static_cast<std::size_t>(m)), best(padded);
+          std::vector<std::int32_t> from(padded);
+          for (std::size_t i = 0; i < padded; ++i) {
+            position[i] = grid(40, 0.5f);
+            best[i] = grid(30, 1.0f) - 10.0f;
+            from[i] = static_cast<std::int32_t>(random() % 100) - 1;
+          }
+          for (std::size_t j = 0; j < prior.size(); ++j) {
+            prior[j] = grid(40, 0.5f);
+            score[j] = grid(20, 1.0f);
+          }
+          const PriorLine line{prior.data(),  score.data(),  m,       grid(4, 1.0f),
+                               grid(3, 1.0f), grid(3, 1.0f), 1000 + m};
+          std::vector<float> expected_best = best;
+          std::vector<std::int32_t> expected_from = from;
+          reference::best_priors(line, n, expected_best.data(), expected_from.data(),
+                                 position.data());
+          best_priors(line, n, best.data(), from.data(), position.data());
+          for (int i = 0; i < n; ++i) {
+            const auto at = static_cast<std::size_t>(i);
+            ASSERT_EQ(best[at], expected_best[at]) << "n " << n << ", m " << m << ", i " << i;
+            ASSERT_EQ(from[at], expected_from[at]) << "n " << n << ", m " << m << ", i " << i;
+          }
+        }
+      }
+    }
+  });
+}
+
 // Columns with a Gaussian line, some clipped (at the image's ends too), on a textured frame
 // minus a textured background seen along slanted lines through it.
 TEST(Kernels, RefineColumnsMatchTheReference) {
@@ -353,6 +395,31 @@ TEST(Kernels, ColumnMaximaMatchTheReference) {
         }
       }
     }
+  });
+}
+
+TEST(Kernels, DownsampleRowMatchesTheReference) {
+  for_each_target([] {
+    std::mt19937 random(8);
+    for (const int width : kWidths) {
+      const auto a =
+          random_values<std::uint8_t>(random, 2 * static_cast<std::size_t>(width), 0, 255);
+      const auto b =
+          random_values<std::uint8_t>(random, 2 * static_cast<std::size_t>(width), 0, 255);
+      std::vector<std::uint8_t> out(static_cast<std::size_t>(width) + 1, 7), expected = out;
+      reference::downsample_row(a.data(), b.data(), width, expected.data());
+      downsample_row(a.data(), b.data(), width, out.data());
+      ASSERT_EQ(out, expected) << "width " << width;
+    }
+    // Four pixels at 255 and at 0, and sums just under and at a multiple of 4 (rounding).
+    const std::vector<std::uint8_t> high(64, 255), low(64, 0), odd(64, 1);
+    std::vector<std::uint8_t> out(32);
+    downsample_row(high.data(), high.data(), 32, out.data());
+    EXPECT_EQ(out[0], 255);
+    downsample_row(low.data(), odd.data(), 32, out.data());
+    EXPECT_EQ(out[31], 1);  // (2 + 2) / 4
+    downsample_row(low.data(), low.data(), 32, out.data());
+    EXPECT_EQ(out[5], 0);
   });
 }
 

@@ -119,6 +119,26 @@ TEST(Segmentation, LinksNeighboursAndDropsShortRuns) {
   EXPECT_NEAR(frame.row_at(dotted, 40), 500.0f, 1e-4);  // filled between candidates
 }
 
+// The chain-code matching stops at the first segment starting too far right: the segments come
+// by first column, whatever order the candidates came in.
+TEST(Segmentation, SegmentsComeByFirstColumn) {
+  Profile profile(400);
+  for (int k = 0; k < 40; ++k) {
+    const int start = (k * 37) % 200;  // pieces starting anywhere, added out of order
+    for (int u = start; u < start + 8; ++u)
+      profile.add({u, 10.0f * static_cast<float>(k)});
+  }
+  ValidationOptions options;
+  SegmentedFrame frame;
+  frame.reset(profile.capacity(), options.max_neighbour_gap_px);
+  SegmentationScratch scratch;
+  scratch.reset(profile.capacity());
+  segment_candidates(profile, options, frame, scratch);
+  ASSERT_EQ(frame.segments.size(), 40u);
+  for (std::size_t t = 1; t < frame.segments.size(); ++t)
+    EXPECT_LE(frame.segments[t - 1].u_min, frame.segments[t].u_min) << t;
+}
+
 TEST(ChainCode, MatchFindsTheShiftAlongTheLine) {
   ValidationOptions options;
   SegmentationScratch scratch;

@@ -1,5 +1,6 @@
-// Kernels over whole images: the per-column maxima of the maxvalue detector, and the transpose of
-// a frame into the search image (a laser beside the camera). Compiled once per target
+// Kernels over whole images: the per-column maxima of the maxvalue detector, the transpose of
+// a frame into the search image (a laser beside the camera), and the halving of the motion
+// estimate's image pyramid. Compiled once per target
 // (foreach_target.h); the scalar references at the end.
 #include <algorithm>
 #include <array>
@@ -194,6 +195,31 @@ void Transpose16(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_
 #endif
 }
 
+// Pairs of pixels as 16-bit lanes (which byte is which does not matter: they are summed), so that
+// the sums of four fit, then narrowed back to bytes.
+void DownsampleRow(const std::uint8_t* a, const std::uint8_t* b, int count, std::uint8_t* out) {
+#if HWY_TARGET == HWY_SCALAR
+  reference::downsample_row(a, b, count, out);
+#else
+  const hn::ScalableTag<std::uint16_t> d;
+  const hn::RebindToSigned<decltype(d)> di;
+  const hn::Rebind<std::uint8_t, decltype(di)> d8;
+  const hn::Repartition<std::uint8_t, decltype(d)> bytes;
+  const auto n = static_cast<int>(hn::Lanes(d));
+  const auto low = hn::Set(d, 0xFF);
+  const auto two = hn::Set(d, 2);
+  int u = 0;
+  for (; u + n <= count; u += n) {
+    const auto pa = hn::BitCast(d, hn::LoadU(bytes, a + 2 * u));
+    const auto pb = hn::BitCast(d, hn::LoadU(bytes, b + 2 * u));
+    const auto sum = hn::Add(hn::Add(hn::And(pa, low), hn::ShiftRight<8>(pa)),
+                             hn::Add(hn::Add(hn::And(pb, low), hn::ShiftRight<8>(pb)), two));
+    hn::StoreU(hn::DemoteTo(d8, hn::BitCast(di, hn::ShiftRight<2>(sum))), d8, out + u);
+  }
+  if (u < count) reference::downsample_row(a + 2 * u, b + 2 * u, count - u, out + u);
+#endif
+}
+
 }  // namespace HWY_NAMESPACE
 }  // namespace laserline::pipeline::kernels
 HWY_AFTER_NAMESPACE();
@@ -203,6 +229,11 @@ namespace laserline::pipeline::kernels {
 
 HWY_EXPORT(ColumnMaxima);
 HWY_EXPORT(Transpose16);
+HWY_EXPORT(DownsampleRow);
+
+void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std::uint8_t* out) {
+  HWY_DYNAMIC_DISPATCH(DownsampleRow)(a, b, count, out);
+}
 
 void column_maxima(const std::uint8_t* image, std::ptrdiff_t stride, int begin, int end, int height,
                    std::uint8_t* max, std::uint16_t* first, std::uint16_t* last,
@@ -242,6 +273,13 @@ void transpose16(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_
   for (int y = 0; y < 16; ++y) {
     for (int x = 0; x < 16; ++x)
       dst[x * dst_stride + y] = src[y * src_stride + x];
+  }
+}
+
+void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std::uint8_t* out) {
+  for (int u = 0; u < count; ++u) {
+    const unsigned sum = 2u + a[2 * u] + a[2 * u + 1] + b[2 * u] + b[2 * u + 1];
+    out[u] = static_cast<std::uint8_t>(sum >> 2);
   }
 }
 

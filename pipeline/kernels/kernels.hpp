@@ -144,6 +144,28 @@ struct RefineColumns {
 void refine_columns(const RefineColumns& columns, int n, float* rows);
 
 // ---------------------------------------------------------------------------------------------
+// The line selection (pipeline/line_selection.cpp; pipeline/kernels/selection_kernels.cpp).
+
+// A line before the line in hand: its candidates' positions and best totals, j < count; the jump
+// it allows for free, the cost per pixel beyond, the cost of the lines skipped to reach it; its
+// first candidate's index.
+struct PriorLine {
+  const float* position;
+  const float* score;
+  int count;
+  float allowed, jump_cost, skipped;
+  std::int32_t first;
+};
+// Per candidate i < n at position[i]: its best through the line,
+//   max over j of score[j] - jump_cost * max(0, |position[i] - position[j]| - allowed) - skipped,
+// where that is above best[i], replaces it, and from[i] = first + the first j that gives it.
+// Reads position and reads and writes best and from up to the next multiple of kSelectionLanes
+// past n (what lies there is overwritten).
+constexpr int kSelectionLanes = 8;
+void best_priors(const PriorLine& line, int n, float* best, std::int32_t* from,
+                 const float* position);
+
+// ---------------------------------------------------------------------------------------------
 // Whole images (pipeline/kernels/image_kernels.cpp).
 
 // Per column u in [begin, end) of an image `height` rows high (at most 65535): its largest value,
@@ -156,13 +178,21 @@ void column_maxima(const std::uint8_t* image, std::ptrdiff_t stride, int begin, 
 void transpose16(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
                  std::ptrdiff_t dst_stride);
 
+// The 2 x 2 box average (rounded half up) of rows a and b into `count` pixels of out: out[u] from
+// a and b at 2u and 2u + 1.
+void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std::uint8_t* out);
+
 namespace reference {
 void column_maxima(const std::uint8_t* image, std::ptrdiff_t stride, int begin, int end, int height,
                    std::uint8_t* max, std::uint16_t* first, std::uint16_t* last,
                    std::uint32_t* sum);
 void transpose16(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
                  std::ptrdiff_t dst_stride);
+void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std::uint8_t* out);
 void refine_columns(const RefineColumns& columns, int n, float* rows);
+// (Reads and writes only the candidates i < n.)
+void best_priors(const PriorLine& line, int n, float* best, std::int32_t* from,
+                 const float* position);
 void interpolate_row(const std::uint8_t* a, const std::uint8_t* b, std::uint16_t fb, int shift,
                      int count, std::uint16_t* out);
 void difference_row(const WarpRow& row);
