@@ -621,7 +621,7 @@ PlaneCalibrationResult calibrate_laser_plane(const std::vector<CalibrationView>&
   result.calibration.camera = cam;
   hal::LaserMount& laser = result.calibration.laser;
   laser = o.laser_prior;
-  laser.plane = std::array<double, 4>{plane.normal[0], plane.normal[1], plane.normal[2], plane.e};
+  laser.plane = Eigen::Vector4d{plane.normal[0], plane.normal[1], plane.normal[2], plane.e};
   // The sheet's width as the camera sees it (its thickness, blurred by the optics): the
   // front-end's band-pass is made for it. A third of the inliers must give it.
   result.width_points = static_cast<int>(widths.size());
