@@ -57,7 +57,8 @@ void BM_naive_triangulation(benchmark::State& state) {
       pixels[i] = {static_cast<float>(profile.points()[i].u), profile.points()[i].v};
     cv::undistortPoints(pixels, normalised, k, distortion);
     auto points = profile.mutable_points();
-    const auto& [a, b, c, e] = g.laser_plane;
+    const double a = g.laser_plane[0], b = g.laser_plane[1], c = g.laser_plane[2],
+                 e = g.laser_plane[3];
     for (std::size_t i = 0; i < normalised.size(); ++i) {
       const double z = -e / (a * normalised[i].x + b * normalised[i].y + c);
       points[i].xyz = {static_cast<float>(normalised[i].x * z),

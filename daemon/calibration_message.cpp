@@ -20,7 +20,7 @@ laserline::calibration_t calibration_message(const hal::Calibration& calibration
   m.cx = c.cx;
   m.cy = c.cy;
   std::copy(c.distortion.begin(), c.distortion.end(), m.distortion);
-  const std::array<double, 4> plane = calibration.laser.plane_coefficients();
+  const Eigen::Vector4d plane = calibration.laser.plane_coefficients();
   std::copy(plane.begin(), plane.end(), m.laser_plane);
   m.sheet_width_m = calibration.laser.sheet_width_m;
   m.instance_id = instance_id;
@@ -64,7 +64,7 @@ bool calibration_from_message(const laserline::calibration_t& m, hal::Calibratio
   c.camera.cx = m.cx;
   c.camera.cy = m.cy;
   std::copy(std::begin(m.distortion), std::end(m.distortion), c.camera.distortion.begin());
-  c.laser.plane = std::array<double, 4>{n[0], n[1], n[2], n[3]};
+  c.laser.plane = Eigen::Vector4d{n[0], n[1], n[2], n[3]};
   c.laser.sheet_width_m = m.sheet_width_m;
   const std::uint64_t id = hal::calibration_id(c);
   if (id != static_cast<std::uint64_t>(m.calibration_id)) {

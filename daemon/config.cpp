@@ -110,9 +110,9 @@ std::uint64_t heap_in_use() {
 // The sheet as the calibration gives it: the plane, or the mount it is computed from.
 std::string describe_sheet(const hal::LaserMount& laser) {
   if (laser.plane) {
-    const auto& [a, b, c, e] = *laser.plane;
-    return "the sheet [" + format_number(a) + ", " + format_number(b) + ", " + format_number(c) +
-           ", " + format_number(e) + "]";
+    const Eigen::Vector4d& p = *laser.plane;
+    return "the sheet [" + format_number(p[0]) + ", " + format_number(p[1]) + ", " +
+           format_number(p[2]) + ", " + format_number(p[3]) + "]";
   }
   const bool beside = laser.side == hal::LaserSide::kLeft || laser.side == hal::LaserSide::kRight;
   return std::string("the sheet of a laser ") + hal::to_string(laser.side) + (beside ? " of" : "") +

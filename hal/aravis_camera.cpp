@@ -48,8 +48,7 @@ bool AravisCamera::open(std::string* error) {
                  std::vector<std::uint8_t>(payload_bytes_, 0));
   stopped_.store(false, std::memory_order_release);
   clock_.reset();
-  have_frame_id_ = false;
-  next_sequence_ = 0;
+  sequence_.reset();
   backoff_.reset();
   return connect(error);
 }
@@ -102,7 +101,7 @@ bool AravisCamera::connect(std::string* error) {
   silent_ns_ = 0;
   // The camera may count frames from anywhere after a reconnect: sequence numbers continue
   // from ours instead.
-  have_frame_id_ = false;
+  sequence_.restart();
   return true;
 }
 
@@ -237,26 +236,9 @@ GrabStatus AravisCamera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
     const std::uint64_t frame_id = arv_buffer_get_frame_id(buffer);
     arv_stream_push_buffer(stream_, buffer);
 
-    // Frame ids: GigE Vision 1 wraps at 16 bits and skips 0; after a reconnect the camera may
-    // start again, so our sequence continues from where it was.
-    if (!have_frame_id_) {
-      sequence_base_ =
-          static_cast<std::int64_t>(next_sequence_) - static_cast<std::int64_t>(frame_id);
-      have_frame_id_ = true;
-    } else if (frame_id < last_frame_id_ && last_frame_id_ - frame_id > 32768 &&
-               last_frame_id_ <= 65535) {
-      sequence_base_ += 65535;
-    }
-    last_frame_id_ = frame_id;
-    const std::uint64_t expected = next_sequence_;
-    next_sequence_ =
-        static_cast<std::uint64_t>(sequence_base_ + static_cast<std::int64_t>(frame_id)) + 1;
-    if (next_sequence_ > expected + 1) {
-      CameraHealthCounters::add(counters_.skipped_frames,
-                                static_cast<std::int64_t>(next_sequence_ - expected - 1));
-    }
-
-    info.sequence = next_sequence_ - 1;
+    std::int64_t skipped = 0;
+    info.sequence = sequence_.next(frame_id, skipped);
+    if (skipped > 0) CameraHealthCounters::add(counters_.skipped_frames, skipped);
     info.camera_ns = camera_ns;
     info.exposure_mono_ns = clock_.to_monotonic(camera_ns, arrival_mono);
     info.arrival_mono_ns = arrival_mono;

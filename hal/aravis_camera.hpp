@@ -140,10 +140,7 @@ class AravisCamera final : public Camera {
   CameraClockOffset clock_;
   double exposure_us_ = 0;  // as read after configure(); NaN: not known or automatic
   double gain_db_ = 0;
-  std::uint64_t last_frame_id_ = 0;
-  std::int64_t sequence_base_ = 0;  // our sequence - the camera's frame id (wraps, reconnects)
-  std::uint64_t next_sequence_ = 0;
-  bool have_frame_id_ = false;
+  DeviceSequence sequence_{65535};    // from the frame id: GigE Vision 1 wraps at 16 bits, skips 0
   std::uint64_t underruns_base_ = 0;  // underruns of streams already closed
 
   CameraHealthCounters counters_;

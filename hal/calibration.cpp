@@ -30,22 +30,22 @@ const char* to_string(LaserSide side) {
   return "above";
 }
 
-std::array<double, 4> LaserMount::plane_coefficients() const {
+Eigen::Vector4d LaserMount::plane_coefficients() const {
   if (plane) return *plane;
   // Above: Y = -d + tan(90 - beta) Z  <=>  0*X + 1*Y - tan(90 - beta) Z + d = 0; the other sides
   // are the same sheet turned about the optical axis, the projector at +y, -x or +x.
   const double t = std::tan((90.0 - angle_deg) * std::numbers::pi / 180.0);
   switch (side) {
     case LaserSide::kBelow:
-      return {0.0, -1.0, -t, baseline_m};
+      return Eigen::Vector4d{0.0, -1.0, -t, baseline_m};
     case LaserSide::kLeft:
-      return {1.0, 0.0, -t, baseline_m};
+      return Eigen::Vector4d{1.0, 0.0, -t, baseline_m};
     case LaserSide::kRight:
-      return {-1.0, 0.0, -t, baseline_m};
+      return Eigen::Vector4d{-1.0, 0.0, -t, baseline_m};
     case LaserSide::kAbove:
       break;
   }
-  return {0.0, 1.0, -t, baseline_m};
+  return Eigen::Vector4d{0.0, 1.0, -t, baseline_m};
 }
 
 namespace {
@@ -241,7 +241,7 @@ Calibration read_calibration(YamlMap& map) {
   if (!plane.empty()) {
     const double norm = std::sqrt(plane[0] * plane[0] + plane[1] * plane[1] + plane[2] * plane[2]);
     if (norm < 1e-9) laser.fail("plane", "the normal (a, b, c) must not be zero");
-    cal.laser.plane = std::array<double, 4>{plane[0], plane[1], plane[2], plane[3]};
+    cal.laser.plane = Eigen::Vector4d{plane[0], plane[1], plane[2], plane[3]};
   }
   laser.finish();
   return cal;

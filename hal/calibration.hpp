@@ -1,5 +1,6 @@
 #pragma once
 
+#include <Eigen/Core>
 #include <array>
 #include <cstdint>
 #include <optional>
@@ -34,10 +35,10 @@ struct LaserMount {
   double angle_deg = 80.0;
   double sheet_width_m = 0.003;
   LaserSide side = LaserSide::kAbove;
-  std::optional<std::array<double, 4>> plane;
+  std::optional<Eigen::Vector4d> plane;
 
   // The sheet as a*X + b*Y + c*Z + e = 0, from `plane` or from baseline, angle and side.
-  std::array<double, 4> plane_coefficients() const;
+  Eigen::Vector4d plane_coefficients() const;
 };
 
 struct Calibration {

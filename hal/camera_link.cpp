@@ -21,6 +21,21 @@ std::int64_t CameraClockOffset::to_monotonic(std::int64_t camera_ns, std::int64_
   return camera_ns + offset_ns_;
 }
 
+std::uint64_t DeviceSequence::next(std::uint64_t counter, std::int64_t& skipped) {
+  if (!have_counter_) {
+    base_ = static_cast<std::int64_t>(next_) - static_cast<std::int64_t>(counter);
+    have_counter_ = true;
+  } else if (wrap_ != 0 && counter < last_counter_ && last_counter_ - counter > (wrap_ + 1) / 2 &&
+             last_counter_ <= wrap_) {
+    base_ += static_cast<std::int64_t>(wrap_);
+  }
+  last_counter_ = counter;
+  const std::uint64_t expected = next_;
+  next_ = static_cast<std::uint64_t>(base_ + static_cast<std::int64_t>(counter)) + 1;
+  skipped = next_ > expected + 1 ? static_cast<std::int64_t>(next_ - expected - 1) : 0;
+  return next_ - 1;
+}
+
 GrabStatus ReconnectBackoff::wait(std::int64_t deadline_mono_ns,
                                   const std::atomic<bool>& stopped) const {
   for (std::int64_t now = monotonic_ns(); now < std::min(deadline_mono_ns, next_try_mono_ns_);

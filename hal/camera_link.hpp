@@ -30,6 +30,35 @@ class CameraClockOffset {
   bool valid_ = false;
 };
 
+// Our frame sequence from a device's own frame counter: consecutive from 0 over the whole run,
+// across reconnects (after which the device may count from anywhere) and across the counter's
+// wrap. A gap in the counter is frames the device numbered but never delivered.
+// Thread context: the camera thread.
+class DeviceSequence {
+ public:
+  // `wrap`: the counter's largest value, after which it starts again at 1 (GigE Vision 1's 16-bit
+  // frame id: 65535); 0: it does not wrap.
+  explicit DeviceSequence(std::uint64_t wrap = 0) : wrap_(wrap) {}
+
+  // A fresh start (open()): the next frame is 0.
+  void reset() {
+    next_ = 0;
+    restart();
+  }
+  // A new stream (a reconnect): the next frame continues our sequence, whatever its counter.
+  void restart() { have_counter_ = false; }
+  // Our sequence number of the frame the device numbered `counter`; `skipped` is how many frames
+  // the device numbered since the previous one without delivering them.
+  std::uint64_t next(std::uint64_t counter, std::int64_t& skipped);
+
+ private:
+  std::uint64_t wrap_;
+  std::int64_t base_ = 0;  // our sequence - the device's counter
+  std::uint64_t next_ = 0;
+  std::uint64_t last_counter_ = 0;
+  bool have_counter_ = false;
+};
+
 // When to try again after a camera was lost: first after min_ms, then after twice as long each
 // failed try, up to max_ms; back to min_ms once a try succeeded. Reconnecting allocates (driver
 // objects): only on this recovery path. Thread context: the camera thread.

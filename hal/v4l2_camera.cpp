@@ -127,8 +127,7 @@ bool V4l2Camera::open(std::string* error) {
   disconnect();
   stopped_.store(false, std::memory_order_release);
   clock_.reset();
-  have_sequence_ = false;
-  next_sequence_ = 0;
+  sequence_.reset();
   backoff_.reset();
   return connect(error);
 }
@@ -255,7 +254,7 @@ bool V4l2Camera::connect(std::string* error) {
   }
   int type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
   if (xioctl(fd_, VIDIOC_STREAMON, &type) != 0) return fail_errno("STREAMON");
-  have_sequence_ = false;
+  sequence_.restart();
   return true;
 }
 
@@ -357,19 +356,13 @@ GrabStatus V4l2Camera::grab(std::span<std::uint8_t> dst, FrameInfo& info,
       return GrabStatus::kError;
     }
 
-    if (!have_sequence_) {
-      sequence_base_ = static_cast<std::int64_t>(next_sequence_) - driver_sequence;
-      have_sequence_ = true;
-    } else if (driver_sequence > last_driver_sequence_ + 1) {
+    std::int64_t lost = 0;
+    info.sequence = sequence_.next(driver_sequence, lost);
+    if (lost > 0) {
       // The driver's sequence skips only frames it had no buffer for.
-      const std::int64_t lost = driver_sequence - last_driver_sequence_ - 1;
       CameraHealthCounters::add(counters_.underruns, lost);
       CameraHealthCounters::add(counters_.skipped_frames, lost);
     }
-    last_driver_sequence_ = driver_sequence;
-    next_sequence_ = static_cast<std::uint64_t>(sequence_base_ + driver_sequence) + 1;
-
-    info.sequence = next_sequence_ - 1;
     info.camera_ns = stamp;
     if (monotonic) {
       info.exposure_mono_ns = stamp;

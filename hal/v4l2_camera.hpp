@@ -104,12 +104,9 @@ class V4l2Camera final : public Camera {
 
   // Camera-thread state.
   ReconnectBackoff backoff_;
-  CameraClockOffset clock_;         // for drivers without monotonic timestamps
-  std::int64_t sequence_base_ = 0;  // our sequence - the driver's (it restarts on reopen)
-  std::uint64_t next_sequence_ = 0;
-  bool have_sequence_ = false;
+  CameraClockOffset clock_;  // for drivers without monotonic timestamps
+  DeviceSequence sequence_;  // from the driver's sequence (it restarts on reopen)
   double exposure_us_ = std::numeric_limits<double>::quiet_NaN();  // once set by a command
-  std::uint32_t last_driver_sequence_ = 0;
 
   CameraHealthCounters counters_;  // underruns: gaps in the driver's sequence, frames it lost
 };

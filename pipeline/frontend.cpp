@@ -41,7 +41,8 @@ int odd_at_least_one(double x) {
 
 RowNormalisation::RowNormalisation(const ScannerGeometry& g, const FrontendOptions& options,
                                    int margin) {
-  const auto& [a, b, c, e] = g.laser_plane;
+  const double a = g.laser_plane[0], b = g.laser_plane[1], c = g.laser_plane[2],
+               e = g.laser_plane[3];
   if (!(g.sheet_width_m > 0)) throw std::invalid_argument("the sheet width must be > 0");
   if (e == 0.0) throw std::invalid_argument("laser plane passes through the camera centre");
   // l(v) = fy l_w / Z(cx, v), 1 / Z = -(b (v - cy) / fy + c) / e: the width is modelled on the

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <Eigen/Core>
 #include <array>
 #include <cmath>
 
@@ -14,13 +15,13 @@ struct ScannerGeometry {
   int height = 1024;
   double fx = 1400, fy = 1400, cx = 639.5, cy = 511.5;
   std::array<double, 5> distortion{};  // k1 k2 p1 p2 k3 (the front-end works on raw pixels)
-  std::array<double, 4> laser_plane{0.0, 1.0, -0.17632698070846498, 0.25};
+  Eigen::Vector4d laser_plane{0.0, 1.0, -0.17632698070846498, 0.25};
   double sheet_width_m = 0.003;  // the paper's l_w
 
   // Inverse depth 1/Z of the sheet seen at pixel (u, v) (distortion ignored); <= 0 where the ray
   // does not meet the sheet in front of the camera.
   double inverse_depth(double u, double v) const {
-    const auto& [a, b, c, e] = laser_plane;
+    const double a = laser_plane[0], b = laser_plane[1], c = laser_plane[2], e = laser_plane[3];
     if (e == 0.0) return 0.0;
     return -(a * (u - cx) / fx + b * (v - cy) / fy + c) / e;
   }

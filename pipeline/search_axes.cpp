@@ -30,12 +30,9 @@ SearchAxes SearchAxes::columns(int width, int height) {
 }
 
 SearchAxes choose_search_axes(const ScannerGeometry& g) {
-  const auto& [a, b, c, e] = g.laser_plane;
-  (void)c;
-  (void)e;
   // The gradient of 1/Z = -(a (u - cx) / fx + b (v - cy) / fy + c) / e over the pixels is
   // proportional to (a / fx, b / fy).
-  const double gu = a / g.fx, gv = b / g.fy;
+  const double gu = g.laser_plane[0] / g.fx, gv = g.laser_plane[1] / g.fy;
   const double norm = std::hypot(gu, gv);
   const double tolerance = std::tan(kAxisToleranceDeg * std::numbers::pi / 180.0);
   if (!(norm > 0) || std::abs(gu) <= tolerance * std::abs(gv)) {
@@ -82,7 +79,8 @@ ScannerGeometry search_geometry(const ScannerGeometry& g, const SearchAxes& axes
   ScannerGeometry s = g;
   s.width = axes.lines;
   s.height = axes.length;
-  const auto [a, b, c, e] = g.laser_plane;
+  const double a = g.laser_plane[0], b = g.laser_plane[1], c = g.laser_plane[2],
+               e = g.laser_plane[3];
   const auto [k1, k2, p1, p2, k3] = g.distortion;
   if (axes.axis == SearchAxis::kRows) {
     s.fx = g.fy;
@@ -90,7 +88,7 @@ ScannerGeometry search_geometry(const ScannerGeometry& g, const SearchAxes& axes
     s.cx = g.cy;
     s.cy = g.cx;
     s.distortion = {k1, k2, p2, p1, k3};
-    s.laser_plane = {b, a, c, e};
+    s.laser_plane = Eigen::Vector4d{b, a, c, e};
     return s;
   }
   // The inverse depth over the frame, 1/Z = A x + B y + C, in search coordinates.
@@ -107,7 +105,7 @@ ScannerGeometry search_geometry(const ScannerGeometry& g, const SearchAxes& axes
   s.fx = s.fy = f;
   s.cx = cx;
   s.cy = cy;
-  s.laser_plane = {-as * f * e, -bs * f * e, -(cs + as * cx + bs * cy) * e, e};
+  s.laser_plane = Eigen::Vector4d{-as * f * e, -bs * f * e, -(cs + as * cx + bs * cy) * e, e};
   // Radial terms are unchanged by a roll; the tangential ones form the vector (p2, p1), which
   // turns with the grid.
   const double q_line = p2 * l[0] + p1 * l[1], q_along = p2 * w[0] + p1 * w[1];

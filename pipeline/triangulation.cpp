@@ -19,7 +19,8 @@ bool Triangulator::point(double u, double v, Eigen::Vector3d& xyz) const {
   double x = 0, y = 0;
   if (!geometry_.normalised(u, v, x, y)) return false;
   // The ray is Z * (x, y, 1): a*x*Z + b*y*Z + c*Z + e = 0.
-  const auto& [a, b, c, e] = geometry_.laser_plane;
+  const Eigen::Vector4d& plane = geometry_.laser_plane;
+  const double a = plane[0], b = plane[1], c = plane[2], e = plane[3];
   const double z = -e / (a * x + b * y + c);
   if (!(z > 0.0) || !std::isfinite(z)) return false;
   xyz = Eigen::Vector3d(x * z, y * z, z);

@@ -296,7 +296,7 @@ inline laserline::calibration_t calibration_message(const hal::Calibration& c) {
   m.cx = c.camera.cx;
   m.cy = c.camera.cy;
   std::copy(c.camera.distortion.begin(), c.camera.distortion.end(), m.distortion);
-  const std::array<double, 4> plane = c.laser.plane_coefficients();
+  const Eigen::Vector4d plane = c.laser.plane_coefficients();
   std::copy(plane.begin(), plane.end(), m.laser_plane);
   m.sheet_width_m = c.laser.sheet_width_m;
   return m;

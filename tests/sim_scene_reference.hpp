@@ -177,9 +177,9 @@ inline SimSceneOptions still_options() {
 
 // The paper's sheet (projector above the camera) turned by `angle` about the optical axis: its
 // normal (0, 1, -tan(90 deg - beta)) rotated in the x-y plane.
-inline std::array<double, 4> turned_sheet(const LaserMount& mount, double angle) {
+inline Eigen::Vector4d turned_sheet(const LaserMount& mount, double angle) {
   const double t = std::tan(kPi / 2 - mount.angle_deg * kDegree);
-  return {-std::sin(angle), std::cos(angle), -t, mount.baseline_m};
+  return Eigen::Vector4d{-std::sin(angle), std::cos(angle), -t, mount.baseline_m};
 }
 
 inline bool same_floats(const std::vector<float>& a, const std::vector<float>& b) {
@@ -230,7 +230,8 @@ inline CameraPlane base_plane_in_camera(const SimSceneOptions& o, const SimCamer
 // The laser sheet's inverse depth 1/Z along the ray of image point (x, y) (<= 0: no crossing in
 // front of the camera).
 inline double sheet_inverse_depth(const Calibration& c, double x, double y) {
-  const auto [a, b, cz, e] = c.laser.plane_coefficients();
+  const Eigen::Vector4d sheet = c.laser.plane_coefficients();
+  const double a = sheet[0], b = sheet[1], cz = sheet[2], e = sheet[3];
   const Vec3 r = ray_of(c.camera, x, y);
   return -(a * r[0] + b * r[1] + cz * r[2]) / e;
 }
@@ -246,7 +247,8 @@ struct FlatHit {
 inline FlatHit flat_hit(const SimSceneOptions& o, const SimCameraPose& pose,
                         const SimLineFamily& lines, int k) {
   const CameraIntrinsics& cam = o.calibration.camera;
-  const auto [a, b, c, e] = o.calibration.laser.plane_coefficients();
+  const Eigen::Vector4d sheet = o.calibration.laser.plane_coefficients();
+  const double a = sheet[0], b = sheet[1], c = sheet[2], e = sheet[3];
   const Vec3 s{a, b, c};
   const CameraPlane plane = base_plane_in_camera(o, pose);
   const auto [x0, y0] = lines.to_image(k, 0.0);
@@ -301,7 +303,8 @@ inline TruthCounts expect_flat_truth_exact(const SimScene& scene, std::uint64_t 
   const CameraIntrinsics& cam = o.calibration.camera;
   const SimCameraPose pose = scene.camera_pose(sequence);
   const CameraPlane plane = base_plane_in_camera(o, pose);
-  const auto [a, b, c, e] = o.calibration.laser.plane_coefficients();
+  const Eigen::Vector4d sheet = o.calibration.laser.plane_coefficients();
+  const double a = sheet[0], b = sheet[1], c = sheet[2], e = sheet[3];
   const double sheet_norm = std::sqrt(a * a + b * b + c * c);
   TruthCounts counts;
   EXPECT_EQ(static_cast<int>(truth.position.size()), truth.lines.count);

@@ -44,8 +44,7 @@ hal::Calibration true_calibration() {
   const double norm = std::hypot(1.0, slope);
   const double turn = 3.0 * kDeg;
   const double b0 = 1.0 / norm, c0 = -slope / norm;
-  cal.laser.plane =
-      std::array<double, 4>{-std::sin(turn) * b0, std::cos(turn) * b0, c0, 0.22 / norm};
+  cal.laser.plane = Eigen::Vector4d{-std::sin(turn) * b0, std::cos(turn) * b0, c0, 0.22 / norm};
   return cal;
 }
 
@@ -153,14 +152,14 @@ struct PlaneError {
   double offset_mm;
 };
 
-PlaneError plane_error(const std::array<double, 4>& got, const std::array<double, 4>& want) {
-  auto unit = [](const std::array<double, 4>& p) {
-    double n = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+PlaneError plane_error(const Eigen::Vector4d& got, const Eigen::Vector4d& want) {
+  auto unit = [](const Eigen::Vector4d& p) -> Eigen::Vector4d {
+    double n = p.head<3>().norm();
     if (p[3] < 0) n = -n;  // same side convention: e > 0
-    return std::array<double, 4>{p[0] / n, p[1] / n, p[2] / n, p[3] / n};
+    return p / n;
   };
-  const auto g = unit(got), w = unit(want);
-  const double cosine = std::clamp(g[0] * w[0] + g[1] * w[1] + g[2] * w[2], -1.0, 1.0);
+  const Eigen::Vector4d g = unit(got), w = unit(want);
+  const double cosine = std::clamp(g.head<3>().dot(w.head<3>()), -1.0, 1.0);
   return {std::acos(cosine) / kDeg, 1000.0 * std::abs(g[3] - w[3])};
 }
 

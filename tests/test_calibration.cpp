@@ -75,7 +75,8 @@ TEST_F(CalibrationFile, LaserSides) {
                                     "{baseline_m: 0.2, angle_deg: 75, side: " +
                                         side + "}\n"));
     EXPECT_STREQ(to_string(c.laser.side), side.c_str());
-    const auto [a, b, cc, e] = c.laser.plane_coefficients();
+    const Eigen::Vector4d sheet = c.laser.plane_coefficients();
+    const double a = sheet[0], b = sheet[1], cc = sheet[2], e = sheet[3];
     EXPECT_NEAR(a * at[0] + b * at[1] + cc * at[2] + e, 0.0, 1e-12) << side;
     const double axis_depth = -e / cc;  // X = Y = 0
     EXPECT_NEAR(axis_depth, d / t, 1e-12) << side;
@@ -323,7 +324,7 @@ TEST(CalibrationId, ChangesWithEveryValue) {
   differs("side", [](Calibration& c) { c.laser.side = LaserSide::kBelow; });
   for (std::size_t k = 0; k < 4; ++k) {
     differs("plane " + std::to_string(k), [k](Calibration& c) {
-      std::array<double, 4> plane = c.laser.plane_coefficients();
+      Eigen::Vector4d plane = c.laser.plane_coefficients();
       plane[k] += 1e-4;
       c.laser.plane = plane;
     });

@@ -20,6 +20,48 @@ TEST(CameraClockOffset, TheLeastDelayedFrameDefinesTheOffsetWhichRisesSlowly) {
   EXPECT_EQ(clock.to_monotonic(3000, 9000), 3000 + 6000) << "a reset forgets the offset";
 }
 
+TEST(DeviceSequence, ConsecutiveAcrossRestartsWithGapsCounted) {
+  DeviceSequence sequence;
+  std::int64_t skipped = -1;
+  EXPECT_EQ(sequence.next(40, skipped), 0u) << "the first frame is 0 whatever its counter";
+  EXPECT_EQ(skipped, 0);
+  EXPECT_EQ(sequence.next(41, skipped), 1u);
+  EXPECT_EQ(skipped, 0);
+  EXPECT_EQ(sequence.next(45, skipped), 5u) << "42 to 44 numbered, not delivered";
+  EXPECT_EQ(skipped, 3);
+  // A reopened device counts from the start: ours goes on.
+  sequence.restart();
+  EXPECT_EQ(sequence.next(0, skipped), 6u);
+  EXPECT_EQ(skipped, 0);
+  EXPECT_EQ(sequence.next(2, skipped), 8u);
+  EXPECT_EQ(skipped, 1);
+  // A counter that does not wrap is taken as it is, however far it falls back.
+  EXPECT_EQ(sequence.next(1, skipped), 7u);
+  EXPECT_EQ(skipped, 0);
+  sequence.reset();
+  EXPECT_EQ(sequence.next(9, skipped), 0u) << "a fresh start";
+}
+
+TEST(DeviceSequence, SixteenBitFrameIdWrapsFrom65535To1) {
+  DeviceSequence sequence(65535);
+  std::int64_t skipped = -1;
+  EXPECT_EQ(sequence.next(65534, skipped), 0u);
+  EXPECT_EQ(sequence.next(65535, skipped), 1u);
+  EXPECT_EQ(sequence.next(1, skipped), 2u) << "GigE Vision 1 skips 0";
+  EXPECT_EQ(skipped, 0);
+  EXPECT_EQ(sequence.next(3, skipped), 4u);
+  EXPECT_EQ(skipped, 1);
+  // Across the wrap with frames lost on both sides of it.
+  for (std::uint64_t id = 4; id <= 65533; ++id)
+    sequence.next(id, skipped);
+  EXPECT_EQ(sequence.next(2, skipped), 65535u + 3u);
+  EXPECT_EQ(skipped, 3) << "65534, 65535 and 1 lost";
+  // A step back of half the range or less is no wrap.
+  EXPECT_EQ(sequence.next(32770, skipped), 65535u + 32770u + 1u);
+  EXPECT_EQ(sequence.next(2, skipped), 65535u + 3u);
+  EXPECT_EQ(skipped, 0);
+}
+
 TEST(ReconnectBackoff, DoublesUpToTheMaximumAndWaitsUntilDue) {
   constexpr std::int64_t kMs = 1'000'000;
   ReconnectBackoff backoff(20, 50);

@@ -544,7 +544,7 @@ TEST(RecordedLog, CarriesItsCalibrationAndEachFramesExposure) {
       EXPECT_EQ(c.fx, 350);
       EXPECT_EQ(c.cy, 127.5);
       EXPECT_EQ(c.sheet_width_m, 0.003);
-      const std::array<double, 4> plane = config.calibration.laser.plane_coefficients();
+      const Eigen::Vector4d plane = config.calibration.laser.plane_coefficients();
       for (std::size_t k = 0; k < 4; ++k)
         EXPECT_EQ(c.laser_plane[k], plane[k]) << k;
       EXPECT_NE(c.instance_id, 0);

@@ -44,7 +44,8 @@ ScannerGeometry geometry_at(double degrees, double sign = 1.0, int width = 640, 
 // The depth at which the ray through pixel (u, v) of the pinhole camera meets the sheet: the ray
 // t (x, y, 1) with x = (u - cx) / fx, y = (v - cy) / fy satisfies a t x + b t y + c t + e = 0.
 double sheet_depth(const ScannerGeometry& g, double u, double v) {
-  const auto& [a, b, c, e] = g.laser_plane;
+  const double a = g.laser_plane[0], b = g.laser_plane[1], c = g.laser_plane[2],
+               e = g.laser_plane[3];
   const double x = (u - g.cx) / g.fx, y = (v - g.cy) / g.fy;
   return -e / (a * x + b * y + c);
 }
@@ -224,7 +225,8 @@ void expect_same_depths(const ScannerGeometry& g, const SearchAxes& axes) {
   const ScannerGeometry s = search_geometry(g, axes);
   EXPECT_EQ(s.width, axes.lines);
   EXPECT_EQ(s.height, axes.length);
-  const auto& [a, b, c, e] = g.laser_plane;
+  const double a = g.laser_plane[0], b = g.laser_plane[1], c = g.laser_plane[2],
+               e = g.laser_plane[3];
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> lateral(-0.09, 0.09);
   for (int i = 0; i < 40; ++i) {
@@ -236,7 +238,8 @@ void expect_same_depths(const ScannerGeometry& g, const SearchAxes& axes) {
     const auto [line, position] = axes.to_search(u, v);
     // Back-projected with the search camera onto the search sheet.
     const double xs = (line - s.cx) / s.fx, ys = (position - s.cy) / s.fy;
-    const auto& [as, bs, cs, es] = s.laser_plane;
+    const double as = s.laser_plane[0], bs = s.laser_plane[1], cs = s.laser_plane[2],
+                 es = s.laser_plane[3];
     const double depth = -es / (as * xs + bs * ys + cs);
     EXPECT_NEAR(depth, big_z, 1e-9 * big_z) << "point " << big_x << ", " << big_y;
   }

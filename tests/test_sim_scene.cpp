@@ -136,9 +136,7 @@ TEST(SimScene, RejectsImpossibleOptions) {
   rejects([](SimSceneOptions& o) { o.noise_sigma = -1; });
   rejects([](SimSceneOptions& o) { o.sway_period_s = 0; });
   rejects([](SimSceneOptions& o) { o.tilt_x_deg = 90; });
-  rejects([](SimSceneOptions& o) {
-    o.calibration.laser.plane = std::array<double, 4>{0, 0, 0, 1};
-  });
+  rejects([](SimSceneOptions& o) { o.calibration.laser.plane = Eigen::Vector4d{0, 0, 0, 1}; });
   EXPECT_NO_THROW(SimScene{small_options()});
 }
 
@@ -342,7 +340,7 @@ TEST(SimScene, TruthMatchesTheTriangulationModel) {
   // The same sheet given as a calibrated plane.
   SimSceneOptions calibrated = o;
   calibrated.calibration.laser.plane =
-      std::array<double, 4>{0.0, 1.0, -std::tan(std::numbers::pi / 2 - beta), d};
+      Eigen::Vector4d{0.0, 1.0, -std::tan(std::numbers::pi / 2 - beta), d};
   SimScene scene(calibrated);
   const SimGroundTruth truth = truth_of(scene, 0, true);
   for (int u = 0; u < o.calibration.camera.width; ++u)
@@ -350,7 +348,7 @@ TEST(SimScene, TruthMatchesTheTriangulationModel) {
 
   // Scaling the plane equation does not move the sheet.
   calibrated.calibration.laser.plane =
-      std::array<double, 4>{0.0, -3.0, 3.0 * std::tan(std::numbers::pi / 2 - beta), -3.0 * d};
+      Eigen::Vector4d{0.0, -3.0, 3.0 * std::tan(std::numbers::pi / 2 - beta), -3.0 * d};
   SimScene scaled(calibrated);
   EXPECT_NEAR(truth_of(scaled, 0, true).position[100], expected, 1e-3);
 
@@ -782,7 +780,7 @@ TEST(SimScene, LargeFramesRenderWithoutHeapAllocation) {
   murky.marks_per_m2 = 20;
   SimScene bayer(murky);
   murky.colour = SimColour::kRgb;
-  murky.calibration.laser.plane = std::array<double, 4>{-0.5, 0.866, -0.176, 0.25};
+  murky.calibration.laser.plane = Eigen::Vector4d{-0.5, 0.866, -0.176, 0.25};
   SimScene rgb(murky);
   ASSERT_NE(rgb.lines().along[0], 0.0);  // oblique
   std::vector<std::uint8_t> colour_buffer(rgb.raw_bytes());

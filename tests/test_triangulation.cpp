@@ -100,7 +100,8 @@ TEST(Triangulation, RemovesLensDistortionAsOpenCvAppliesIt) {
   g.distortion = {-0.28, 0.12, 0.0012, -0.0008, -0.03};
   g.laser_plane = {0.052, 0.9825, -0.1789, 0.22};
   const Triangulator triangulator(g);
-  const auto& [a, b, c, e] = g.laser_plane;
+  const double a = g.laser_plane[0], b = g.laser_plane[1], c = g.laser_plane[2],
+               e = g.laser_plane[3];
   // Points of the sheet: X across the field, Z over the working range; Y from the plane.
   std::vector<cv::Point3d> truth;
   for (double z = 0.6; z <= 2.5; z += 0.1) {

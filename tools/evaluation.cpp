@@ -255,7 +255,7 @@ std::vector<Scenario> standard_scenarios(int width, int height) {
     // The paper's sheet (projector 0.25 m above, 80 degrees) turned by 30 degrees.
     const double t = std::tan(10.0 * std::numbers::pi / 180.0);
     const double c30 = std::cos(std::numbers::pi / 6), s30 = std::sin(std::numbers::pi / 6);
-    s.scene.calibration.laser.plane = std::array<double, 4>{-s30, c30, -t, 0.25};
+    s.scene.calibration.laser.plane = Eigen::Vector4d{-s30, c30, -t, 0.25};
     out.push_back(s);
   }
   return out;

@@ -6,6 +6,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "daemon/config.hpp"
 #include "tools/frame_channel.hpp"
 #include "tools/laser_line_removal.hpp"
 
@@ -27,16 +28,7 @@ constexpr int kGateMarginPx = 2;
 pipeline::DetectorOptions detector_options(const PlaneCalibrationOptions& o,
                                            const hal::CameraIntrinsics& cam) {
   pipeline::DetectorOptions d;
-  pipeline::ScannerGeometry& g = d.geometry;
-  g.width = cam.width;
-  g.height = cam.height;
-  g.fx = cam.fx;
-  g.fy = cam.fy;
-  g.cx = cam.cx;
-  g.cy = cam.cy;
-  g.distortion = cam.distortion;
-  g.laser_plane = o.laser_prior.plane_coefficients();
-  g.sheet_width_m = o.laser_prior.sheet_width_m;
+  d.geometry = daemon::scanner_geometry(hal::Calibration{cam, o.laser_prior});
   d.frontend = o.frontend;
   return d;
 }

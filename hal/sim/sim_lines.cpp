@@ -15,10 +15,8 @@ SimLineFamily SimLineFamily::columns(int width) {
 
 SimLineFamily epipolar_lines(const Calibration& calibration) {
   const CameraIntrinsics& cam = calibration.camera;
-  const auto [a, b, c, e] = calibration.laser.plane_coefficients();
-  (void)c;
-  (void)e;
-  const double gu = a / cam.fx, gv = b / cam.fy;
+  const Eigen::Vector4d plane = calibration.laser.plane_coefficients();
+  const double gu = plane[0] / cam.fx, gv = plane[1] / cam.fy;
   const double norm = std::hypot(gu, gv);
   const double tolerance = std::tan(5.0 * sim::kDeg);
   if (!(norm > 0) || std::abs(gu) <= tolerance * std::abs(gv)) {
@@ -150,7 +148,7 @@ LineRays rays_of(const FrameGeometry& g, const SimLineFamily& lines, double k) {
 LineHit solve_flat(const FrameGeometry& g, const SimLineFamily& lines, double k) {
   LineHit out;
   if (!g.surface) return out;
-  const auto& [a, b, c, e] = g.lp;
+  const double a = g.lp[0], b = g.lp[1], c = g.lp[2], e = g.lp[3];
   const LineRays r = rays_of(g, lines, k);
   const double d = g.d_surface;
   const double k0 = -e * (g.n[0] * r.x0 + g.n[1] * r.y0 + g.n[2]) - d * (a * r.x0 + b * r.y0 + c);
@@ -175,13 +173,13 @@ LineHit solve_relief(const FrameGeometry& g, const SimLineFamily& lines, double 
                      const float* relief, double relief_max) {
   LineHit out;
   if (!g.surface) return out;
-  const auto& [a, b, c, e] = g.lp;
+  const double e = g.lp[3];
   const LineRays r = rays_of(g, lines, k);
   // The plane's normal: the line's direction (scaled to unit largest component) times its first
   // ray; for a column u exactly (1, 0, -xn).
   const double scale = std::max(std::abs(r.dx), std::abs(r.dy));
   const double d0 = r.dx / scale, d1 = r.dy / scale;
-  const Vec3 n1(d1, -d0, d0 * r.y0 - d1 * r.x0), n2(a, b, c);
+  const Vec3 n1(d1, -d0, d0 * r.y0 - d1 * r.x0), n2 = g.lp.head<3>();
   const Vec3 dir = n1.cross(n2);
   // P = alpha n1 + beta n2 with n1 . P = 0 (in the line's plane) and n2 . P = -e (on the sheet).
   const double g11 = n1.dot(n1), g12 = n1.dot(n2), g22 = n2.dot(n2);

@@ -26,8 +26,8 @@ struct FrameGeometry {
   bool surface = false;   // the surface plane is in front of the camera
   Vec3 n = Vec3::Zero();  // surface: n . X = d_surface, n pointing away from the camera
   double d_surface = 0;
-  Mat3 h = Mat3::Zero();       // pixel (u, v, 1) -> (S, T, W); texel coordinates are S/W, T/W
-  std::array<double, 4> lp{};  // laser sheet a X + b Y + c Z + e = 0
+  Mat3 h = Mat3::Zero();  // pixel (u, v, 1) -> (S, T, W); texel coordinates are S/W, T/W
+  Eigen::Vector4d lp = Eigen::Vector4d::Zero();  // laser sheet a X + b Y + c Z + e = 0
   double fx = 1, fy = 1, cx = 0, cy = 0;
   // For the relief: surface coordinates (metres) of a camera-frame point X are
   // x = e1 . X + c1, y = e2 . X + c2, height toward the camera d_surface - n . X.

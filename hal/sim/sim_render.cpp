@@ -298,7 +298,8 @@ void SimScene::place_snow(std::uint64_t sequence) {
   snow_.clear();
   if (options_.snow_per_frame == 0 || options_.laser_peak <= 0) return;
   const CameraIntrinsics& cam = options_.calibration.camera;
-  const auto [a, b, c, e] = options_.calibration.laser.plane_coefficients();
+  const Eigen::Vector4d plane = options_.calibration.laser.plane_coefficients();
+  const double a = plane[0], b = plane[1], c = plane[2], e = plane[3];
   Rng rng(mix64(options_.seed ^ 0x736e6f7766616c6cULL) ^ mix64(sequence));
   const float* depth = scratch_truth_.depth_m.data();
   for (int i = 0; i < options_.snow_per_frame; ++i) {
@@ -464,7 +465,7 @@ void SimScene::render(std::uint64_t sequence, bool laser_on, std::span<std::uint
   const std::uint64_t offsets = kNoiseTableSize - static_cast<std::size_t>(width) + 1;
   const float noise_scale = static_cast<float>(options_.noise_sigma) / kNoiseTableScale;
   const float ambient = static_cast<float>(options_.ambient);
-  const auto& [la, lb, lc, le] = g.lp;
+  const double la = g.lp[0], lb = g.lp[1], lc = g.lp[2], le = g.lp[3];
   const bool glow = laser && options_.backscatter > 0 && le != 0.0;
   const float backscatter = static_cast<float>(options_.backscatter);
   const float attenuation = static_cast<float>(options_.attenuation_per_m);

@@ -366,40 +366,41 @@ int open_shim(const char* path, int flags, mode_t mode, bool* handled) {
   return -1;
 }
 
+using OpenFn = int (*)(const char*, int, ...);
+
+// open() and open64() alike: the chip and its sysfs file here, any other path to `next`. The mode
+// is in `rest` only where the flags create a file.
+int open_or_forward(const char* path, int flags, va_list rest, OpenFn next) {
+  mode_t mode = 0;
+  if ((flags & O_CREAT) != 0 || (flags & O_TMPFILE) == O_TMPFILE) {
+    mode = static_cast<mode_t>(va_arg(rest, int));
+  }
+  bool handled = false;
+  const int fd = open_shim(path, flags, mode, &handled);
+  if (handled) return fd;
+  return next(path, flags, mode);
+}
+
 }  // namespace
 
 extern "C" {
 
 int open(const char* path, int flags, ...) {
-  mode_t mode = 0;
-  if ((flags & O_CREAT) != 0 || (flags & O_TMPFILE) == O_TMPFILE) {
-    va_list ap;
-    va_start(ap, flags);
-    mode = static_cast<mode_t>(va_arg(ap, int));
-    va_end(ap);
-  }
-  bool handled = false;
-  const int fd = open_shim(path, flags, mode, &handled);
-  if (handled) return fd;
-  using OpenFn = int (*)(const char*, int, ...);
   static const OpenFn next = real<OpenFn>("open");
-  return next(path, flags, mode);
+  va_list ap;
+  va_start(ap, flags);
+  const int fd = open_or_forward(path, flags, ap, next);
+  va_end(ap);
+  return fd;
 }
 
 int open64(const char* path, int flags, ...) {
-  mode_t mode = 0;
-  if ((flags & O_CREAT) != 0 || (flags & O_TMPFILE) == O_TMPFILE) {
-    va_list ap;
-    va_start(ap, flags);
-    mode = static_cast<mode_t>(va_arg(ap, int));
-    va_end(ap);
-  }
-  bool handled = false;
-  const int fd = open_shim(path, flags, mode, &handled);
-  if (handled) return fd;
-  using OpenFn = int (*)(const char*, int, ...);
   static const OpenFn next = real<OpenFn>("open64");
-  return next(path, flags, mode);
+  va_list ap;
+  va_start(ap, flags);
+  const int fd = open_or_forward(path, flags, ap, next);
+  va_end(ap);
+  return fd;
 }
 
 int close(int fd) {
