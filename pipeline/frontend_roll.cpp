@@ -112,11 +112,11 @@ struct Frontend::StripRows {
   const std::uint16_t* const* normalised_rows = nullptr;  // of row normalised_base on
   int normalised_base = 0;
   std::uint64_t* peak_bits = nullptr;  // one row's candidates
-  // One row's candidates that are ridges (see Part).
-  std::int32_t* ridge_column = nullptr;
-  std::int32_t* ridge_slot = nullptr;
-  std::int32_t* ridge_clipped = nullptr;
-  float* ridge_rank = nullptr;
+  // One row's peaks awaiting their noise level (see Part).
+  std::int32_t* peak_column = nullptr;
+  std::int32_t* peak_slot = nullptr;
+  std::int32_t* peak_clipped = nullptr;
+  float* peak_rank = nullptr;
   std::int32_t* window_first = nullptr;
   std::uint64_t* window_sum = nullptr;
 
@@ -301,11 +301,12 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
   const Lane* down = strip.band(r + 1);
   const int source_row = static_cast<int>(rows_.source_row(r) + 0.5f);
 
-  // The ridges first, then the noise of all their windows at once (a column has one candidate
-  // per row: its slot stays as found). From set bit to set bit over the strip's own columns [first,
-  // end) (a branch per pixel would mispredict).
+  // The peaks that would be kept first, then the noise of all their windows at once, then the
+  // SNR test and the ridge test (the dearer, for fewer peaks); a column has one peak per row:
+  // its slot stays as found. From set bit to set bit over the strip's own columns [first, end) (a
+  // branch per pixel would mispredict).
   const int first = c0 - begin, end = c1 - begin;
-  int ridges = 0;
+  int peaks = 0;
   for (int w = first / 64; w * 64 < end; ++w) {
     std::uint64_t word = bits[w];
     if (first > w * 64) word &= ~std::uint64_t{0} << (first - w * 64);
@@ -331,33 +332,18 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
           if (best[j].rank < best[slot].rank) slot = j;
         if (best[slot].rank >= rank) continue;
       }
-      // A ridge, not an edge: the band-pass an eighth of the peak below zero on both sides (a
-      // line gives a half to three quarters, a line lying on a texture edge less on the edge's
-      // bright side; an edge nothing on its bright side).
-      const int enough = -static_cast<int>(lane) / 8;  // (rounded toward zero)
-      const int lowest_up =
-          glowing_ && !pass.near_down ? 0 : lowest_beside(pass, strip, r, i, -1, enough);
-      const int lowest_down =
-          glowing_ && pass.near_down ? 0 : lowest_beside(pass, strip, r, i, +1, enough);
-      const int needed =
-          glowing_ ? (pass.near_down ? lowest_up : lowest_down) : std::max(lowest_up, lowest_down);
-      // (A clipped core much wider than the model is flat: the band-pass sees its two flanks as
-      // edges. Its run is found and centred by the refinement.)
-      if (8 * needed > -static_cast<int>(lane) && current_.at(u, source_row) < pass.saturation) {
-        continue;
-      }
-      strip.ridge_column[ridges] = i;
-      strip.ridge_slot[ridges] = slot;
-      strip.ridge_clipped[ridges] = clipped ? 1 : 0;
-      strip.ridge_rank[ridges] = rank;
-      strip.window_first[ridges] = i - pass.nw;
-      ++ridges;
+      strip.peak_column[peaks] = i;
+      strip.peak_slot[peaks] = slot;
+      strip.peak_clipped[peaks] = clipped ? 1 : 0;
+      strip.peak_rank[peaks] = rank;
+      strip.window_first[peaks] = i - pass.nw;
+      ++peaks;
     }
   }
   kernels::window_sums(strip.band_ring, noise.above, noise.below, noise.rows, strip.window_first,
-                       ridges, 2 * pass.nw + 1, strip.window_sum);
-  for (int k = 0; k < ridges; ++k) {
-    const int i = strip.ridge_column[k];
+                       peaks, 2 * pass.nw + 1, strip.window_sum);
+  for (int k = 0; k < peaks; ++k) {
+    const int i = strip.peak_column[k];
     const int u = begin + i;
     const Lane lane = row[i];
     const float value = static_cast<float>(lane) * pass.unit;
@@ -369,7 +355,22 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
     const float snr = value / noise_level_at;
     // (A short clipped run is taken whatever its SNR: texture ridges beside the laser's crossing
     // of a bright patch raise the noise measured around it far above the light clipping left.)
-    if (!(snr >= pass.threshold) && strip.ridge_clipped[k] == 0) continue;
+    if (!(snr >= pass.threshold) && strip.peak_clipped[k] == 0) continue;
+    // A ridge, not an edge: the band-pass an eighth of the peak below zero on both sides (a
+    // line gives a half to three quarters, a line lying on a texture edge less on the edge's
+    // bright side; an edge nothing on its bright side).
+    const int enough = -static_cast<int>(lane) / 8;  // (rounded toward zero)
+    const int lowest_up =
+        glowing_ && !pass.near_down ? 0 : lowest_beside(pass, strip, r, i, -1, enough);
+    const int lowest_down =
+        glowing_ && pass.near_down ? 0 : lowest_beside(pass, strip, r, i, +1, enough);
+    const int needed =
+        glowing_ ? (pass.near_down ? lowest_up : lowest_down) : std::max(lowest_up, lowest_down);
+    // (A clipped core much wider than the model is flat: the band-pass sees its two flanks as
+    // edges. Its run is found and centred by the refinement.)
+    if (8 * needed > -static_cast<int>(lane) && current_.at(u, source_row) < pass.saturation) {
+      continue;
+    }
     const int n = column_count_[u];
     if (n < pass.per_column) column_count_[u] = static_cast<std::uint8_t>(n + 1);
     // Sub-row position of the band-pass peak, mapped back to an original row: the guess the
@@ -380,8 +381,7 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
     const float offset =
         curvature < 0.0f ? std::clamp(0.5f * (above - below) / curvature, -0.5f, 0.5f) : 0.0f;
     Peak* best = column_best_.data() + static_cast<std::size_t>(u) * pass.per_column;
-    best[strip.ridge_slot[k]] =
-        Peak{static_cast<float>(r) + offset, snr, value, strip.ridge_rank[k]};
+    best[strip.peak_slot[k]] = Peak{static_cast<float>(r) + offset, snr, value, strip.peak_rank[k]};
   }
 }
 
@@ -432,10 +432,10 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, const P
       strip.normalised_rows = part.normalised_rows.data();
       strip.normalised_base = normalised_base;
       strip.peak_bits = part.peak_bits.data();
-      strip.ridge_column = part.ridge_column.data();
-      strip.ridge_slot = part.ridge_slot.data();
-      strip.ridge_clipped = part.ridge_clipped.data();
-      strip.ridge_rank = part.ridge_rank.data();
+      strip.peak_column = part.peak_column.data();
+      strip.peak_slot = part.peak_slot.data();
+      strip.peak_clipped = part.peak_clipped.data();
+      strip.peak_rank = part.peak_rank.data();
       strip.window_first = part.window_first.data();
       strip.window_sum = part.window_sum.data();
       band_pass_rows(pass, strip, next_band, band_end, images);
