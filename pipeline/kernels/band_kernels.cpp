@@ -212,7 +212,7 @@ std::uint64_t WindowSum32(const std::int32_t* ring, const std::size_t* above,
 // Windows whose columns lie within one vector of the first's (a line crossing the strip, a
 // texture edge along the row) share its columns: their sums down the rows, once for all of them.
 // (From this many windows on that costs less than a window at a time.)
-constexpr int kSharedWindows = 2;
+constexpr int kSharedWindows = 3;
 
 void WindowSums16(const std::int16_t* ring, const std::size_t* above, const std::size_t* below,
                   int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
