@@ -210,6 +210,11 @@ void Frontend::reset(int width, int height) {
     for (std::vector<std::int32_t>& weights : part.warp_weights)
       weights.assign(static_cast<std::size_t>(blocks), 0);
     part.peak_bits.assign((ring + 63) / 64, 0u);
+    for (std::vector<std::int32_t>* buffer :
+         {&part.peak_column, &part.peak_slot, &part.peak_clipped, &part.window_first})
+      buffer->assign(ring, 0);
+    part.peak_rank.assign(ring, 0.0f);
+    part.window_sum.assign(ring, 0u);
   }
   zero_normalised_.assign(s, 0);
   column_best_.assign(static_cast<std::size_t>(width) * options_.max_candidates_per_column, {});

@@ -205,6 +205,13 @@ class Frontend {
     std::vector<int> band_slots;  // the band-pass rows' slots (band_rows = slot * ring stride)
     std::vector<const std::uint16_t*> normalised_rows;
     std::vector<std::uint64_t> peak_bits;  // one row of a strip's candidates, as bits
+    // One row of a strip's peaks that would be kept, awaiting their noise level: their ring
+    // column, the slot they would take, their rank, whether clipped; their noise window's first
+    // ring column and its sum (kernels::window_sums()).
+    std::vector<std::int32_t> peak_column, peak_slot, peak_clipped;
+    std::vector<float> peak_rank;
+    std::vector<std::int32_t> window_first;
+    std::vector<std::uint64_t> window_sum;
   };
   // Each part's strips and warp blocks for a pass within `bounds` (no allocation).
   void place_parts(const PassBounds& bounds);

@@ -80,6 +80,7 @@ struct Frontend::RollPass {
   int rows = 0;
   int hi = 0, ho = 0;      // half the inner and the outer band-pass box
   int nh = 0, gh = 0;      // half the noise window, its guard band
+  int nw = 0;              // ... and half its width
   int look = 0;            // band-pass rows needed below the row under test
   int start = 0;           // the first band-pass row of the pass
   int edge = 0;            // rows nearer the ends are outside the depth range: no candidates there
@@ -111,6 +112,13 @@ struct Frontend::StripRows {
   const std::uint16_t* const* normalised_rows = nullptr;  // of row normalised_base on
   int normalised_base = 0;
   std::uint64_t* peak_bits = nullptr;  // one row's candidates
+  // One row's peaks awaiting their noise level (see Part).
+  std::int32_t* peak_column = nullptr;
+  std::int32_t* peak_slot = nullptr;
+  std::int32_t* peak_clipped = nullptr;
+  float* peak_rank = nullptr;
+  std::int32_t* window_first = nullptr;
+  std::uint64_t* window_sum = nullptr;
 
   LASERLINE_ROW_KERNEL Lane* band(int r) const { return band_ring + band_rows[r - band_base]; }
   LASERLINE_ROW_KERNEL int& row_most(int r) const { return most[band_slots[r - band_base]]; }
@@ -128,6 +136,7 @@ LASERLINE_ROW_KERNEL Frontend::RollPass<Lane> Frontend::roll_pass() const {
   pass.ho = outer_ / 2;
   pass.nh = noise_half_;
   pass.gh = guard_;
+  pass.nw = noise_pad_;
   pass.look = std::max({noise_half_, reach_, ridge_});
   pass.edge = std::max({margin_, reach_, ridge_});
   pass.near_down = rows_.near_side() > 0;
@@ -290,10 +299,14 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
   kernels::peak_bits(strip.band_ring, rows_at, reach_, pass.lane_threshold, count, bits);
   const Lane* up = strip.band(r - 1);
   const Lane* down = strip.band(r + 1);
+  const int source_row = static_cast<int>(rows_.source_row(r) + 0.5f);
 
-  // From set bit to set bit over the strip's own columns [first, end) (a branch per pixel would
-  // mispredict).
+  // The peaks that would be kept first, then the noise of all their windows at once, then the
+  // SNR test and the ridge test (the dearer, for fewer peaks); a column has one peak per row:
+  // its slot stays as found. From set bit to set bit over the strip's own columns [first, end) (a
+  // branch per pixel would mispredict).
   const int first = c0 - begin, end = c1 - begin;
+  int peaks = 0;
   for (int w = first / 64; w * 64 < end; ++w) {
     std::uint64_t word = bits[w];
     if (first > w * 64) word &= ~std::uint64_t{0} << (first - w * 64);
@@ -308,7 +321,6 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
       // have the higher SNR. But a short clipped run before any: where the laser crosses a bright
       // patch, clipping leaves it little amplitude, less than the texture's ridges around it.
       // (Checked first: they are the cheapest tests.)
-      const int source_row = static_cast<int>(rows_.source_row(r) + 0.5f);
       const bool clipped = in_clipped_core(u, source_row);
       const float rank = clipped ? value + kClippedCoreRank : value;
       Peak* best = column_best_.data() + static_cast<std::size_t>(u) * pass.per_column;
@@ -320,35 +332,56 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
           if (best[j].rank < best[slot].rank) slot = j;
         if (best[slot].rank >= rank) continue;
       }
-      // A ridge, not an edge: the band-pass an eighth of the peak below zero on both sides (a
-      // line gives a half to three quarters, a line lying on a texture edge less on the edge's
-      // bright side; an edge nothing on its bright side).
-      const int enough = -static_cast<int>(lane) / 8;  // (rounded toward zero)
-      const int lowest_up =
-          glowing_ && !pass.near_down ? 0 : lowest_beside(pass, strip, r, i, -1, enough);
-      const int lowest_down =
-          glowing_ && pass.near_down ? 0 : lowest_beside(pass, strip, r, i, +1, enough);
-      const int needed =
-          glowing_ ? (pass.near_down ? lowest_up : lowest_down) : std::max(lowest_up, lowest_down);
-      // (A clipped core much wider than the model is flat: the band-pass sees its two flanks as
-      // edges. Its run is found and centred by the refinement.)
-      if (8 * needed > -static_cast<int>(lane) && current_.at(u, source_row) < pass.saturation) {
-        continue;
-      }
-      const float snr = value / noise_at(u);
-      // (A short clipped run is taken whatever its SNR: texture ridges beside the laser's crossing
-      // of a bright patch raise the noise measured around it far above the light clipping left.)
-      if (!(snr >= pass.threshold) && !clipped) continue;
-      if (n < pass.per_column) column_count_[u] = static_cast<std::uint8_t>(n + 1);
-      // Sub-row position of the band-pass peak, mapped back to an original row: the guess the
-      // refinement starts from.
-      const auto above = static_cast<float>(up[i]), below = static_cast<float>(down[i]);
-      const auto centre = static_cast<float>(lane);
-      const float curvature = above - 2.0f * centre + below;
-      const float offset =
-          curvature < 0.0f ? std::clamp(0.5f * (above - below) / curvature, -0.5f, 0.5f) : 0.0f;
-      best[slot] = Peak{static_cast<float>(r) + offset, snr, value, rank};
+      strip.peak_column[peaks] = i;
+      strip.peak_slot[peaks] = slot;
+      strip.peak_clipped[peaks] = clipped ? 1 : 0;
+      strip.peak_rank[peaks] = rank;
+      strip.window_first[peaks] = i - pass.nw;
+      ++peaks;
     }
+  }
+  kernels::window_sums(strip.band_ring, noise.above, noise.below, noise.rows, strip.window_first,
+                       peaks, 2 * pass.nw + 1, strip.window_sum);
+  for (int k = 0; k < peaks; ++k) {
+    const int i = strip.peak_column[k];
+    const int u = begin + i;
+    const Lane lane = row[i];
+    const float value = static_cast<float>(lane) * pass.unit;
+    // (At the image's sides the window repeats the edge column: noise_level() sums it so.)
+    const float noise_level_at =
+        u >= pass.nw && u + pass.nw < width_
+            ? std::max(static_cast<float>(strip.window_sum[k]) * pass.unit * noise_norm_, 1.0f)
+            : noise_at(u);
+    const float snr = value / noise_level_at;
+    // (A short clipped run is taken whatever its SNR: texture ridges beside the laser's crossing
+    // of a bright patch raise the noise measured around it far above the light clipping left.)
+    if (!(snr >= pass.threshold) && strip.peak_clipped[k] == 0) continue;
+    // A ridge, not an edge: the band-pass an eighth of the peak below zero on both sides (a
+    // line gives a half to three quarters, a line lying on a texture edge less on the edge's
+    // bright side; an edge nothing on its bright side).
+    const int enough = -static_cast<int>(lane) / 8;  // (rounded toward zero)
+    const int lowest_up =
+        glowing_ && !pass.near_down ? 0 : lowest_beside(pass, strip, r, i, -1, enough);
+    const int lowest_down =
+        glowing_ && pass.near_down ? 0 : lowest_beside(pass, strip, r, i, +1, enough);
+    const int needed =
+        glowing_ ? (pass.near_down ? lowest_up : lowest_down) : std::max(lowest_up, lowest_down);
+    // (A clipped core much wider than the model is flat: the band-pass sees its two flanks as
+    // edges. Its run is found and centred by the refinement.)
+    if (8 * needed > -static_cast<int>(lane) && current_.at(u, source_row) < pass.saturation) {
+      continue;
+    }
+    const int n = column_count_[u];
+    if (n < pass.per_column) column_count_[u] = static_cast<std::uint8_t>(n + 1);
+    // Sub-row position of the band-pass peak, mapped back to an original row: the guess the
+    // refinement starts from.
+    const auto above = static_cast<float>(up[i]), below = static_cast<float>(down[i]);
+    const auto centre = static_cast<float>(lane);
+    const float curvature = above - 2.0f * centre + below;
+    const float offset =
+        curvature < 0.0f ? std::clamp(0.5f * (above - below) / curvature, -0.5f, 0.5f) : 0.0f;
+    Peak* best = column_best_.data() + static_cast<std::size_t>(u) * pass.per_column;
+    best[strip.peak_slot[k]] = Peak{static_cast<float>(r) + offset, snr, value, strip.peak_rank[k]};
   }
 }
 
@@ -399,6 +432,12 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, const P
       strip.normalised_rows = part.normalised_rows.data();
       strip.normalised_base = normalised_base;
       strip.peak_bits = part.peak_bits.data();
+      strip.peak_column = part.peak_column.data();
+      strip.peak_slot = part.peak_slot.data();
+      strip.peak_clipped = part.peak_clipped.data();
+      strip.peak_rank = part.peak_rank.data();
+      strip.window_first = part.window_first.data();
+      strip.window_sum = part.window_sum.data();
       band_pass_rows(pass, strip, next_band, band_end, images);
       for (int r = std::max(r_begin, bounds.row_begin); r < r_end; ++r)
         row_candidates(pass, strip, r, images);

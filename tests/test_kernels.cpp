@@ -259,6 +259,56 @@ void check_window_sum(std::mt19937& random, Lane lo, Lane hi) {
   }
 }
 
+// Many windows of a row at once, at columns in any order (repeated too), against the reference.
+template <class Lane>
+void check_window_sums(std::mt19937& random, Lane lo, Lane hi) {
+  const int stride = 1040;
+  for (const int rows : {0, 1, 10, 40}) {
+    const auto ring = random_values<Lane>(
+        random, static_cast<std::size_t>(2 * rows + 1) * stride + kWindowLanes, lo, hi);
+    std::vector<std::size_t> above(rows), below(rows);
+    for (int j = 0; j < rows; ++j) {
+      above[j] = static_cast<std::size_t>(j) * stride;
+      below[j] = static_cast<std::size_t>(rows + 1 + j) * stride;
+    }
+    for (const int width : kWidths) {
+      if (width > stride) continue;
+      std::uniform_int_distribution<std::int32_t> column(0, stride - width);
+      for (const int n : {0, 1, 7, 100}) {
+        std::vector<std::int32_t> firsts(static_cast<std::size_t>(n));
+        for (std::int32_t& first : firsts)
+          first = column(random);
+        if (n > 1) firsts[1] = firsts[0];
+        // (Half of them in order within a few vectors: windows near each other share columns.)
+        std::uniform_int_distribution<std::int32_t> near(0, std::min(64, stride - width));
+        for (int k = 2; k < n / 2; ++k)
+          firsts[static_cast<std::size_t>(k)] = near(random);
+        std::sort(firsts.begin(), firsts.begin() + n / 2);
+        std::vector<std::uint64_t> sums(firsts.size() + 1, 7), expected(sums);
+        window_sums(ring.data(), above.data(), below.data(), rows, firsts.data(), n, width,
+                    sums.data());
+        reference::window_sums(ring.data(), above.data(), below.data(), rows, firsts.data(), n,
+                               width, expected.data());
+        ASSERT_EQ(sums, expected) << "rows " << rows << " width " << width << " windows " << n;
+        for (int k = 0; k < n; ++k) {
+          ASSERT_EQ(expected[static_cast<std::size_t>(k)],
+                    reference::window_sum(ring.data(), above.data(), below.data(), rows,
+                                          firsts[static_cast<std::size_t>(k)], width));
+        }
+      }
+    }
+  }
+}
+
+TEST(Kernels, WindowSumsMatchTheReference) {
+  for_each_target([] {
+    std::mt19937 random(6);
+    check_window_sums<std::int16_t>(random, -32767, 32767);
+    check_window_sums<std::int16_t>(random, -3, 3);
+    check_window_sums<std::int32_t>(random, -2147483647, 2147483647);
+  });
+}
+
 TEST(Kernels, WindowSumMatchesTheReference) {
   for_each_target([] {
     std::mt19937 random(5);

@@ -209,6 +209,80 @@ std::uint64_t WindowSum32(const std::int32_t* ring, const std::size_t* above,
   return WindowSum<std::int32_t, std::uint64_t>(ring, above, below, rows, first, count);
 }
 
+// Windows whose columns lie within one vector of the first's (a line crossing the strip, a
+// texture edge along the row) share its columns: their sums down the rows, once for all of them.
+// (From this many windows on that costs less than a window at a time.)
+constexpr int kSharedWindows = 3;
+
+void WindowSums16(const std::int16_t* ring, const std::size_t* above, const std::size_t* below,
+                  int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
+#if HWY_TARGET != HWY_SCALAR
+  const hn::CappedTag<std::int16_t, 32> d;
+  const hn::RebindToUnsigned<decltype(d)> du;
+  const hn::Repartition<std::int32_t, decltype(d)> d32;
+  const hn::Repartition<std::uint32_t, decltype(d)> dw;
+  const int lanes = static_cast<int>(hn::Lanes(d));
+  if (count <= lanes) {
+    // One vector per row and window (WindowSum16's loop once): its mask, the rows' places and
+    // the dispatch paid once for all the windows.
+    const auto ones =
+        hn::IfThenElseZero(hn::FirstN(d, static_cast<std::size_t>(count)), hn::Set(d, 1));
+    const auto low_half = hn::Set(dw, 0xFFFFu);
+    const int reach = lanes - count;  // the farthest window start that one vector covers
+    for (int k = 0; k < n;) {
+      const int start = firsts[k];
+      int shared = k + 1;
+      while (shared < n && firsts[shared] >= start && firsts[shared] <= start + reach)
+        ++shared;
+      const std::int16_t* columns = ring + start;
+      if (shared - k >= kSharedWindows) {
+        // Per column the sum of |x| down the rows, even and odd columns in 32-bit lanes (|x| as
+        // unsigned: exact for -2^15 too); then sums of `count` columns as differences of running
+        // sums along the row. (At most 2 x 1000 rows of 2^15 and 32 columns: fits 32 bits.)
+        auto even = hn::Zero(dw), odd = even;
+        auto add = [&](const std::int16_t* x) HWY_ATTR {
+          const auto magnitude = hn::BitCast(dw, hn::BitCast(du, hn::Abs(hn::LoadU(d, x))));
+          even = hn::Add(even, hn::And(magnitude, low_half));
+          odd = hn::Add(odd, hn::ShiftRight<16>(magnitude));
+        };
+        for (int j = 0; j < rows; ++j) {
+          add(columns + above[j]);
+          add(columns + below[j]);
+        }
+        std::uint32_t even_sums[16], odd_sums[16], running[33];
+        hn::StoreU(even, dw, even_sums);
+        hn::StoreU(odd, dw, odd_sums);
+        running[0] = 0;
+        for (int c = 0; c < lanes; ++c)
+          running[c + 1] = running[c] + ((c & 1) != 0 ? odd_sums[c / 2] : even_sums[c / 2]);
+        for (; k < shared; ++k)
+          sums[k] = running[firsts[k] - start + count] - running[firsts[k] - start];
+        continue;
+      }
+      auto up = hn::Zero(d32), up_odd = up, down = up, down_odd = up;
+      for (int j = 0; j < rows; ++j) {
+        up = hn::ReorderWidenMulAccumulate(d32, hn::Abs(hn::LoadU(d, columns + above[j])), ones, up,
+                                           up_odd);
+        down = hn::ReorderWidenMulAccumulate(d32, hn::Abs(hn::LoadU(d, columns + below[j])), ones,
+                                             down, down_odd);
+      }
+      const auto both = hn::Add(hn::Add(up, up_odd), hn::Add(down, down_odd));
+      sums[k] = static_cast<std::uint32_t>(hn::GetLane(hn::SumOfLanes(d32, both)));
+      ++k;
+    }
+    return;
+  }
+#endif
+  for (int k = 0; k < n; ++k)
+    sums[k] = WindowSum16(ring, above, below, rows, firsts[k], count);
+}
+
+void WindowSums32(const std::int32_t* ring, const std::size_t* above, const std::size_t* below,
+                  int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
+  for (int k = 0; k < n; ++k)
+    sums[k] = WindowSum32(ring, above, below, rows, firsts[k], count);
+}
+
 }  // namespace HWY_NAMESPACE
 }  // namespace laserline::pipeline::kernels
 HWY_AFTER_NAMESPACE();
@@ -222,6 +296,8 @@ HWY_EXPORT(PeakBits16);
 HWY_EXPORT(PeakBits32);
 HWY_EXPORT(WindowSum16);
 HWY_EXPORT(WindowSum32);
+HWY_EXPORT(WindowSums16);
+HWY_EXPORT(WindowSums32);
 
 int band_pass_row(std::uint16_t* inner, const std::uint16_t* inner_in,
                   const std::uint16_t* inner_out, std::uint16_t* outer,
@@ -257,6 +333,16 @@ std::uint64_t window_sum(const std::int16_t* ring, const std::size_t* above,
 std::uint64_t window_sum(const std::int32_t* ring, const std::size_t* above,
                          const std::size_t* below, int rows, int first, int count) {
   return HWY_DYNAMIC_DISPATCH(WindowSum32)(ring, above, below, rows, first, count);
+}
+
+void window_sums(const std::int16_t* ring, const std::size_t* above, const std::size_t* below,
+                 int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
+  HWY_DYNAMIC_DISPATCH(WindowSums16)(ring, above, below, rows, firsts, n, count, sums);
+}
+
+void window_sums(const std::int32_t* ring, const std::size_t* above, const std::size_t* below,
+                 int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
+  HWY_DYNAMIC_DISPATCH(WindowSums32)(ring, above, below, rows, firsts, n, count, sums);
 }
 
 namespace reference {
@@ -339,6 +425,18 @@ std::uint64_t window_sum(const std::int16_t* ring, const std::size_t* above,
 std::uint64_t window_sum(const std::int32_t* ring, const std::size_t* above,
                          const std::size_t* below, int rows, int first, int count) {
   return window_sum_of(ring, above, below, rows, first, count);
+}
+
+void window_sums(const std::int16_t* ring, const std::size_t* above, const std::size_t* below,
+                 int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
+  for (int k = 0; k < n; ++k)
+    sums[k] = window_sum_of(ring, above, below, rows, firsts[k], count);
+}
+
+void window_sums(const std::int32_t* ring, const std::size_t* above, const std::size_t* below,
+                 int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
+  for (int k = 0; k < n; ++k)
+    sums[k] = window_sum_of(ring, above, below, rows, firsts[k], count);
 }
 
 }  // namespace reference

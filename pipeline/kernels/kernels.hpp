@@ -109,6 +109,11 @@ std::uint64_t window_sum(const std::int16_t* ring, const std::size_t* above,
                          const std::size_t* below, int rows, int first, int count);
 std::uint64_t window_sum(const std::int32_t* ring, const std::size_t* above,
                          const std::size_t* below, int rows, int first, int count);
+// window_sum() of the windows [firsts[k], firsts[k] + count) into sums[k], k < n.
+void window_sums(const std::int16_t* ring, const std::size_t* above, const std::size_t* below,
+                 int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums);
+void window_sums(const std::int32_t* ring, const std::size_t* above, const std::size_t* below,
+                 int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums);
 
 // ---------------------------------------------------------------------------------------------
 // III-F: sub-pixel refinement of columns whose samples all lie inside the frame and the
@@ -215,6 +220,10 @@ std::uint64_t window_sum(const std::int16_t* ring, const std::size_t* above,
                          const std::size_t* below, int rows, int first, int count);
 std::uint64_t window_sum(const std::int32_t* ring, const std::size_t* above,
                          const std::size_t* below, int rows, int first, int count);
+void window_sums(const std::int16_t* ring, const std::size_t* above, const std::size_t* below,
+                 int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums);
+void window_sums(const std::int32_t* ring, const std::size_t* above, const std::size_t* below,
+                 int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums);
 }  // namespace reference
 
 // The name of the target the kernels run on (e.g. "AVX2", "NEON"), for logs and benchmarks.
