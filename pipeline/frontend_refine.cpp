@@ -144,31 +144,24 @@ struct GlowingLineModel {
   // The sum of squared residuals of the least-squares fit with the centre at c.
   template <class Sample>
   double residual(const Sample& sample, float c) const {
-    std::array<std::array<double, 3>, 3> normal{};
-    std::array<double, 3> right{};
+    Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d right = Eigen::Vector3d::Zero();
     double squares = 0;
     const double inverse_variance = 1.0 / (2.0 * static_cast<double>(sigma) * sigma);
     for (int v = first; v <= last; ++v) {
       const double d = static_cast<double>(v) - static_cast<double>(c);
       const double front = std::clamp(0.5 + static_cast<double>(near) * d, 0.0, 1.0);
-      const std::array<double, 3> basis{1.0 - front, front, std::exp(-d * d * inverse_variance)};
+      const Eigen::Vector3d basis{1.0 - front, front, std::exp(-d * d * inverse_variance)};
       const double y = sample(v);
       squares += y * y;
-      for (std::size_t i = 0; i < 3; ++i) {
-        right[i] += basis[i] * y;
-        for (std::size_t j = 0; j < 3; ++j)
-          normal[i][j] += basis[i] * basis[j];
-      }
+      right += basis * y;
+      normal += basis * basis.transpose();
     }
     // With the line (if its amplitude comes out >= 0), else the two levels alone.
-    const Eigen::Matrix3d n{{normal[0][0], normal[0][1], normal[0][2]},
-                            {normal[1][0], normal[1][1], normal[1][2]},
-                            {normal[2][0], normal[2][1], normal[2][2]}};
-    const Eigen::Vector3d r{right[0], right[1], right[2]};
-    const Eigen::Vector3d x = n.ldlt().solve(r);
-    if (x[2] >= 0.0 && x.allFinite()) return squares - x.dot(r);
-    const Eigen::Vector2d levels = n.topLeftCorner<2, 2>().ldlt().solve(r.head<2>());
-    return squares - levels.dot(r.head<2>());
+    const Eigen::Vector3d x = normal.ldlt().solve(right);
+    if (x[2] >= 0.0 && x.allFinite()) return squares - x.dot(right);
+    const Eigen::Vector2d levels = normal.topLeftCorner<2, 2>().ldlt().solve(right.head<2>());
+    return squares - levels.dot(right.head<2>());
   }
 };
 
