@@ -374,12 +374,62 @@ TEST_F(LaserlineExtract, LaserPatternOffFramesAreBackgroundsNotLaserFrames) {
   }
 }
 
+// A calibration that states the sheet several times too wide or too narrow (a guess, on someone
+// else's images): the filters are sized for the width measured in the first frames, and it is
+// said; --keep-sheet-width keeps the calibration's.
+TEST_F(LaserlineExtract, SheetWidthMeasuredWhereTheCalibrationMisstatesIt) {
+  options_.texture_contrast = 0.6;
+  options_.ambient = 120;
+  options_.calibration.laser.sheet_width_m = 0.008;  // a line ~3 px wide: wider than the blur
+  hal::SimScene scene(options_);
+  fs::create_directories(dir_ / "frames");
+  constexpr int kFrames = 4;
+  for (int k = 0; k < kFrames; ++k) {
+    ASSERT_TRUE(cv::imwrite(path("frames/f" + std::to_string(k) + ".png"), render(scene, k)));
+  }
+  const auto& laser = options_.calibration.laser;
+  const auto recall = [&](const std::string& args, double stated, std::string* out) {
+    const std::string calib = write_calibration(
+        "stated.yaml", "{baseline_m: " + std::to_string(laser.baseline_m) +
+                           ", angle_deg: " + std::to_string(laser.angle_deg) + ", sheet_width_m: " +
+                           std::to_string(laser.sheet_width_m * stated) + "}");
+    const RunResult r = extract(args + " " + path("frames"), "fir", calib);
+    EXPECT_EQ(r.exit_code, 0) << r.out;
+    *out = r.out;
+    const Csv csv = read_csv(path("points.csv"));
+    double sum = 0;
+    for (int k = 0; k < kFrames; ++k) {
+      if (csv.frames.count(k) == 0) continue;
+      sum +=
+          compare(csv.frames.at(k), truth_of(scene, static_cast<std::uint64_t>(k)), 2.0).recall();
+    }
+    return sum / kFrames;
+  };
+  std::string out;
+  const double right = recall("", 1.0, &out);
+  EXPECT_EQ(out.find("times as wide"), std::string::npos) << out;
+  for (const double stated : {4.0, 0.25}) {
+    const double kept = recall("--keep-sheet-width", stated, &out);
+    EXPECT_EQ(out.find("times as wide"), std::string::npos) << out;
+    const double measured = recall("", stated, &out);
+    std::printf(
+        "sheet stated x%.2f: recall %.3f with the calibration's width, %.3f measured "
+        "(%.3f stated right)\n",
+        stated, kept, measured, right);
+    const std::string said = line_starting(out, "laserline-extract: the laser line in the first");
+    EXPECT_NE(said.find("times as wide as laser.sheet_width_m"), std::string::npos) << out;
+    EXPECT_NE(said.find("--keep-sheet-width keeps"), std::string::npos) << out;
+    EXPECT_GE(measured, right - 0.07) << stated;
+    EXPECT_LT(kept, measured - 0.05) << stated;
+  }
+}
+
 TEST_F(LaserlineExtract, HelpNamesTheNewFlagsAndExitStatuses) {
   const RunResult r = run_command(std::string(LASERLINE_EXTRACT_PATH) + " --help");
   EXPECT_EQ(r.exit_code, 0);
   for (const char* text :
        {"--threshold VALUE", "--channel NAME|EXPR", "--roi x,y,w,h", "--mask FILE",
-        "--laser-pattern BITS", "frame,source,u,v,x,y,snr_db,segment,valid",
+        "--laser-pattern BITS", "--keep-sheet-width", "frame,source,u,v,x,y,snr_db,segment,valid",
         "folders of images (in natural\n                     order: 2 before 10)",
         "maxvalue a grey level 1..255", "SNR in dB 0..60", "Exit status: 0", "1 some input",
         "2 bad arguments", "3 frames\nwere read but no point was accepted"}) {

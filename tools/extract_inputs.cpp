@@ -99,7 +99,7 @@ void extract_video(Extractor& x, const std::string& path, std::size_t input, std
     } catch (const cv::Exception&) {
       got = false;
     }
-    if (!got) break;
+    if (!got || x.done()) break;
     x.frame(frame, path + " frame " + std::to_string(n));
     ++n;
     x.progress().update(input, inputs, name, count > 0 ? static_cast<double>(n) / count : 0.0,
@@ -198,7 +198,7 @@ void extract_log(Extractor& x, const std::string& path, std::size_t input, std::
                          std::to_string(event.number)
                    : " are not a complete event (recording cut short?); ignored"));
     }
-    if (!more) break;
+    if (!more || x.done()) break;
     if (laserline::messages::message_hash(event.data.data(), event.data.size()) !=
         laserline::image_t::getHash()) {
       continue;
@@ -317,7 +317,7 @@ LogCalibration first_log_calibration(const std::string& path) {
 
 void extract_inputs(Extractor& x, const std::vector<std::string>& inputs,
                     const std::vector<InputKind>& kinds, const CalibrationInUse& in_use) {
-  for (std::size_t i = 0; i < inputs.size(); ++i) {
+  for (std::size_t i = 0; i < inputs.size() && !x.done(); ++i) {
     const std::string& input = inputs[i];
     const std::size_t number = i + 1, count = inputs.size();
     const std::string name = fs::path(input).filename().string();
@@ -339,7 +339,7 @@ void extract_inputs(Extractor& x, const std::vector<std::string>& inputs,
           break;
         }
         x.start_sequence();
-        for (std::size_t k = 0; k < files.size(); ++k) {
+        for (std::size_t k = 0; k < files.size() && !x.done(); ++k) {
           extract_image(x, files[k]);
           x.progress().update(number, count, name,
                               static_cast<double>(k + 1) / static_cast<double>(files.size()),

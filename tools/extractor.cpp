@@ -73,6 +73,10 @@ void Extractor::frame(const cv::Mat& raw, const std::string& where,
                                             static_cast<int>(mono_.step[0])};
   // Laser-off frames too: a detector that subtracts backgrounds keeps them as the next one's.
   detector_->detect(view, {static_cast<std::uint64_t>(index), laser_on}, profile_);
+  if (width_meter_ != nullptr) {
+    if (laser_on) width_meter_->add(view, profile_);
+    return;
+  }
   if (profile_.overflowed()) ++overflowed_frames_;
   select_reported_points(laser_on);
   if (csv_ != nullptr) write_csv_points(index, where);

@@ -18,6 +18,7 @@
 #include "hal/calibration.hpp"
 #include "hal/laser_channel.hpp"
 #include "pipeline/detector.hpp"
+#include "pipeline/line_width.hpp"
 #include "tools/point_cloud.hpp"
 
 namespace laserline::tools::extract {
@@ -45,8 +46,14 @@ class Progress {
   }
   // Prints one line, keeping the progress line out of its way.
   void message(const std::string& line) {
+    if (silent_) return;
     clear();
     std::fprintf(stderr, "%s\n", line.c_str());
+  }
+  // Neither progress nor messages (a pass whose frames are read again).
+  void silence() {
+    enabled_ = false;
+    silent_ = true;
   }
   void clear() {
     if (shown_) std::fputs("\r\033[K", stderr);
@@ -55,6 +62,7 @@ class Progress {
 
  private:
   bool enabled_;
+  bool silent_ = false;
   bool shown_ = false;
   std::chrono::steady_clock::time_point last_{};
 };
@@ -69,6 +77,7 @@ struct Options {
   std::string laser_pattern;  // as given, for messages
   std::vector<bool> laser_on_pattern;  // empty: every frame the input says nothing of is "on"
   bool all_candidates = false;
+  bool keep_sheet_width = false;  // the filters sized for the calibration's sheet width
   std::vector<std::string> inputs;
 };
 
@@ -104,6 +113,15 @@ class Extractor {
             FILE* csv, laserline::tools::PlyWriter* ply, const laserline::tools::PoseLog* poses);
 
   Progress& progress() { return progress_; }
+  // Instead of writing anything, measures the laser line's width on the first `frames` frames
+  // (their laser-on ones) into `meter`, silently: the pass that writes reports the problems.
+  void measure_width_only(laserline::pipeline::LineWidthMeter& meter, std::int64_t frames) {
+    width_meter_ = &meter;
+    frame_limit_ = frames;
+    progress_.silence();
+  }
+  // No more frames wanted (the measuring pass has its frames).
+  bool done() const { return width_meter_ != nullptr && next_frame_ >= frame_limit_; }
 
   // The input that messages are about from now on.
   void start_input(const std::string& input) {
@@ -184,6 +202,8 @@ class Extractor {
   std::int64_t laser_off_recorded_ = 0, laser_off_by_pattern_ = 0;
   std::int64_t points_written_ = 0, valid_written_ = 0, accepted_ = 0;
   std::int64_t cloud_accepted_ = 0, cloud_triangulated_ = 0, overflowed_frames_ = 0;
+  laserline::pipeline::LineWidthMeter* width_meter_ = nullptr;
+  std::int64_t frame_limit_ = 0;
   static constexpr int kShownPerInput = 10;
   std::string input_;
   int input_failures_ = 0;

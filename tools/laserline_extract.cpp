@@ -51,6 +51,7 @@ constexpr const char* kUsage =
     "                         --detector NAME [--threshold VALUE]\n"
     "                         [--channel NAME|EXPR] [--roi x,y,w,h] [--mask FILE]\n"
     "                         [--laser-pattern BITS] [--overlay-dir DIR] [--all-candidates]\n"
+    "                         [--keep-sheet-width]\n"
     "                         [--output points.csv] [--ply cloud.ply [--poses poses.csv]]\n"
     "                         INPUT...\n"
     "  --calib FILE       calibration (camera and laser); images must have its size. Without\n"
@@ -81,6 +82,11 @@ constexpr const char* kUsage =
     "  --overlay-dir DIR  write DIR/frame_NNNNNN.png per frame: the grey image the detector saw\n"
     "                     with its points (accepted green, rejected red)\n"
     "  --all-candidates   also write rejected candidates (valid = 0)\n"
+    "  --keep-sheet-width  fir, background, backprojection size their filters for the line\n"
+    "                     width the calibration predicts (laser.sheet_width_m); where the\n"
+    "                     line in the first frames is over twice as wide or half as wide, they\n"
+    "                     are sized for the width measured (and it is said). This keeps the\n"
+    "                     calibration's width\n"
     "  --output FILE      CSV: frame,source,u,v,x,y,snr_db,segment,valid (source: the image\n"
     "                     file, or the video's frame or the log's event; u the epipolar line and\n"
     "                     v the position along it, x y the frame pixel: for a laser above or\n"
@@ -143,6 +149,7 @@ Options parse_arguments(int argc, char** argv) {
                                   {"ply", true},
                                   {"poses", true},
                                   {"all-candidates", false},
+                                  {"keep-sheet-width", false},
                                   {"override-log-calibration", false}});
   while (args.next()) {
     const std::string& arg = args.name();
@@ -193,6 +200,8 @@ Options parse_arguments(int argc, char** argv) {
       o.poses = value();
     } else if (arg == "--all-candidates") {
       o.all_candidates = true;
+    } else if (arg == "--keep-sheet-width") {
+      o.keep_sheet_width = true;
     } else if (arg == "--override-log-calibration") {
       o.override_log_calibration = true;
     }
@@ -282,6 +291,46 @@ Region region_of(const Options& o, int width, int height,
     region.limit_to(kept);
   }
   return region;
+}
+
+// The front end's filters are sized for the line width the calibration predicts (f l_w / Z, from
+// laser.sheet_width_m); a line several times wider (blur, bloom, a clipped core) or narrower is
+// answered weakly, and a guessed sheet width is common on someone else's images. The width is
+// measured on the first frames; off by more than kWidthTolerance, the filters are sized for what
+// was measured (measured again: a detection sized for a width far off finds the line poorly), and
+// it is said.
+void fit_sheet_width(const Options& options, const laserline::hal::Calibration& calibration,
+                     const Region& region, const std::vector<InputKind>& kinds,
+                     const CalibrationInUse& in_use,
+                     laserline::pipeline::DetectorOptions& detector_options) {
+  constexpr std::int64_t kWidthFrames = 12;
+  constexpr std::size_t kMinimumPoints = 200;
+  constexpr double kWidthTolerance = 2.0;
+  if (options.keep_sheet_width || !laserline::daemon::searches_depth_range(options.detector)) {
+    return;
+  }
+  const double stated = detector_options.geometry.sheet_width_m;
+  std::size_t measured = 0;
+  for (int pass = 0; pass < 3; ++pass) {
+    laserline::pipeline::LineWidthMeter meter(detector_options.geometry);
+    Extractor probe(options, calibration,
+                    laserline::pipeline::make_detector(options.detector, detector_options), region,
+                    nullptr, nullptr, nullptr);
+    probe.measure_width_only(meter, kWidthFrames);
+    laserline::tools::extract::extract_inputs(probe, options.inputs, kinds, in_use);
+    if (meter.measured() < kMinimumPoints) break;
+    const double ratio = meter.ratio();
+    if (ratio < kWidthTolerance && ratio > 1.0 / kWidthTolerance) break;
+    detector_options.geometry.sheet_width_m *= ratio;
+    measured = meter.measured();
+  }
+  if (measured == 0) return;
+  const double used = detector_options.geometry.sheet_width_m;
+  std::fprintf(stderr,
+               "laserline-extract: the laser line in the first frames is %.2f times as wide as "
+               "laser.sheet_width_m %.4g m of %s predicts (%zu points): extracting with %.4g m "
+               "(set it in the calibration; --keep-sheet-width keeps %.4g)\n",
+               used / stated, stated, options.calib.c_str(), measured, used, stated);
 }
 
 int run_extract(int argc, char** argv) {
@@ -416,6 +465,11 @@ int run_extract(int argc, char** argv) {
     std::fflush(csv);
   }
 
+  const double stated_sheet_width = detector_options.geometry.sheet_width_m;
+  fit_sheet_width(options, calibration, region, kinds, in_use, detector_options);
+  if (detector_options.geometry.sheet_width_m != stated_sheet_width) {
+    detector = laserline::pipeline::make_detector(options.detector, detector_options);
+  }
   Extractor x(options, calibration, std::move(detector), region, csv, ply ? &*ply : nullptr,
               poses ? &*poses : nullptr);
   laserline::tools::extract::extract_inputs(x, options.inputs, kinds, in_use);
