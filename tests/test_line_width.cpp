@@ -1,16 +1,17 @@
 // The laser line's width measured in frames against the width the calibration predicts
-// (pipeline/line_width.hpp), on simulated scenes whose calibration states the sheet width wrong.
+// (tools/line_width.hpp), on simulated scenes whose calibration states the sheet width wrong.
 #include <gtest/gtest.h>
 
 #include <cstdint>
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
 
 #include "daemon/config.hpp"
 #include "hal/sim/sim_scene.hpp"
 #include "pipeline/detector.hpp"
-#include "pipeline/line_width.hpp"
 #include "tools/evaluation.hpp"
+#include "tools/line_width.hpp"
 
 namespace {
 
@@ -37,37 +38,43 @@ double measured_ratio(const std::string& name, double stated, int frames = 4) {
   detector->reset(format.width, format.height);
   pipeline::Profile profile(detector->max_points(format.width, format.height));
   std::vector<std::uint8_t> pixels(format.bytes());
-  pipeline::LineWidthMeter meter(options.geometry);
+  tools::LineWidthMeter meter(options.geometry, options.frontend.saturation_level);
   for (int i = 0; i < frames; ++i) {
     scene.render(static_cast<std::uint64_t>(i), true, pixels);
     const pipeline::ImageView view{pixels.data(), format.width, format.height, format.stride};
     detector->detect(view, {static_cast<std::uint64_t>(i), true}, profile);
-    meter.add(view, profile);
+    meter.add(cv::Mat(format.height, format.width, CV_8UC1, pixels.data(),
+                      static_cast<std::size_t>(format.stride)),
+              profile);
   }
-  EXPECT_GT(meter.measured(), static_cast<std::size_t>(frames * 400)) << name << " x" << stated;
+  EXPECT_GT(meter.measured(), static_cast<std::size_t>(frames * 200)) << name << " x" << stated;
   return meter.ratio();
 }
 
 // The simulator draws the sheet's projected width as the line's full width at half maximum, then
-// the pixels and the lens blur it, which the meter takes out only roughly. Told a sheet three
-// times too wide or too narrow, it says so by the same factor.
+// the pixels and the lens widen it (by half at this size). Told a sheet three times too wide or
+// too narrow, the meter says so by the same factor. On the checkerboard, a detector sized for a
+// line three times too wide puts a good part of its points on the squares' edges, which measure
+// wider: the ratio is then off by up to a third, still far beyond laserline-extract's tolerance
+// (twice or half), which measures again once its filters are sized for it.
 TEST(LineWidth, MeasuredAgainstTheStatedWidth) {
   for (const std::string name : {"clean", "checkerboard", "beside"}) {
     const double right = measured_ratio(name, 1.0);
-    EXPECT_GT(right, 0.9) << name;
-    EXPECT_LT(right, 1.3) << name;
+    EXPECT_GT(right, 1.0) << name;
+    EXPECT_LT(right, 1.7) << name;
     for (const double stated : {1.0 / 3.0, 3.0}) {
       const double ratio = measured_ratio(name, stated);
       std::printf("%s, sheet stated x%.2f: measured / predicted %.3f (%.3f stated right)\n",
                   name.c_str(), stated, ratio, right);
-      EXPECT_NEAR(ratio * stated / right, 1.0, 0.2) << name << " x" << stated;
+      const bool edges = name == "checkerboard" && stated > 1.0;
+      EXPECT_NEAR(ratio * stated / right, 1.0, edges ? 0.35 : 0.15) << name << " x" << stated;
     }
   }
 }
 
 TEST(LineWidth, NothingMeasuredWithoutALine) {
   const tools::Scenario& s = scenario("clean");
-  pipeline::LineWidthMeter meter(daemon::scanner_geometry(s.scene.calibration));
+  tools::LineWidthMeter meter(daemon::scanner_geometry(s.scene.calibration), 250);
   const int width = 64, height = 48;
   std::vector<std::uint8_t> flat(static_cast<std::size_t>(width) * height, 90);
   pipeline::Profile profile(4);
@@ -79,7 +86,7 @@ TEST(LineWidth, NothingMeasuredWithoutALine) {
   p.valid = false;
   p.v = 24.0f;
   profile.add(p);
-  meter.add({flat.data(), width, height, width}, profile);
+  meter.add(cv::Mat(height, width, CV_8UC1, flat.data()), profile);
   EXPECT_EQ(meter.measured(), 0u);
   EXPECT_EQ(meter.ratio(), 0.0);
 }

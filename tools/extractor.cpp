@@ -74,7 +74,7 @@ void Extractor::frame(const cv::Mat& raw, const std::string& where,
   // Laser-off frames too: a detector that subtracts backgrounds keeps them as the next one's.
   detector_->detect(view, {static_cast<std::uint64_t>(index), laser_on}, profile_);
   if (width_meter_ != nullptr) {
-    if (laser_on) width_meter_->add(view, profile_);
+    if (laser_on) width_meter_->add(mono_, profile_);
     return;
   }
   if (profile_.overflowed()) ++overflowed_frames_;

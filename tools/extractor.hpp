@@ -18,7 +18,7 @@
 #include "hal/calibration.hpp"
 #include "hal/laser_channel.hpp"
 #include "pipeline/detector.hpp"
-#include "pipeline/line_width.hpp"
+#include "tools/line_width.hpp"
 #include "tools/point_cloud.hpp"
 
 namespace laserline::tools::extract {
@@ -115,7 +115,7 @@ class Extractor {
   Progress& progress() { return progress_; }
   // Instead of writing anything, measures the laser line's width on the first `frames` frames
   // (their laser-on ones) into `meter`, silently: the pass that writes reports the problems.
-  void measure_width_only(laserline::pipeline::LineWidthMeter& meter, std::int64_t frames) {
+  void measure_width_only(laserline::tools::LineWidthMeter& meter, std::int64_t frames) {
     width_meter_ = &meter;
     frame_limit_ = frames;
     progress_.silence();
@@ -202,7 +202,7 @@ class Extractor {
   std::int64_t laser_off_recorded_ = 0, laser_off_by_pattern_ = 0;
   std::int64_t points_written_ = 0, valid_written_ = 0, accepted_ = 0;
   std::int64_t cloud_accepted_ = 0, cloud_triangulated_ = 0, overflowed_frames_ = 0;
-  laserline::pipeline::LineWidthMeter* width_meter_ = nullptr;
+  laserline::tools::LineWidthMeter* width_meter_ = nullptr;
   std::int64_t frame_limit_ = 0;
   static constexpr int kShownPerInput = 10;
   std::string input_;

@@ -251,7 +251,7 @@ double sample_bilinear(const cv::Mat& image, double x, double y) {
 }
 
 double full_width_at_half_maximum(const cv::Mat& image, cv::Point2d p, cv::Point2d normal,
-                                  double saturation) {
+                                  double saturation, double peak_within_px) {
   constexpr double kStep = 0.25;
   constexpr int kReach = static_cast<int>(kMaxHalfWidthPx / kStep);
   auto at = [&](int k) {
@@ -263,7 +263,9 @@ double full_width_at_half_maximum(const cv::Mat& image, cv::Point2d p, cv::Point
   };
   int centre = 0;
   double peak = -1;
-  for (int k = -static_cast<int>(1 / kStep); k <= static_cast<int>(1 / kStep); ++k) {
+  const int peak_reach =
+      static_cast<int>(std::clamp(peak_within_px, 0.0, 0.5 * kMaxHalfWidthPx) / kStep);
+  for (int k = -peak_reach; k <= peak_reach; ++k) {
     const double v = at(k);
     if (v > peak) {
       peak = v;

@@ -34,12 +34,12 @@ std::vector<std::size_t> straight_line_inliers(const std::vector<cv::Point2d>& p
                                                double tolerance);
 
 // The line's full width at half maximum across it at `p`, in pixels, along the unit `normal`:
-// its peak within a pixel of `p`, its floor the lower of the two sides where the profile stops
-// falling. NaN where the core is clipped (at or above `saturation`: the width at half of a
+// its peak within `peak_within_px` of `p`, its floor the lower of the two sides where the profile
+// stops falling. NaN where the core is clipped (at or above `saturation`: the width at half of a
 // clipped height is too wide), or where the profile does not fall to half on both sides within
 // kMaxHalfWidthPx.
 double full_width_at_half_maximum(const cv::Mat& image, cv::Point2d p, cv::Point2d normal,
-                                  double saturation);
+                                  double saturation, double peak_within_px = 1.0);
 
 // A grey level of a mono8 image between pixels (bilinear), the image's edge extended. The image
 // is at least 2x2.

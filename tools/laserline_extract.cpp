@@ -312,7 +312,8 @@ void fit_sheet_width(const Options& options, const laserline::hal::Calibration& 
   const double stated = detector_options.geometry.sheet_width_m;
   std::size_t measured = 0;
   for (int pass = 0; pass < 3; ++pass) {
-    laserline::pipeline::LineWidthMeter meter(detector_options.geometry);
+    laserline::tools::LineWidthMeter meter(detector_options.geometry,
+                                           detector_options.frontend.saturation_level);
     Extractor probe(options, calibration,
                     laserline::pipeline::make_detector(options.detector, detector_options), region,
                     nullptr, nullptr, nullptr);
