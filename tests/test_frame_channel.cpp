@@ -63,15 +63,21 @@ TEST(FrameChannel, ClippedLaserColourGives255) {
   EXPECT_EQ(deep_difference.at<std::uint8_t>(0, 0), 255);
   EXPECT_EQ(deep_difference.at<std::uint8_t>(0, 1), 0);
   // From a level below the top (the detector's saturation_level): red at 251 is clipped, at 249
-  // it is not; white light at 251 in every colour is taken for clipped too.
-  cv::Mat near(1, 3, CV_8UC3);
+  // it is not; white light at 251 in every colour is taken for clipped too, and so is white whose
+  // every colour is within 5 levels of it (a clipped core's noise straddles the level: without
+  // this, red - (green + blue) / 2 turns 249 - 251 into black gaps in a saturated line).
+  cv::Mat near(1, 5, CV_8UC3);
   near.at<cv::Vec3b>(0, 0) = {240, 245, 251};
   near.at<cv::Vec3b>(0, 1) = {240, 245, 249};
   near.at<cv::Vec3b>(0, 2) = {251, 251, 251};
+  near.at<cv::Vec3b>(0, 3) = {251, 251, 249};
+  near.at<cv::Vec3b>(0, 4) = {251, 244, 249};  // green more than 5 below: not white
   const cv::Mat from_250 = convert(near, "red - (green + blue) / 2", 250);
   EXPECT_EQ(from_250.at<std::uint8_t>(0, 0), 255);
   EXPECT_EQ(from_250.at<std::uint8_t>(0, 1), 7);  // 249 - 242.5, rounded half up
   EXPECT_EQ(from_250.at<std::uint8_t>(0, 2), 255);
+  EXPECT_EQ(from_250.at<std::uint8_t>(0, 3), 255);
+  EXPECT_EQ(from_250.at<std::uint8_t>(0, 4), 2);  // 249 - 247.5, rounded half up
   EXPECT_EQ(convert(near, "red - (green + blue) / 2").at<std::uint8_t>(0, 0), 9);  // 251 - 242.5
 }
 

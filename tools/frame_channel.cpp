@@ -124,6 +124,7 @@ bool read_image_file(const std::string& path, cv::Mat& out, std::string& problem
 
 bool to_laser_mono8(const cv::Mat& raw, const hal::LaserChannel& channel, int clipped_from,
                     cv::Mat& out, std::string& problem) {
+  constexpr int kWhiteMargin = 5;
   if (raw.empty()) {
     problem = "empty image";
     return false;
@@ -180,9 +181,19 @@ bool to_laser_mono8(const cv::Mat& raw, const hal::LaserChannel& channel, int cl
   for (int i = 0; i < 3; ++i) {
     // 16 bit: onto 0..255 first; the top codes become 255, clipped as 8-bit samples are.
     if (scale != 1.0) planes[i].convertTo(planes[i], CV_8U, scale);
+  }
+  cv::Mat clipped;
+  if (clipped_from < 255) {
+    // Every colour within kWhiteMargin of the level: white, clipped (a bright laser's core and
+    // bloom on a white surface, its noise straddling the level); a colour difference there is
+    // noise about 0, dark gaps in the line.
+    const int near_top = std::max(clipped_from - kWhiteMargin, 0);
+    clipped = (planes[0] >= near_top) & (planes[1] >= near_top) & (planes[2] >= near_top);
+  }
+  for (int i = 0; i < 3; ++i) {
     if (weights[i] > 0.0f && clipped_from < 255) {
       planes[i] = planes[i].clone();
-      planes[i].setTo(255, planes[i] >= clipped_from);
+      planes[i].setTo(255, (planes[i] >= clipped_from) | clipped);
     }
   }
   cv::Mat bgr;

@@ -16,8 +16,9 @@ namespace laserline::tools {
 // laser's white core); 16-bit frames are scaled from their full range onto 0..255. A colour counts
 // as clipped at `clipped_from` or above (8-bit units; the detector's saturation_level): files are
 // processed images, whose clipped samples often come out a few levels below 255 (white balance
-// after the sensor clipped, lossy compression). False with a one-line reason in `problem` for an
-// empty image or a pixel type the detectors cannot take.
+// after the sensor clipped, lossy compression); so does a pixel whose every colour is within 5
+// levels of it (white: clipped, its noise straddling the level). False with a one-line reason in
+// `problem` for an empty image or a pixel type the detectors cannot take.
 bool to_laser_mono8(const cv::Mat& raw, const hal::LaserChannel& channel, int clipped_from,
                     cv::Mat& out, std::string& problem);
 
