@@ -100,6 +100,19 @@ TEST(Cli, ValuesAfterAnEqualsSign) {
   EXPECT_NE(evaluate.out.find(": "), std::string::npos) << evaluate.out;
   const auto small = run_command(std::string(LASERLINE_EVALUATE_PATH) + " --frames=1");
   EXPECT_EQ(small.exit_code, 2);
+  // --seed: another draw of the scenes (other texture and noise: other errors), 0 the table's.
+  const std::string quick = std::string(LASERLINE_EVALUATE_PATH) +
+                            " --size 320x256 --frames 3 --scenario pier --detector fir";
+  const auto table = run_command(quick);
+  const auto same = run_command(quick + " --seed 0");
+  const auto other = run_command(quick + " --seed 12");
+  EXPECT_EQ(table.exit_code, 0) << table.out;
+  EXPECT_EQ(other.exit_code, 0) << other.out;
+  EXPECT_EQ(same.out, table.out);
+  EXPECT_NE(other.out, table.out);
+  const auto negative = run_command(std::string(LASERLINE_EVALUATE_PATH) + " --seed -2");
+  EXPECT_EQ(negative.exit_code, 2);
+  EXPECT_EQ(negative.out, "laserline-evaluate: bad value for --seed\n");
 
   const auto extract = run_command(std::string(LASERLINE_EXTRACT_PATH) +
                                    " --calib=c.yaml --detector=nosuch --output=o.csv in.png");

@@ -3,6 +3,7 @@
 // it; the tests assert the same figures.
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <exception>
@@ -17,13 +18,15 @@
 namespace {
 
 constexpr const char* kUsage =
-    "usage: laserline-evaluate [--tolerance PX] [--frames N] [--size WxH] "
+    "usage: laserline-evaluate [--tolerance PX] [--frames N] [--size WxH] [--seed N] "
     "[--overlay-dir DIR] [--detector NAME]... [--scenario NAME]...\n"
     "                          [--validation chain_code|image_features] [--markdown]\n"
     "       laserline-evaluate --list\n"
     "       laserline-evaluate --turbidity-plot FILE.png [--frames N]\n"
     "Scores detectors on simulated scenarios (ground truth exact): recall, precision\n"
     "within the tolerance (default 2 px), RMS error and bias of the found points.\n"
+    "--seed N: another draw of every scenario (texture, relief, particles, noise, motion),\n"
+    "N added to each scenario's own seed; 0 (default) is the table in the README.\n"
     "--validation: how backprojection associates segments between frames (default\n"
     "chain_code, the paper's; image_features tracks the segment's box in the image).\n"
     "--markdown: one row per scenario, recall / precision of each detector.\n"
@@ -37,6 +40,7 @@ int run_evaluate(int argc, char** argv) {
   double tolerance = 2.0;
   int frames = 16;
   int width = 1280, height = 1024;
+  std::uint64_t seed = 0;
   std::string overlay_dir, turbidity_plot;
   bool markdown = false;
   std::vector<std::string> detectors, scenarios;
@@ -45,6 +49,7 @@ int run_evaluate(int argc, char** argv) {
                       {{"tolerance", true},
                        {"frames", true},
                        {"size", true},
+                       {"seed", true},
                        {"overlay-dir", true},
                        {"detector", true},
                        {"validation", true},
@@ -66,6 +71,11 @@ int run_evaluate(int argc, char** argv) {
         if (x == std::string::npos) throw std::invalid_argument(s);
         width = std::stoi(s.substr(0, x));
         height = std::stoi(s.substr(x + 1));
+      } else if (arg == "--seed") {
+        const std::string v = value();
+        std::size_t used = 0;
+        seed = std::stoull(v, &used);
+        if (used != v.size() || v.find('-') != std::string::npos) throw std::invalid_argument(v);
       } else if (arg == "--overlay-dir") {
         overlay_dir = value();
       } else if (arg == "--detector") {
@@ -148,6 +158,7 @@ int run_evaluate(int argc, char** argv) {
       continue;
     }
     scenario.frames = frames;
+    scenario.scene.seed += seed;
     if (markdown) std::printf("| %s |", scenario.name.c_str());
     for (const std::string& name : detectors) {
       tools::Score score;
