@@ -105,6 +105,45 @@ class ColumnSampler {
   float x0_ = 0, y0_ = 0, dx_ = 0, dy_ = 0, x_max_ = 0, y_max_ = 0;
 };
 
+// The centre of the clipped run top..bottom (2 <= top, bottom <= last - 2) from `light` (the frame,
+// or the frame less the background, on the run's column): where each flank crosses the level of
+// the lower of the two samples next to the run, midway between the crossings by the line's
+// symmetry. On the frame less the background the flanks are the laser's light alone: a surface
+// brighter on one side (a texture edge along the line), where the laser saturates farther out,
+// does not lean the centre toward it.
+template <class Light>
+float clipped_run_centre(const Light& light, int top, int bottom) {
+  const float above = light(top - 1), below = light(bottom + 1);
+  const float level = std::min(above, below);
+  auto crossing = [&](int inside, int step, float inside_value) {
+    if (inside_value <= level) return static_cast<float>(inside);
+    const float outside = light(inside + step);
+    if (outside >= inside_value) return static_cast<float>(inside);
+    const float t = (inside_value - level) / (inside_value - outside);
+    return static_cast<float>(inside) + static_cast<float>(step) * std::min(t, 1.0f);
+  };
+  return 0.5f * (crossing(top - 1, -1, above) + crossing(bottom + 1, +1, below));
+}
+
+// The centre of the clipped run (pixels at or above `saturation`) through (u, v) of `frame`: on
+// `laser` (the frame less the background along column u) where it lies under the run's flanks,
+// else on the frame.
+float clipped_core_centre(const ImageView& frame, int u, int v, int saturation,
+                          const ColumnSampler* laser) {
+  const int last = frame.height - 1;
+  int top = v, bottom = v;
+  while (top > 0 && frame.at(u, top - 1) >= saturation)
+    --top;
+  while (bottom < last && frame.at(u, bottom + 1) >= saturation)
+    ++bottom;
+  if (top < 2 || bottom > last - 2) return 0.5f * static_cast<float>(top + bottom);
+  // (The run's flanks, two rows beyond it, may lie where the background does not.)
+  if (laser != nullptr && laser->covers(top - 2, bottom + 2)) {
+    return clipped_run_centre(*laser, top, bottom);
+  }
+  return clipped_run_centre([&](int t) { return static_cast<float>(frame.at(u, t)); }, top, bottom);
+}
+
 // Where the glow in front of the line ends, walking from row `from` by `step` (+1 or -1) at most
 // `span` rows within [0, last]: the centroid of the fall between neighbouring samples around the
 // sharpest one (a blurred step spreads its fall over two or three rows). `from` when nothing falls.
@@ -237,26 +276,9 @@ float Frontend::refine_row(int u, float v_guess) const {
   };
 
   // A clipped core (real green lasers saturate): the centre of the run, located on its flanks.
-  const int saturation = options_.saturation_level;
-  if (current_.at(u, best) >= saturation) {
-    int top = best, bottom = best;
-    while (top > 0 && current_.at(u, top - 1) >= saturation)
-      --top;
-    while (bottom < last && current_.at(u, bottom + 1) >= saturation)
-      ++bottom;
-    if (top < 2 || bottom > last - 2) return 0.5f * static_cast<float>(top + bottom);
-    // Where each flank crosses the level of the lower of the two samples next to the run: by
-    // symmetry the centre lies midway between the crossings.
-    const float above = current_.at(u, top - 1), below = current_.at(u, bottom + 1);
-    const float level = std::min(above, below);
-    auto crossing = [&](int inside, int step, float inside_value) {
-      if (inside_value <= level) return static_cast<float>(inside);
-      const float outside = current_.at(u, inside + step);
-      if (outside >= inside_value) return static_cast<float>(inside);
-      const float t = (inside_value - level) / (inside_value - outside);
-      return static_cast<float>(inside) + static_cast<float>(step) * std::min(t, 1.0f);
-    };
-    return 0.5f * (crossing(top - 1, -1, above) + crossing(bottom + 1, +1, below));
+  if (current_.at(u, best) >= options_.saturation_level) {
+    return clipped_core_centre(current_, u, best, options_.saturation_level,
+                               subtracting_ ? &with_background : nullptr);
   }
 
   // Gaussian 3-point fit (exact for a sampled Gaussian) on samples about one sigma apart, so a
@@ -338,7 +360,17 @@ float Frontend::refine_row(int u, float v_guess) const {
   const float a = sample(best - spacing) - (level - step);
   const float b = best_value - level;
   const float c = sample(best + spacing) - (level + step);
-  return static_cast<float>(best) + static_cast<float>(spacing) * gaussian_offset(a, b, c);
+  const float fitted =
+      static_cast<float>(best) + static_cast<float>(spacing) * gaussian_offset(a, b, c);
+  // Less the background, a core clipped on a bright surface has little light left (255 less the
+  // surface), less than its flank on a darker side: the brightest sample and the fit are on that
+  // flank, and the run beside it is the line's core.
+  const int fitted_row = std::clamp(static_cast<int>(std::lround(fitted)), 0, last);
+  if (subtracting_ && current_.at(u, fitted_row) >= options_.saturation_level) {
+    return clipped_core_centre(current_, u, fitted_row, options_.saturation_level,
+                               &with_background);
+  }
+  return fitted;
 }
 
 void Frontend::refine(std::span<ProfilePoint> points, std::size_t count) {
@@ -404,8 +436,32 @@ void Frontend::refine_range(std::span<ProfilePoint> points, std::size_t first, s
                                        last,
                                        options_.saturation_level};
   kernels::refine_columns(columns, static_cast<int>(n - first), lanes.rows.data() + first);
-  for (std::size_t j = first; j < n; ++j)
-    points[lanes.point[j]].v = lanes.rows[j];
+  const int saturation = options_.saturation_level;
+  for (std::size_t j = first; j < n; ++j) {
+    float row = lanes.rows[j];
+    const int u = lanes.u[j];
+    // The kernel leaves a clipped peak (NaN) to be centred here, one by one (few points); a fit
+    // may also land beside a clipped core (see refine_row()).
+    const bool clipped_peak = std::isnan(row);
+    const int fitted_row =
+        clipped_peak ? 0 : std::clamp(static_cast<int>(std::lround(row)), 0, last);
+    if (clipped_peak || current_.at(u, fitted_row) >= saturation) {
+      const ColumnSampler laser(current_, &background_, to_background_, u, lanes.centre[j]);
+      int through = fitted_row;
+      if (clipped_peak) {  // the window's first largest sample, as the kernel found it
+        float most = -1.0f;
+        for (int v = lanes.lo[j]; v < lanes.lo[j] + lanes.count[j]; ++v) {
+          const float value = laser(v);
+          if (value > most) {
+            most = value;
+            through = v;
+          }
+        }
+      }
+      row = clipped_core_centre(current_, u, through, saturation, &laser);
+    }
+    points[lanes.point[j]].v = row;
+  }
 }
 
 }  // namespace laserline::pipeline

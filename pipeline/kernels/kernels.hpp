@@ -123,10 +123,11 @@ void window_sums(const std::int32_t* ring, const std::size_t* above, const std::
 // background-free sample is the peak), the guess `centre`, the fit's sample spacing and the rows
 // from the peak to the baseline's samples (edge); the column's path through the background, row v
 // at (x0 + dx k, y0 + dy k), k = v - centre. A background-free sample is the current pixel minus
-// the background's bilinear sample there, clipped at 0. The result: a clipped core's centre (the
-// run of pixels at or above `saturation`, located on its flanks), else the Gaussian 3-point fit
-// over the straight baseline through the samples `edge` rows on either side (where they lie in
-// the frame: else the peak's row). Reads 4 bytes from each pixel it samples: u + 4 <= the
+// the background's bilinear sample there, clipped at 0. The result: NaN where the peak is a
+// clipped core (its pixel at or above `saturation`: the caller centres the run, whose flanks may
+// reach beyond the rows these samples may read), else the Gaussian 3-point fit over the straight
+// baseline through the samples `edge` rows on either side (where they lie in the frame: else the
+// peak's row). Reads 4 bytes from each pixel it samples: u + 4 <= the
 // frame's width, and the background's columns x + 4 <= its width.
 struct RefineColumns {
   const std::int32_t* u;

@@ -5,6 +5,7 @@
 #include <array>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 
 #include "pipeline/kernels/kernels.hpp"
 #include "pipeline/subpixel.hpp"
@@ -96,27 +97,11 @@ class Lanes {
   const std::uint8_t* bottom_row_;
 };
 
-// Where a flank of a clipped run crosses `level`: from the sample next to the run, `inside`
-// (value inside_value), one row further by `step` (-1 or +1).
-HWY_INLINE VF Crossing(const Lanes& lanes, VI inside, int step, VF inside_value, VF level,
-                       MI wanted) {
-  const DF df;
-  const DI di;
-  const VF at_inside = hn::ConvertTo(df, inside);
-  const VF outside = hn::ConvertTo(df, lanes.Current(hn::Add(inside, hn::Set(di, step)), wanted));
-  const VF t = hn::Div(hn::Sub(inside_value, level), hn::Sub(inside_value, outside));
-  const VF moved = hn::Add(
-      at_inside, hn::Mul(hn::Set(df, static_cast<float>(step)), hn::Min(t, hn::Set(df, 1.0f))));
-  const auto stays = hn::Or(hn::Le(inside_value, level), hn::Ge(outside, inside_value));
-  return hn::IfThenElse(stays, at_inside, moved);
-}
-
 // Columns [first, first + lanes) into rows.
 HWY_INLINE void RefineVector(const RefineColumns& c, int first, float* result) {
   const DF df;
   const DI di;
   const Lanes lanes(c, first);
-  const VI one = hn::Set(di, 1);
   const MI all = hn::FirstN(di, hn::Lanes(di));
   const VI lo = hn::LoadU(di, c.lo + first), count = hn::LoadU(di, c.count + first);
   const VI last_row = hn::Set(di, c.last_row);
@@ -134,36 +119,9 @@ HWY_INLINE void RefineVector(const RefineColumns& c, int first, float* result) {
     best = hn::IfThenElse(larger, rows, best);
   }
 
-  // A clipped core: the run of saturated rows around the peak, walked out from it.
+  // A clipped core: left to the caller (NaN).
   const VI below_saturation = hn::Set(di, c.saturation - 1);
   const MI clipped = hn::Gt(lanes.Current(best, all), below_saturation);
-  VI top = best, bottom = best;
-  for (MI going = clipped; !hn::AllFalse(di, going);) {
-    const VI next = hn::Sub(top, one);
-    going = hn::And(going, hn::Gt(top, hn::Zero(di)));
-    going = hn::And(going, hn::Gt(lanes.Current(next, going), below_saturation));
-    top = hn::IfThenElse(going, next, top);
-  }
-  for (MI going = clipped; !hn::AllFalse(di, going);) {
-    const VI next = hn::Add(bottom, one);
-    going = hn::And(going, hn::Gt(last_row, bottom));
-    going = hn::And(going, hn::Gt(lanes.Current(next, going), below_saturation));
-    bottom = hn::IfThenElse(going, next, bottom);
-  }
-  // Runs that reach within two rows of an end: their middle.
-  const MI near_end =
-      hn::Or(hn::Gt(hn::Set(di, 2), top), hn::Gt(bottom, hn::Set(di, c.last_row - 2)));
-  const VF middle = hn::Mul(hn::Set(df, 0.5f), hn::ConvertTo(df, hn::Add(top, bottom)));
-  // Else midway between the crossings of the flanks.
-  const MI flanked = hn::AndNot(near_end, clipped);
-  const VI above_run = hn::Sub(top, one), below_run = hn::Add(bottom, one);
-  const VF above = hn::ConvertTo(df, lanes.Current(above_run, flanked));
-  const VF below = hn::ConvertTo(df, lanes.Current(below_run, flanked));
-  const VF level = hn::Min(above, below);
-  const VF crossings =
-      hn::Mul(hn::Set(df, 0.5f), hn::Add(Crossing(lanes, above_run, -1, above, level, flanked),
-                                         Crossing(lanes, below_run, +1, below, level, flanked)));
-  const VF clipped_row = hn::IfThenElse(hn::RebindMask(df, near_end), middle, crossings);
 
   // Else the Gaussian 3-point fit on the baseline-free samples, where the baseline's samples lie
   // inside the frame.
@@ -183,8 +141,10 @@ HWY_INLINE void RefineVector(const RefineColumns& c, int first, float* result) {
             cc.data());
   hn::Store(hn::ConvertTo(df, best), df, rows.data());
   hn::Store(hn::ConvertTo(df, spacing), df, spacings.data());
-  hn::Store(hn::IfThenElse(hn::RebindMask(df, clipped), clipped_row, hn::ConvertTo(df, best)), df,
-            results.data());
+  hn::Store(
+      hn::IfThenElse(hn::RebindMask(df, clipped),
+                     hn::Set(df, std::numeric_limits<float>::quiet_NaN()), hn::ConvertTo(df, best)),
+      df, results.data());
   alignas(64) std::array<std::int32_t, kMaxLanes> fit{};
   hn::Store(hn::VecFromMask(di, fitted), di, fit.data());
   for (std::size_t j = 0; j < hn::Lanes(df); ++j) {
@@ -264,24 +224,8 @@ float refine_column(const Column& at) {
       best = c.lo[j] + k;
     }
   }
-  const auto saturation = static_cast<float>(c.saturation);
-  if (at.current(best) >= saturation) {
-    int top = best, bottom = best;
-    while (top > 0 && at.current(top - 1) >= saturation)
-      --top;
-    while (bottom < last && at.current(bottom + 1) >= saturation)
-      ++bottom;
-    if (top < 2 || bottom > last - 2) return 0.5f * static_cast<float>(top + bottom);
-    const float above = at.current(top - 1), below = at.current(bottom + 1);
-    const float level = std::min(above, below);
-    auto crossing = [&](int inside, int step, float inside_value) {
-      if (inside_value <= level) return static_cast<float>(inside);
-      const float outside = at.current(inside + step);
-      if (outside >= inside_value) return static_cast<float>(inside);
-      const float t = (inside_value - level) / (inside_value - outside);
-      return static_cast<float>(inside) + static_cast<float>(step) * std::min(t, 1.0f);
-    };
-    return 0.5f * (crossing(top - 1, -1, above) + crossing(bottom + 1, +1, below));
+  if (at.current(best) >= static_cast<float>(c.saturation)) {
+    return std::numeric_limits<float>::quiet_NaN();
   }
   const int edge = c.edge[j], spacing = c.spacing[j];
   if (best - edge < 0 || best + edge > last) return static_cast<float>(best);
