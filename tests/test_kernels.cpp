@@ -473,6 +473,31 @@ TEST(Kernels, DownsampleRowMatchesTheReference) {
   });
 }
 
+TEST(Kernels, CopyRowsPastCacheMatchesTheReference) {
+  for_each_target([] {
+    std::mt19937 random(8);
+    constexpr int kRows = 3;
+    for (const int width : kWidths) {
+      // Destinations at every offset from a 128-byte boundary, so that rows start aligned and
+      // unaligned to every vector size; the bytes between and after the rows are left alone.
+      for (const int offset : {0, 1, 7, 31, 63, 64, 65, 127}) {
+        const std::ptrdiff_t src_stride = width + 5, dst_stride = width + 3;
+        const auto source = random_values<std::uint8_t>(
+            random, static_cast<std::size_t>(src_stride * kRows), 0, 255);
+        std::vector<std::uint8_t> got(static_cast<std::size_t>(dst_stride * kRows + 256), 9);
+        std::vector<std::uint8_t> expected = got;
+        const std::size_t skip =
+            (128 - reinterpret_cast<std::uintptr_t>(got.data()) % 128) % 128 + offset;
+        copy_rows_past_cache(source.data(), src_stride, got.data() + skip, dst_stride, width,
+                             kRows);
+        reference::copy_rows_past_cache(source.data(), src_stride, expected.data() + skip,
+                                        dst_stride, width, kRows);
+        ASSERT_EQ(got, expected) << "width " << width << " at offset " << offset;
+      }
+    }
+  });
+}
+
 TEST(Kernels, Transpose16MatchesTheReference) {
   for_each_target([] {
     std::mt19937 random(8);

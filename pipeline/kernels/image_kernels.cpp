@@ -1,10 +1,11 @@
 // Kernels over whole images: the per-column maxima of the maxvalue detector, the transpose of
-// a frame into the search image (a laser beside the camera), and the halving of the motion
-// estimate's image pyramid. Compiled once per target
+// a frame into the search image (a laser beside the camera), the halving of the motion
+// estimate's image pyramid, and the copy of rows kept for later frames. Compiled once per target
 // (foreach_target.h); the scalar references at the end.
 #include <algorithm>
 #include <array>
 #include <cstdint>
+#include <cstring>
 
 #include "pipeline/kernels/kernels.hpp"
 
@@ -220,6 +221,31 @@ void DownsampleRow(const std::uint8_t* a, const std::uint8_t* b, int count, std:
 #endif
 }
 
+// Whole vectors streamed past the cache to aligned destinations, the unaligned ends copied; the
+// stores fenced at the end, so that a thread that synchronises with this one after the call sees
+// them.
+void CopyRowsPastCache(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
+                       std::ptrdiff_t dst_stride, int width, int rows) {
+#if HWY_TARGET == HWY_SCALAR
+  reference::copy_rows_past_cache(src, src_stride, dst, dst_stride, width, rows);
+#else
+  const hn::ScalableTag<std::uint8_t> d;
+  const auto n = static_cast<std::ptrdiff_t>(hn::Lanes(d));
+  for (int v = 0; v < rows; ++v) {
+    const std::uint8_t* from = src + v * src_stride;
+    std::uint8_t* to = dst + v * dst_stride;
+    const auto misaligned = static_cast<std::ptrdiff_t>(reinterpret_cast<std::uintptr_t>(to) %
+                                                        static_cast<std::uintptr_t>(n));
+    std::ptrdiff_t u = std::min<std::ptrdiff_t>((n - misaligned) % n, width);
+    std::memcpy(to, from, static_cast<std::size_t>(u));
+    for (; u + n <= width; u += n)
+      hn::Stream(hn::LoadU(d, from + u), d, to + u);
+    std::memcpy(to + u, from + u, static_cast<std::size_t>(width - u));
+  }
+  hwy::FlushStream();
+#endif
+}
+
 }  // namespace HWY_NAMESPACE
 }  // namespace laserline::pipeline::kernels
 HWY_AFTER_NAMESPACE();
@@ -230,6 +256,12 @@ namespace laserline::pipeline::kernels {
 HWY_EXPORT(ColumnMaxima);
 HWY_EXPORT(Transpose16);
 HWY_EXPORT(DownsampleRow);
+HWY_EXPORT(CopyRowsPastCache);
+
+void copy_rows_past_cache(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
+                          std::ptrdiff_t dst_stride, int width, int rows) {
+  HWY_DYNAMIC_DISPATCH(CopyRowsPastCache)(src, src_stride, dst, dst_stride, width, rows);
+}
 
 void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std::uint8_t* out) {
   HWY_DYNAMIC_DISPATCH(DownsampleRow)(a, b, count, out);
@@ -281,6 +313,12 @@ void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std
     const unsigned sum = 2u + a[2 * u] + a[2 * u + 1] + b[2 * u] + b[2 * u + 1];
     out[u] = static_cast<std::uint8_t>(sum >> 2);
   }
+}
+
+void copy_rows_past_cache(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
+                          std::ptrdiff_t dst_stride, int width, int rows) {
+  for (int v = 0; v < rows; ++v)
+    std::memcpy(dst + v * dst_stride, src + v * src_stride, static_cast<std::size_t>(width));
 }
 
 }  // namespace reference

@@ -187,6 +187,12 @@ void transpose16(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_
 // a and b at 2u and 2u + 1.
 void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std::uint8_t* out);
 
+// Copies `rows` rows of `width` bytes, with stores that bypass the cache where the target has
+// them: for a copy read again only frames later, which would otherwise first read every
+// destination line in and push out what the frame's next stages read.
+void copy_rows_past_cache(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
+                          std::ptrdiff_t dst_stride, int width, int rows);
+
 namespace reference {
 void column_maxima(const std::uint8_t* image, std::ptrdiff_t stride, int begin, int end, int height,
                    std::uint8_t* max, std::uint16_t* first, std::uint16_t* last,
@@ -194,6 +200,8 @@ void column_maxima(const std::uint8_t* image, std::ptrdiff_t stride, int begin, 
 void transpose16(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
                  std::ptrdiff_t dst_stride);
 void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std::uint8_t* out);
+void copy_rows_past_cache(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
+                          std::ptrdiff_t dst_stride, int width, int rows);
 void refine_columns(const RefineColumns& columns, int n, float* rows);
 // (Reads and writes only the candidates i < n.)
 void best_priors(const PriorLine& line, int n, float* best, std::int32_t* from,
