@@ -2,6 +2,7 @@
 // corners one per grid cell at the detect level, and the laser filter (paper IV-A) that keeps
 // features on the laser line out.
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstring>
 
@@ -61,15 +62,13 @@ void downsample_rows(const std::uint8_t* fine, std::ptrdiff_t stride, Level& coa
   });
 }
 
-// min(a, c) of the 3x3 structure tensor [a b; b c]: a bound of its smaller eigenvalue.
-[[gnu::noinline]] void eigenvalue_bound_row(const std::int32_t* __restrict sum_xx,
-                                            const std::int32_t* __restrict sum_yy,
-                                            std::int32_t* __restrict bound, int first, int last) {
-  for_each_index(first, last, [&](int u) {
-    const std::int32_t a = sum_xx[u - 1] + sum_xx[u] + sum_xx[u + 1];
-    const std::int32_t c = sum_yy[u - 1] + sum_yy[u] + sum_yy[u + 1];
-    bound[u] = std::min(a, c);
-  });
+// The largest of score[first .. last) where it is above 0 (else at most 0): the bits of a
+// positive float order as it does, so the loop is one over integers the compiler vectorises.
+[[gnu::noinline]] float largest_positive(const float* __restrict score, int first, int last) {
+  std::int32_t most = 0;
+  for (int u = first; u < last; ++u)
+    most = std::max(most, std::bit_cast<std::int32_t>(score[u]));
+  return std::bit_cast<float>(most);
 }
 
 // Paper IV-A: summed |Haar d/dv| over summed |Haar d/du| in the neighbourhood of (u, v), detect
@@ -165,37 +164,26 @@ void MotionEstimator::find_corners(int index, const ImageView& frame, int part) 
   std::fill(s.cell_score.begin() + first_cell, s.cell_score.begin() + end_cell, floor4);
   slide(first);
   slide(first + 1);
-  std::int32_t* __restrict bound = scratch.eigen_bound.data();
+  float* score = scratch.score.data();
   for (int v = v_first; v < v_end; ++v) {
     slide(v + 1);
-    // The smaller eigenvalue is at most min(a, c): most pixels stop at that bound.
-    eigenvalue_bound_row(sum_xx, sum_yy, bound, s.margin, width - s.margin);
+    kernels::corner_scores(sum_xx, sum_xy, sum_yy, s.margin, width - s.margin, score);
     float* cell_score = s.cell_score.data() + s.cell_of_row[v] * o.grid_columns;
     int* cell_u = s.cell_u.data() + s.cell_of_row[v] * o.grid_columns;
     int* cell_v = s.cell_v.data() + s.cell_of_row[v] * o.grid_columns;
+    // Per cell the first pixel of the row's largest score, where it beats the cell's best so far
+    // (which is above 0). (Every pixel is scored, in vectors: a score never exceeds min(a, c),
+    // in floats too, so no bound picks fewer pixels.)
     for (int column = 0; column < o.grid_columns; ++column) {
-      float best = cell_score[column];
-      int best_u = -1;
-      const int u_end = s.cell_start[column + 1];
-      for (int u = s.cell_start[column]; u < u_end; ++u) {
-        if (static_cast<float>(bound[u]) <= best) continue;
-        const std::int32_t a = sum_xx[u - 1] + sum_xx[u] + sum_xx[u + 1];
-        const std::int32_t c = sum_yy[u - 1] + sum_yy[u] + sum_yy[u + 1];
-        const std::int32_t b = sum_xy[u - 1] + sum_xy[u] + sum_xy[u + 1];
-        const float half_difference = 0.5f * static_cast<float>(a - c);
-        const float bf = static_cast<float>(b);
-        const float score = 0.5f * static_cast<float>(a + c) -
-                            std::sqrt(half_difference * half_difference + bf * bf);
-        if (score > best) {
-          best = score;
-          best_u = u;
-        }
-      }
-      if (best_u >= 0) {
-        cell_score[column] = best;
-        cell_u[column] = best_u;
-        cell_v[column] = v;
-      }
+      const int u_first_in_cell = s.cell_start[column], u_end = s.cell_start[column + 1];
+      const float most = largest_positive(score, u_first_in_cell, u_end);
+      if (!(most > cell_score[column])) continue;
+      int u = u_first_in_cell;
+      while (score[u] != most)
+        ++u;
+      cell_score[column] = most;
+      cell_u[column] = u;
+      cell_v[column] = v;
     }
   }
 

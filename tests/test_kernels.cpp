@@ -8,6 +8,8 @@
 
 #include <hwy/targets.h>
 #include <algorithm>
+#include <array>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -495,6 +497,39 @@ TEST(Kernels, CopyRowsPastCacheMatchesTheReference) {
         ASSERT_EQ(got, expected) << "width " << width << " at offset " << offset;
       }
     }
+  });
+}
+
+TEST(Kernels, CornerScoresMatchTheReference) {
+  for_each_target([] {
+    std::mt19937 random(8);
+    // Column sums of three rows of doubled central differences: |products| up to 3 * 255^2.
+    constexpr std::int32_t kMost = 3 * 255 * 255;
+    for (const int width : kWidths) {
+      const auto size = static_cast<std::size_t>(width) + 2;
+      const auto xx = random_values<std::int32_t>(random, size, 0, kMost);
+      const auto yy = random_values<std::int32_t>(random, size, 0, kMost);
+      const auto xy = random_values<std::int32_t>(random, size, -kMost, kMost);
+      std::vector<float> got(size, -1.0f), expected = got;
+      corner_scores(xx.data(), xy.data(), yy.data(), 1, width + 1, got.data());
+      reference::corner_scores(xx.data(), xy.data(), yy.data(), 1, width + 1, expected.data());
+      for (std::size_t u = 0; u < size; ++u) {
+        ASSERT_EQ(std::bit_cast<std::uint32_t>(got[u]), std::bit_cast<std::uint32_t>(expected[u]))
+            << "width " << width << " at " << u;
+      }
+    }
+    // A flat window, an edge (one eigenvalue 0) and an isotropic corner.
+    const std::vector<std::int32_t> zero(3, 0), one(3, 1), hundred(3, 100);
+    std::array<float, 3> scores{};
+    const float& score = scores[1];
+    corner_scores(zero.data(), zero.data(), zero.data(), 1, 2, scores.data());
+    EXPECT_EQ(score, 0.0f);
+    corner_scores(hundred.data(), zero.data(), zero.data(), 1, 2, scores.data());
+    EXPECT_EQ(score, 0.0f);
+    corner_scores(hundred.data(), zero.data(), hundred.data(), 1, 2, scores.data());
+    EXPECT_EQ(score, 300.0f);
+    corner_scores(one.data(), one.data(), one.data(), 1, 2, scores.data());
+    EXPECT_EQ(score, 0.0f);
   });
 }
 

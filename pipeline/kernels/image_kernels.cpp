@@ -1,9 +1,10 @@
 // Kernels over whole images: the per-column maxima of the maxvalue detector, the transpose of
 // a frame into the search image (a laser beside the camera), the halving of the motion
-// estimate's image pyramid, and the copy of rows kept for later frames. Compiled once per target
-// (foreach_target.h); the scalar references at the end.
+// estimate's image pyramid and its corner scores, and the copy of rows kept for later frames.
+// Compiled once per target (foreach_target.h); the scalar references at the end.
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 
@@ -246,6 +247,27 @@ void CopyRowsPastCache(const std::uint8_t* src, std::ptrdiff_t src_stride, std::
 #endif
 }
 
+void CornerScores(const std::int32_t* sum_xx, const std::int32_t* sum_xy,
+                  const std::int32_t* sum_yy, int first, int last, float* score) {
+  const hn::ScalableTag<float> df;
+  const hn::RebindToSigned<decltype(df)> di;
+  const auto n = static_cast<int>(hn::Lanes(df));
+  const auto half = hn::Set(df, 0.5f);
+  const auto three = [&](const std::int32_t* sums, int u) HWY_ATTR {
+    return hn::Add(hn::Add(hn::LoadU(di, sums + u - 1), hn::LoadU(di, sums + u)),
+                   hn::LoadU(di, sums + u + 1));
+  };
+  int u = first;
+  for (; u + n <= last; u += n) {
+    const auto a = three(sum_xx, u), b = three(sum_xy, u), c = three(sum_yy, u);
+    const auto half_difference = hn::Mul(half, hn::ConvertTo(df, hn::Sub(a, c)));
+    const auto bf = hn::ConvertTo(df, b);
+    const auto root = hn::Sqrt(hn::Add(hn::Mul(half_difference, half_difference), hn::Mul(bf, bf)));
+    hn::StoreU(hn::Sub(hn::Mul(half, hn::ConvertTo(df, hn::Add(a, c))), root), df, score + u);
+  }
+  reference::corner_scores(sum_xx, sum_xy, sum_yy, u, last, score);
+}
+
 }  // namespace HWY_NAMESPACE
 }  // namespace laserline::pipeline::kernels
 HWY_AFTER_NAMESPACE();
@@ -257,6 +279,12 @@ HWY_EXPORT(ColumnMaxima);
 HWY_EXPORT(Transpose16);
 HWY_EXPORT(DownsampleRow);
 HWY_EXPORT(CopyRowsPastCache);
+HWY_EXPORT(CornerScores);
+
+void corner_scores(const std::int32_t* sum_xx, const std::int32_t* sum_xy,
+                   const std::int32_t* sum_yy, int first, int last, float* score) {
+  HWY_DYNAMIC_DISPATCH(CornerScores)(sum_xx, sum_xy, sum_yy, first, last, score);
+}
 
 void copy_rows_past_cache(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
                           std::ptrdiff_t dst_stride, int width, int rows) {
@@ -319,6 +347,19 @@ void copy_rows_past_cache(const std::uint8_t* src, std::ptrdiff_t src_stride, st
                           std::ptrdiff_t dst_stride, int width, int rows) {
   for (int v = 0; v < rows; ++v)
     std::memcpy(dst + v * dst_stride, src + v * src_stride, static_cast<std::size_t>(width));
+}
+
+void corner_scores(const std::int32_t* sum_xx, const std::int32_t* sum_xy,
+                   const std::int32_t* sum_yy, int first, int last, float* score) {
+  for (int u = first; u < last; ++u) {
+    const std::int32_t a = sum_xx[u - 1] + sum_xx[u] + sum_xx[u + 1];
+    const std::int32_t c = sum_yy[u - 1] + sum_yy[u] + sum_yy[u + 1];
+    const std::int32_t b = sum_xy[u - 1] + sum_xy[u] + sum_xy[u + 1];
+    const float half_difference = 0.5f * static_cast<float>(a - c);
+    const float bf = static_cast<float>(b);
+    score[u] =
+        0.5f * static_cast<float>(a + c) - std::sqrt(half_difference * half_difference + bf * bf);
+  }
 }
 
 }  // namespace reference

@@ -193,6 +193,12 @@ void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std
 void copy_rows_past_cache(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
                           std::ptrdiff_t dst_stride, int width, int rows);
 
+// The smaller eigenvalue of the structure tensor [a b; b c] at u in [first, last), into score[u]:
+// a, b, c the sums of sum_xx, sum_xy, sum_yy over u - 1 .. u + 1 (each below 2^24, so exact as
+// floats). The vectors round like the scalar reference, operation by operation.
+void corner_scores(const std::int32_t* sum_xx, const std::int32_t* sum_xy,
+                   const std::int32_t* sum_yy, int first, int last, float* score);
+
 namespace reference {
 void column_maxima(const std::uint8_t* image, std::ptrdiff_t stride, int begin, int end, int height,
                    std::uint8_t* max, std::uint16_t* first, std::uint16_t* last,
@@ -202,6 +208,8 @@ void transpose16(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_
 void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std::uint8_t* out);
 void copy_rows_past_cache(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
                           std::ptrdiff_t dst_stride, int width, int rows);
+void corner_scores(const std::int32_t* sum_xx, const std::int32_t* sum_xy,
+                   const std::int32_t* sum_yy, int first, int last, float* score);
 void refine_columns(const RefineColumns& columns, int n, float* rows);
 // (Reads and writes only the candidates i < n.)
 void best_priors(const PriorLine& line, int n, float* best, std::int32_t* from,
