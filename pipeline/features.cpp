@@ -16,22 +16,6 @@ using namespace motion_detail;
 
 namespace {
 
-// Calls body(i) for i in [first, last). The blocks of a fixed length are what GCC's default -O2
-// ("very cheap") cost model is willing to vectorise; the rest runs one by one. Flattened, so
-// that the body is inlined too. Its callers take __restrict pointers and stay out of line
-// (noinline): inlined, GCC loses the promise and declines to vectorise.
-template <typename Body>
-[[gnu::always_inline, gnu::flatten]] inline void for_each_index(int first, int last, Body body) {
-  constexpr int kBlock = 16;
-  int i = first;
-  for (; i + kBlock <= last; i += kBlock) {
-    for (int k = 0; k < kBlock; ++k)
-      body(i + k);
-  }
-  for (; i < last; ++i)
-    body(i);
-}
-
 // Rows [first, end) of `coarse`, from the rows twice as far down of the finer image.
 void downsample_rows(const std::uint8_t* fine, std::ptrdiff_t stride, Level& coarse, int first,
                      int end) {
@@ -39,27 +23,6 @@ void downsample_rows(const std::uint8_t* fine, std::ptrdiff_t stride, Level& coa
     kernels::downsample_row(fine + 2 * v * stride, fine + (2 * v + 1) * stride, coarse.width,
                             coarse.pixels.data() + static_cast<std::ptrdiff_t>(v) * coarse.width);
   }
-}
-
-// Adds the gradient products of the row `mid` (doubled central differences) to the column sums
-// and replaces the products of the row three above (in xx, xy, yy) with them, for u in
-// [first, last).
-[[gnu::noinline]] void slide_structure_row(
-    const std::uint8_t* __restrict up, const std::uint8_t* __restrict mid,
-    const std::uint8_t* __restrict down, std::int32_t* __restrict xx, std::int32_t* __restrict xy,
-    std::int32_t* __restrict yy, std::int32_t* __restrict sum_xx, std::int32_t* __restrict sum_xy,
-    std::int32_t* __restrict sum_yy, int first, int last) {
-  for_each_index(first, last, [&](int u) {
-    const std::int32_t gx = mid[u + 1] - mid[u - 1];
-    const std::int32_t gy = down[u] - up[u];
-    const std::int32_t pxx = gx * gx, pxy = gx * gy, pyy = gy * gy;
-    sum_xx[u] += pxx - xx[u];
-    sum_xy[u] += pxy - xy[u];
-    sum_yy[u] += pyy - yy[u];
-    xx[u] = pxx;
-    xy[u] = pxy;
-    yy[u] = pyy;
-  });
 }
 
 // The largest of score[first .. last) where it is above 0 (else at most 0): the bits of a
@@ -156,9 +119,10 @@ void MotionEstimator::find_corners(int index, const ImageView& frame, int part) 
   // Adds row v's products to the sums, replacing those of row v-3.
   const auto slide = [&](int v) {
     const int slot = v % 3;
-    slide_structure_row(level.row(v - 1), level.row(v), level.row(v + 1), scratch.gxx[slot].data(),
-                        scratch.gxy[slot].data(), scratch.gyy[slot].data(), sum_xx, sum_xy, sum_yy,
-                        u_first, u_last + 1);
+    kernels::slide_structure_row(level.row(v - 1), level.row(v), level.row(v + 1),
+                                 scratch.gxx[slot].data(), scratch.gxy[slot].data(),
+                                 scratch.gyy[slot].data(), sum_xx, sum_xy, sum_yy, u_first,
+                                 u_last + 1);
   };
   const float floor4 = 4.0f * kMinEigenvalue;
   std::fill(s.cell_score.begin() + first_cell, s.cell_score.begin() + end_cell, floor4);

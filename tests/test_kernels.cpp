@@ -500,6 +500,41 @@ TEST(Kernels, CopyRowsPastCacheMatchesTheReference) {
   });
 }
 
+TEST(Kernels, SlideStructureRowMatchesTheReference) {
+  for_each_target([] {
+    std::mt19937 random(8);
+    for (const int width : kWidths) {
+      const auto size = static_cast<std::size_t>(width) + 2;
+      // Three rows of pixels (the extremes side by side: the largest differences), the products
+      // of the row three above and the running sums.
+      const auto up = random_values<std::uint8_t>(random, size, 0, 255);
+      const auto mid = random_values<std::uint8_t>(random, size, 0, 255);
+      const auto down = random_values<std::uint8_t>(random, size, 0, 255);
+      std::vector<std::vector<std::int32_t>> got;
+      for (int k = 0; k < 6; ++k)
+        got.push_back(random_values<std::int32_t>(random, size, -65025, 65025));
+      auto expected = got;
+      slide_structure_row(up.data(), mid.data(), down.data(), got[0].data(), got[1].data(),
+                          got[2].data(), got[3].data(), got[4].data(), got[5].data(), 1, width + 1);
+      reference::slide_structure_row(up.data(), mid.data(), down.data(), expected[0].data(),
+                                     expected[1].data(), expected[2].data(), expected[3].data(),
+                                     expected[4].data(), expected[5].data(), 1, width + 1);
+      ASSERT_EQ(got, expected) << "width " << width;
+    }
+    // One pixel: gx = 255 - 0, gy = 0 - 255, replacing products of 1 in sums of 10.
+    const std::vector<std::uint8_t> up{0, 255, 0}, mid{0, 7, 255}, down{0, 0, 0};
+    std::vector<std::int32_t> xx(3, 1), xy(3, 1), yy(3, 1), sxx(3, 10), sxy(3, 10), syy(3, 10);
+    slide_structure_row(up.data(), mid.data(), down.data(), xx.data(), xy.data(), yy.data(),
+                        sxx.data(), sxy.data(), syy.data(), 1, 2);
+    EXPECT_EQ(xx[1], 65025);
+    EXPECT_EQ(xy[1], -65025);
+    EXPECT_EQ(yy[1], 65025);
+    EXPECT_EQ(sxx[1], 65034);
+    EXPECT_EQ(sxy[1], -65016);
+    EXPECT_EQ(syy[1], 65034);
+  });
+}
+
 TEST(Kernels, CornerScoresMatchTheReference) {
   for_each_target([] {
     std::mt19937 random(8);

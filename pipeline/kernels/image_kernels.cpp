@@ -247,6 +247,35 @@ void CopyRowsPastCache(const std::uint8_t* src, std::ptrdiff_t src_stride, std::
 #endif
 }
 
+void SlideStructureRow(const std::uint8_t* up, const std::uint8_t* mid, const std::uint8_t* down,
+                       std::int32_t* xx, std::int32_t* xy, std::int32_t* yy, std::int32_t* sum_xx,
+                       std::int32_t* sum_xy, std::int32_t* sum_yy, int first, int last) {
+#if HWY_TARGET == HWY_SCALAR
+  reference::slide_structure_row(up, mid, down, xx, xy, yy, sum_xx, sum_xy, sum_yy, first, last);
+#else
+  const hn::ScalableTag<std::int32_t> d;
+  const hn::Rebind<std::uint8_t, decltype(d)> d8;
+  const auto n = static_cast<int>(hn::Lanes(d));
+  const auto wide = [&](const std::uint8_t* p)
+                        HWY_ATTR { return hn::PromoteTo(d, hn::LoadU(d8, p)); };
+  const auto replace = [&](std::int32_t* products, std::int32_t* sums, int u,
+                           hn::Vec<decltype(d)> p) HWY_ATTR {
+    hn::StoreU(hn::Add(hn::LoadU(d, sums + u), hn::Sub(p, hn::LoadU(d, products + u))), d,
+               sums + u);
+    hn::StoreU(p, d, products + u);
+  };
+  int u = first;
+  for (; u + n <= last; u += n) {
+    const auto gx = hn::Sub(wide(mid + u + 1), wide(mid + u - 1));
+    const auto gy = hn::Sub(wide(down + u), wide(up + u));
+    replace(xx, sum_xx, u, hn::Mul(gx, gx));
+    replace(xy, sum_xy, u, hn::Mul(gx, gy));
+    replace(yy, sum_yy, u, hn::Mul(gy, gy));
+  }
+  reference::slide_structure_row(up, mid, down, xx, xy, yy, sum_xx, sum_xy, sum_yy, u, last);
+#endif
+}
+
 void CornerScores(const std::int32_t* sum_xx, const std::int32_t* sum_xy,
                   const std::int32_t* sum_yy, int first, int last, float* score) {
   const hn::ScalableTag<float> df;
@@ -280,6 +309,14 @@ HWY_EXPORT(Transpose16);
 HWY_EXPORT(DownsampleRow);
 HWY_EXPORT(CopyRowsPastCache);
 HWY_EXPORT(CornerScores);
+HWY_EXPORT(SlideStructureRow);
+
+void slide_structure_row(const std::uint8_t* up, const std::uint8_t* mid, const std::uint8_t* down,
+                         std::int32_t* xx, std::int32_t* xy, std::int32_t* yy, std::int32_t* sum_xx,
+                         std::int32_t* sum_xy, std::int32_t* sum_yy, int first, int last) {
+  HWY_DYNAMIC_DISPATCH(SlideStructureRow)
+  (up, mid, down, xx, xy, yy, sum_xx, sum_xy, sum_yy, first, last);
+}
 
 void corner_scores(const std::int32_t* sum_xx, const std::int32_t* sum_xy,
                    const std::int32_t* sum_yy, int first, int last, float* score) {
@@ -347,6 +384,22 @@ void copy_rows_past_cache(const std::uint8_t* src, std::ptrdiff_t src_stride, st
                           std::ptrdiff_t dst_stride, int width, int rows) {
   for (int v = 0; v < rows; ++v)
     std::memcpy(dst + v * dst_stride, src + v * src_stride, static_cast<std::size_t>(width));
+}
+
+void slide_structure_row(const std::uint8_t* up, const std::uint8_t* mid, const std::uint8_t* down,
+                         std::int32_t* xx, std::int32_t* xy, std::int32_t* yy, std::int32_t* sum_xx,
+                         std::int32_t* sum_xy, std::int32_t* sum_yy, int first, int last) {
+  for (int u = first; u < last; ++u) {
+    const std::int32_t gx = mid[u + 1] - mid[u - 1];
+    const std::int32_t gy = down[u] - up[u];
+    const std::int32_t pxx = gx * gx, pxy = gx * gy, pyy = gy * gy;
+    sum_xx[u] += pxx - xx[u];
+    sum_xy[u] += pxy - xy[u];
+    sum_yy[u] += pyy - yy[u];
+    xx[u] = pxx;
+    xy[u] = pxy;
+    yy[u] = pyy;
+  }
 }
 
 void corner_scores(const std::int32_t* sum_xx, const std::int32_t* sum_xy,

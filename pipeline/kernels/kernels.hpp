@@ -193,6 +193,13 @@ void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std
 void copy_rows_past_cache(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
                           std::ptrdiff_t dst_stride, int width, int rows);
 
+// The corners' sliding structure tensor sums, for u in [first, last): the products of row `mid`'s
+// doubled central differences (gx = mid[u+1] - mid[u-1], gy = down[u] - up[u]) added to the
+// column sums in place of those of the row three above, which xx, xy, yy hold and then take.
+void slide_structure_row(const std::uint8_t* up, const std::uint8_t* mid, const std::uint8_t* down,
+                         std::int32_t* xx, std::int32_t* xy, std::int32_t* yy, std::int32_t* sum_xx,
+                         std::int32_t* sum_xy, std::int32_t* sum_yy, int first, int last);
+
 // The smaller eigenvalue of the structure tensor [a b; b c] at u in [first, last), into score[u]:
 // a, b, c the sums of sum_xx, sum_xy, sum_yy over u - 1 .. u + 1 (each below 2^24, so exact as
 // floats). The vectors round like the scalar reference, operation by operation.
@@ -210,6 +217,9 @@ void copy_rows_past_cache(const std::uint8_t* src, std::ptrdiff_t src_stride, st
                           std::ptrdiff_t dst_stride, int width, int rows);
 void corner_scores(const std::int32_t* sum_xx, const std::int32_t* sum_xy,
                    const std::int32_t* sum_yy, int first, int last, float* score);
+void slide_structure_row(const std::uint8_t* up, const std::uint8_t* mid, const std::uint8_t* down,
+                         std::int32_t* xx, std::int32_t* xy, std::int32_t* yy, std::int32_t* sum_xx,
+                         std::int32_t* sum_xy, std::int32_t* sum_yy, int first, int last);
 void refine_columns(const RefineColumns& columns, int n, float* rows);
 // (Reads and writes only the candidates i < n.)
 void best_priors(const PriorLine& line, int n, float* best, std::int32_t* from,
