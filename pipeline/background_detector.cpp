@@ -1,11 +1,11 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <cstring>
 #include <limits>
 #include <stdexcept>
 
 #include "pipeline/frontend_detectors.hpp"
+#include "pipeline/kernels/kernels.hpp"
 
 namespace laserline::pipeline {
 
@@ -104,13 +104,13 @@ void BackgroundDetector::collect_candidates(const ImageView& image, const FrameC
                                             Profile& out) {
   out.clear();
   // The rows this frame keeps, in bands of rows (the kept frames stay as they are until it is
-  // done: one of them may be its background).
+  // done: one of them may be its background). Past the cache: read again a frame later at the
+  // soonest.
   auto keep_rows = [&](int part) {
     const auto [first, end] = part_range(band_rows_, part, parts_);
-    for (int v = first; v < end; ++v) {
-      std::memcpy(incoming_.data() + static_cast<std::size_t>(v) * width_,
-                  image.row(band_first_ + v), static_cast<std::size_t>(width_));
-    }
+    kernels::copy_rows_past_cache(image.row(band_first_ + first), image.stride,
+                                  incoming_.data() + static_cast<std::size_t>(first) * width_,
+                                  width_, width_, end - first);
   };
   if (parts_ > 1 && runner_->parts() == parts_) {
     runner_->run(PartWork(keep_rows));

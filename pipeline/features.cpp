@@ -2,6 +2,7 @@
 // corners one per grid cell at the detect level, and the laser filter (paper IV-A) that keeps
 // features on the laser line out.
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstring>
 
@@ -15,22 +16,6 @@ using namespace motion_detail;
 
 namespace {
 
-// Calls body(i) for i in [first, last). The blocks of a fixed length are what GCC's default -O2
-// ("very cheap") cost model is willing to vectorise; the rest runs one by one. Flattened, so
-// that the body is inlined too. Its callers take __restrict pointers and stay out of line
-// (noinline): inlined, GCC loses the promise and declines to vectorise.
-template <typename Body>
-[[gnu::always_inline, gnu::flatten]] inline void for_each_index(int first, int last, Body body) {
-  constexpr int kBlock = 16;
-  int i = first;
-  for (; i + kBlock <= last; i += kBlock) {
-    for (int k = 0; k < kBlock; ++k)
-      body(i + k);
-  }
-  for (; i < last; ++i)
-    body(i);
-}
-
 // Rows [first, end) of `coarse`, from the rows twice as far down of the finer image.
 void downsample_rows(const std::uint8_t* fine, std::ptrdiff_t stride, Level& coarse, int first,
                      int end) {
@@ -40,36 +25,13 @@ void downsample_rows(const std::uint8_t* fine, std::ptrdiff_t stride, Level& coa
   }
 }
 
-// Adds the gradient products of the row `mid` (doubled central differences) to the column sums
-// and replaces the products of the row three above (in xx, xy, yy) with them, for u in
-// [first, last).
-[[gnu::noinline]] void slide_structure_row(
-    const std::uint8_t* __restrict up, const std::uint8_t* __restrict mid,
-    const std::uint8_t* __restrict down, std::int32_t* __restrict xx, std::int32_t* __restrict xy,
-    std::int32_t* __restrict yy, std::int32_t* __restrict sum_xx, std::int32_t* __restrict sum_xy,
-    std::int32_t* __restrict sum_yy, int first, int last) {
-  for_each_index(first, last, [&](int u) {
-    const std::int32_t gx = mid[u + 1] - mid[u - 1];
-    const std::int32_t gy = down[u] - up[u];
-    const std::int32_t pxx = gx * gx, pxy = gx * gy, pyy = gy * gy;
-    sum_xx[u] += pxx - xx[u];
-    sum_xy[u] += pxy - xy[u];
-    sum_yy[u] += pyy - yy[u];
-    xx[u] = pxx;
-    xy[u] = pxy;
-    yy[u] = pyy;
-  });
-}
-
-// min(a, c) of the 3x3 structure tensor [a b; b c]: a bound of its smaller eigenvalue.
-[[gnu::noinline]] void eigenvalue_bound_row(const std::int32_t* __restrict sum_xx,
-                                            const std::int32_t* __restrict sum_yy,
-                                            std::int32_t* __restrict bound, int first, int last) {
-  for_each_index(first, last, [&](int u) {
-    const std::int32_t a = sum_xx[u - 1] + sum_xx[u] + sum_xx[u + 1];
-    const std::int32_t c = sum_yy[u - 1] + sum_yy[u] + sum_yy[u + 1];
-    bound[u] = std::min(a, c);
-  });
+// The largest of score[first .. last) where it is above 0 (else at most 0): the bits of a
+// positive float order as it does, so the loop is one over integers the compiler vectorises.
+[[gnu::noinline]] float largest_positive(const float* __restrict score, int first, int last) {
+  std::int32_t most = 0;
+  for (int u = first; u < last; ++u)
+    most = std::max(most, std::bit_cast<std::int32_t>(score[u]));
+  return std::bit_cast<float>(most);
 }
 
 // Paper IV-A: summed |Haar d/dv| over summed |Haar d/du| in the neighbourhood of (u, v), detect
@@ -157,45 +119,35 @@ void MotionEstimator::find_corners(int index, const ImageView& frame, int part) 
   // Adds row v's products to the sums, replacing those of row v-3.
   const auto slide = [&](int v) {
     const int slot = v % 3;
-    slide_structure_row(level.row(v - 1), level.row(v), level.row(v + 1), scratch.gxx[slot].data(),
-                        scratch.gxy[slot].data(), scratch.gyy[slot].data(), sum_xx, sum_xy, sum_yy,
-                        u_first, u_last + 1);
+    kernels::slide_structure_row(level.row(v - 1), level.row(v), level.row(v + 1),
+                                 scratch.gxx[slot].data(), scratch.gxy[slot].data(),
+                                 scratch.gyy[slot].data(), sum_xx, sum_xy, sum_yy, u_first,
+                                 u_last + 1);
   };
   const float floor4 = 4.0f * kMinEigenvalue;
   std::fill(s.cell_score.begin() + first_cell, s.cell_score.begin() + end_cell, floor4);
   slide(first);
   slide(first + 1);
-  std::int32_t* __restrict bound = scratch.eigen_bound.data();
+  float* score = scratch.score.data();
   for (int v = v_first; v < v_end; ++v) {
     slide(v + 1);
-    // The smaller eigenvalue is at most min(a, c): most pixels stop at that bound.
-    eigenvalue_bound_row(sum_xx, sum_yy, bound, s.margin, width - s.margin);
+    kernels::corner_scores(sum_xx, sum_xy, sum_yy, s.margin, width - s.margin, score);
     float* cell_score = s.cell_score.data() + s.cell_of_row[v] * o.grid_columns;
     int* cell_u = s.cell_u.data() + s.cell_of_row[v] * o.grid_columns;
     int* cell_v = s.cell_v.data() + s.cell_of_row[v] * o.grid_columns;
+    // Per cell the first pixel of the row's largest score, where it beats the cell's best so far
+    // (which is above 0). (Every pixel is scored, in vectors: a score never exceeds min(a, c),
+    // in floats too, so no bound picks fewer pixels.)
     for (int column = 0; column < o.grid_columns; ++column) {
-      float best = cell_score[column];
-      int best_u = -1;
-      const int u_end = s.cell_start[column + 1];
-      for (int u = s.cell_start[column]; u < u_end; ++u) {
-        if (static_cast<float>(bound[u]) <= best) continue;
-        const std::int32_t a = sum_xx[u - 1] + sum_xx[u] + sum_xx[u + 1];
-        const std::int32_t c = sum_yy[u - 1] + sum_yy[u] + sum_yy[u + 1];
-        const std::int32_t b = sum_xy[u - 1] + sum_xy[u] + sum_xy[u + 1];
-        const float half_difference = 0.5f * static_cast<float>(a - c);
-        const float bf = static_cast<float>(b);
-        const float score = 0.5f * static_cast<float>(a + c) -
-                            std::sqrt(half_difference * half_difference + bf * bf);
-        if (score > best) {
-          best = score;
-          best_u = u;
-        }
-      }
-      if (best_u >= 0) {
-        cell_score[column] = best;
-        cell_u[column] = best_u;
-        cell_v[column] = v;
-      }
+      const int u_first_in_cell = s.cell_start[column], u_end = s.cell_start[column + 1];
+      const float most = largest_positive(score, u_first_in_cell, u_end);
+      if (!(most > cell_score[column])) continue;
+      int u = u_first_in_cell;
+      while (score[u] != most)
+        ++u;
+      cell_score[column] = most;
+      cell_u[column] = u;
+      cell_v[column] = v;
     }
   }
 

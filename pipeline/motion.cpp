@@ -125,9 +125,9 @@ void MotionEstimator::reset(int width, int height, const ScannerGeometry* geomet
       scratch.gxy[i].assign(detect_width, 0);
       scratch.gyy[i].assign(detect_width, 0);
     }
-    for (auto* v :
-         {&scratch.column_xx, &scratch.column_xy, &scratch.column_yy, &scratch.eigen_bound})
+    for (auto* v : {&scratch.column_xx, &scratch.column_xy, &scratch.column_yy})
       v->assign(detect_width, 0);
+    scratch.score.assign(detect_width, 0.0f);
   }
   s.cell_on_laser.assign(cells, 0);
   s.feature_tracks.assign(cells, TrackResult{});

@@ -58,11 +58,11 @@ struct TrackResult {
 };
 
 // One part's scratch for the corners (features.cpp): gradient products of the last three rows,
-// their sums over those rows (kept sliding), the bound of the smaller eigenvalue per column.
+// their sums over those rows (kept sliding), the corner score (smaller eigenvalue) per column.
 struct CornerScratch {
   std::array<std::vector<std::int32_t>, 3> gxx, gxy, gyy;
   std::vector<std::int32_t> column_xx, column_xy, column_yy;
-  std::vector<std::int32_t> eigen_bound;
+  std::vector<float> score;
 };
 
 // splitmix64: small, fast and the same everywhere, so RANSAC repeats bit for bit.

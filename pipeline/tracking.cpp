@@ -17,8 +17,11 @@ namespace {
 
 // Samples a (2n+1)^2 patch of `image` centred on (x, y) with bilinear interpolation; every
 // sample shares the same sub-pixel weights, so rows are interpolated once and blended. False when
-// a sample would fall outside.
-bool sample_patch(const ImageView& image, float x, float y, int n, float* out) {
+// a sample would fall outside. kN: n when known at compile time (0: runtime_n), so that the loops
+// over a row unroll into whole vectors.
+template <int kN>
+bool sample_patch(const ImageView& image, float x, float y, int runtime_n, float* out) {
+  const int n = kN > 0 ? kN : runtime_n;
   const float fx = std::floor(x), fy = std::floor(y);
   if (!(fx - n >= 0 && fy - n >= 0 && fx + n + 1 < image.width && fy + n + 1 < image.height))
     return false;
@@ -51,10 +54,13 @@ bool sample_patch(const ImageView& image, float x, float y, int n, float* out) {
 // pyramid levels; at full size the previous frame is the (2r+3)^2 patch around the point kept
 // when it was detected, the current frame is the frame itself. Coarse levels where the window
 // does not fit are skipped; the full-size level must fit.
+// kRadius: the window radius when known at compile time (0: o.window_radius).
+template <int kRadius>
 TrackResult track_point(const Pyramid& previous, const Pyramid& current,
                         const std::uint8_t* full_size_patch, const ImageView& frame,
                         const MotionOptions& o, float pu, float pv) {
-  const int r = o.window_radius;
+  const int r = kRadius > 0 ? kRadius : o.window_radius;
+  constexpr int kTemplateN = kRadius > 0 ? kRadius + 1 : 0;
   const int side = 2 * r + 1;
   const int patch_side = side + 2;
   std::array<float, kMaxPatch * kMaxPatch> templ;
@@ -70,7 +76,7 @@ TrackResult track_point(const Pyramid& previous, const Pyramid& current,
         templ[k] = full_size_patch[k];
     } else {
       const float x = (pu + 0.5f) * scale - 0.5f, y = (pv + 0.5f) * scale - 0.5f;
-      if (!sample_patch(previous.levels[l].view(), x, y, r + 1, templ.data())) continue;
+      if (!sample_patch<kTemplateN>(previous.levels[l].view(), x, y, r + 1, templ.data())) continue;
     }
     // Template gradients (central differences) and the 2x2 normal matrix.
     float gxx = 0, gxy = 0, gyy = 0;
@@ -102,7 +108,7 @@ TrackResult track_point(const Pyramid& previous, const Pyramid& current,
     float last_step = 1e9f;
     bool inside = true;
     for (int iteration = 0; iteration < o.max_iterations; ++iteration) {
-      if (!sample_patch(cur_level, cx, cy, r, warped.data())) {
+      if (!sample_patch<kRadius>(cur_level, cx, cy, r, warped.data())) {
         inside = false;
         break;
       }
@@ -138,6 +144,17 @@ TrackResult track_point(const Pyramid& previous, const Pyramid& current,
     }
   }
   return result;
+}
+
+// track_point() with the window radius of the default options fixed at compile time.
+TrackResult track_point(const Pyramid& previous, const Pyramid& current,
+                        const std::uint8_t* full_size_patch, const ImageView& frame,
+                        const MotionOptions& o, float pu, float pv) {
+  constexpr int kDefaultRadius = MotionOptions{}.window_radius;
+  if (o.window_radius == kDefaultRadius) {
+    return track_point<kDefaultRadius>(previous, current, full_size_patch, frame, o, pu, pv);
+  }
+  return track_point<0>(previous, current, full_size_patch, frame, o, pu, pv);
 }
 
 }  // namespace

@@ -8,6 +8,8 @@
 
 #include <hwy/targets.h>
 #include <algorithm>
+#include <array>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -470,6 +472,99 @@ TEST(Kernels, DownsampleRowMatchesTheReference) {
     EXPECT_EQ(out[31], 1);  // (2 + 2) / 4
     downsample_row(low.data(), low.data(), 32, out.data());
     EXPECT_EQ(out[5], 0);
+  });
+}
+
+TEST(Kernels, CopyRowsPastCacheMatchesTheReference) {
+  for_each_target([] {
+    std::mt19937 random(8);
+    constexpr int kRows = 3;
+    for (const int width : kWidths) {
+      // Destinations at every offset from a 128-byte boundary, so that rows start aligned and
+      // unaligned to every vector size; the bytes between and after the rows are left alone.
+      for (const int offset : {0, 1, 7, 31, 63, 64, 65, 127}) {
+        const std::ptrdiff_t src_stride = width + 5, dst_stride = width + 3;
+        const auto source = random_values<std::uint8_t>(
+            random, static_cast<std::size_t>(src_stride * kRows), 0, 255);
+        std::vector<std::uint8_t> got(static_cast<std::size_t>(dst_stride * kRows + 256), 9);
+        std::vector<std::uint8_t> expected = got;
+        const std::size_t skip =
+            (128 - reinterpret_cast<std::uintptr_t>(got.data()) % 128) % 128 + offset;
+        copy_rows_past_cache(source.data(), src_stride, got.data() + skip, dst_stride, width,
+                             kRows);
+        reference::copy_rows_past_cache(source.data(), src_stride, expected.data() + skip,
+                                        dst_stride, width, kRows);
+        ASSERT_EQ(got, expected) << "width " << width << " at offset " << offset;
+      }
+    }
+  });
+}
+
+TEST(Kernels, SlideStructureRowMatchesTheReference) {
+  for_each_target([] {
+    std::mt19937 random(8);
+    for (const int width : kWidths) {
+      const auto size = static_cast<std::size_t>(width) + 2;
+      // Three rows of pixels (the extremes side by side: the largest differences), the products
+      // of the row three above and the running sums.
+      const auto up = random_values<std::uint8_t>(random, size, 0, 255);
+      const auto mid = random_values<std::uint8_t>(random, size, 0, 255);
+      const auto down = random_values<std::uint8_t>(random, size, 0, 255);
+      std::vector<std::vector<std::int32_t>> got;
+      for (int k = 0; k < 6; ++k)
+        got.push_back(random_values<std::int32_t>(random, size, -65025, 65025));
+      auto expected = got;
+      slide_structure_row(up.data(), mid.data(), down.data(), got[0].data(), got[1].data(),
+                          got[2].data(), got[3].data(), got[4].data(), got[5].data(), 1, width + 1);
+      reference::slide_structure_row(up.data(), mid.data(), down.data(), expected[0].data(),
+                                     expected[1].data(), expected[2].data(), expected[3].data(),
+                                     expected[4].data(), expected[5].data(), 1, width + 1);
+      ASSERT_EQ(got, expected) << "width " << width;
+    }
+    // One pixel: gx = 255 - 0, gy = 0 - 255, replacing products of 1 in sums of 10.
+    const std::vector<std::uint8_t> up{0, 255, 0}, mid{0, 7, 255}, down{0, 0, 0};
+    std::vector<std::int32_t> xx(3, 1), xy(3, 1), yy(3, 1), sxx(3, 10), sxy(3, 10), syy(3, 10);
+    slide_structure_row(up.data(), mid.data(), down.data(), xx.data(), xy.data(), yy.data(),
+                        sxx.data(), sxy.data(), syy.data(), 1, 2);
+    EXPECT_EQ(xx[1], 65025);
+    EXPECT_EQ(xy[1], -65025);
+    EXPECT_EQ(yy[1], 65025);
+    EXPECT_EQ(sxx[1], 65034);
+    EXPECT_EQ(sxy[1], -65016);
+    EXPECT_EQ(syy[1], 65034);
+  });
+}
+
+TEST(Kernels, CornerScoresMatchTheReference) {
+  for_each_target([] {
+    std::mt19937 random(8);
+    // Column sums of three rows of doubled central differences: |products| up to 3 * 255^2.
+    constexpr std::int32_t kMost = 3 * 255 * 255;
+    for (const int width : kWidths) {
+      const auto size = static_cast<std::size_t>(width) + 2;
+      const auto xx = random_values<std::int32_t>(random, size, 0, kMost);
+      const auto yy = random_values<std::int32_t>(random, size, 0, kMost);
+      const auto xy = random_values<std::int32_t>(random, size, -kMost, kMost);
+      std::vector<float> got(size, -1.0f), expected = got;
+      corner_scores(xx.data(), xy.data(), yy.data(), 1, width + 1, got.data());
+      reference::corner_scores(xx.data(), xy.data(), yy.data(), 1, width + 1, expected.data());
+      for (std::size_t u = 0; u < size; ++u) {
+        ASSERT_EQ(std::bit_cast<std::uint32_t>(got[u]), std::bit_cast<std::uint32_t>(expected[u]))
+            << "width " << width << " at " << u;
+      }
+    }
+    // A flat window, an edge (one eigenvalue 0) and an isotropic corner.
+    const std::vector<std::int32_t> zero(3, 0), one(3, 1), hundred(3, 100);
+    std::array<float, 3> scores{};
+    const float& score = scores[1];
+    corner_scores(zero.data(), zero.data(), zero.data(), 1, 2, scores.data());
+    EXPECT_EQ(score, 0.0f);
+    corner_scores(hundred.data(), zero.data(), zero.data(), 1, 2, scores.data());
+    EXPECT_EQ(score, 0.0f);
+    corner_scores(hundred.data(), zero.data(), hundred.data(), 1, 2, scores.data());
+    EXPECT_EQ(score, 300.0f);
+    corner_scores(one.data(), one.data(), one.data(), 1, 2, scores.data());
+    EXPECT_EQ(score, 0.0f);
   });
 }
 

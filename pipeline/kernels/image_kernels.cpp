@@ -1,10 +1,12 @@
 // Kernels over whole images: the per-column maxima of the maxvalue detector, the transpose of
-// a frame into the search image (a laser beside the camera), and the halving of the motion
-// estimate's image pyramid. Compiled once per target
-// (foreach_target.h); the scalar references at the end.
+// a frame into the search image (a laser beside the camera), the halving of the motion
+// estimate's image pyramid and its corner scores, and the copy of rows kept for later frames.
+// Compiled once per target (foreach_target.h); the scalar references at the end.
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
+#include <cstring>
 
 #include "pipeline/kernels/kernels.hpp"
 
@@ -220,6 +222,81 @@ void DownsampleRow(const std::uint8_t* a, const std::uint8_t* b, int count, std:
 #endif
 }
 
+// Whole vectors streamed past the cache to aligned destinations, the unaligned ends copied; the
+// stores fenced at the end, so that a thread that synchronises with this one after the call sees
+// them.
+void CopyRowsPastCache(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
+                       std::ptrdiff_t dst_stride, int width, int rows) {
+#if HWY_TARGET == HWY_SCALAR
+  reference::copy_rows_past_cache(src, src_stride, dst, dst_stride, width, rows);
+#else
+  const hn::ScalableTag<std::uint8_t> d;
+  const auto n = static_cast<std::ptrdiff_t>(hn::Lanes(d));
+  for (int v = 0; v < rows; ++v) {
+    const std::uint8_t* from = src + v * src_stride;
+    std::uint8_t* to = dst + v * dst_stride;
+    const auto misaligned = static_cast<std::ptrdiff_t>(reinterpret_cast<std::uintptr_t>(to) %
+                                                        static_cast<std::uintptr_t>(n));
+    std::ptrdiff_t u = std::min<std::ptrdiff_t>((n - misaligned) % n, width);
+    std::memcpy(to, from, static_cast<std::size_t>(u));
+    for (; u + n <= width; u += n)
+      hn::Stream(hn::LoadU(d, from + u), d, to + u);
+    std::memcpy(to + u, from + u, static_cast<std::size_t>(width - u));
+  }
+  hwy::FlushStream();
+#endif
+}
+
+void SlideStructureRow(const std::uint8_t* up, const std::uint8_t* mid, const std::uint8_t* down,
+                       std::int32_t* xx, std::int32_t* xy, std::int32_t* yy, std::int32_t* sum_xx,
+                       std::int32_t* sum_xy, std::int32_t* sum_yy, int first, int last) {
+#if HWY_TARGET == HWY_SCALAR
+  reference::slide_structure_row(up, mid, down, xx, xy, yy, sum_xx, sum_xy, sum_yy, first, last);
+#else
+  const hn::ScalableTag<std::int32_t> d;
+  const hn::Rebind<std::uint8_t, decltype(d)> d8;
+  const auto n = static_cast<int>(hn::Lanes(d));
+  const auto wide = [&](const std::uint8_t* p)
+                        HWY_ATTR { return hn::PromoteTo(d, hn::LoadU(d8, p)); };
+  const auto replace = [&](std::int32_t* products, std::int32_t* sums, int u,
+                           hn::Vec<decltype(d)> p) HWY_ATTR {
+    hn::StoreU(hn::Add(hn::LoadU(d, sums + u), hn::Sub(p, hn::LoadU(d, products + u))), d,
+               sums + u);
+    hn::StoreU(p, d, products + u);
+  };
+  int u = first;
+  for (; u + n <= last; u += n) {
+    const auto gx = hn::Sub(wide(mid + u + 1), wide(mid + u - 1));
+    const auto gy = hn::Sub(wide(down + u), wide(up + u));
+    replace(xx, sum_xx, u, hn::Mul(gx, gx));
+    replace(xy, sum_xy, u, hn::Mul(gx, gy));
+    replace(yy, sum_yy, u, hn::Mul(gy, gy));
+  }
+  reference::slide_structure_row(up, mid, down, xx, xy, yy, sum_xx, sum_xy, sum_yy, u, last);
+#endif
+}
+
+void CornerScores(const std::int32_t* sum_xx, const std::int32_t* sum_xy,
+                  const std::int32_t* sum_yy, int first, int last, float* score) {
+  const hn::ScalableTag<float> df;
+  const hn::RebindToSigned<decltype(df)> di;
+  const auto n = static_cast<int>(hn::Lanes(df));
+  const auto half = hn::Set(df, 0.5f);
+  const auto three = [&](const std::int32_t* sums, int u) HWY_ATTR {
+    return hn::Add(hn::Add(hn::LoadU(di, sums + u - 1), hn::LoadU(di, sums + u)),
+                   hn::LoadU(di, sums + u + 1));
+  };
+  int u = first;
+  for (; u + n <= last; u += n) {
+    const auto a = three(sum_xx, u), b = three(sum_xy, u), c = three(sum_yy, u);
+    const auto half_difference = hn::Mul(half, hn::ConvertTo(df, hn::Sub(a, c)));
+    const auto bf = hn::ConvertTo(df, b);
+    const auto root = hn::Sqrt(hn::Add(hn::Mul(half_difference, half_difference), hn::Mul(bf, bf)));
+    hn::StoreU(hn::Sub(hn::Mul(half, hn::ConvertTo(df, hn::Add(a, c))), root), df, score + u);
+  }
+  reference::corner_scores(sum_xx, sum_xy, sum_yy, u, last, score);
+}
+
 }  // namespace HWY_NAMESPACE
 }  // namespace laserline::pipeline::kernels
 HWY_AFTER_NAMESPACE();
@@ -230,6 +307,26 @@ namespace laserline::pipeline::kernels {
 HWY_EXPORT(ColumnMaxima);
 HWY_EXPORT(Transpose16);
 HWY_EXPORT(DownsampleRow);
+HWY_EXPORT(CopyRowsPastCache);
+HWY_EXPORT(CornerScores);
+HWY_EXPORT(SlideStructureRow);
+
+void slide_structure_row(const std::uint8_t* up, const std::uint8_t* mid, const std::uint8_t* down,
+                         std::int32_t* xx, std::int32_t* xy, std::int32_t* yy, std::int32_t* sum_xx,
+                         std::int32_t* sum_xy, std::int32_t* sum_yy, int first, int last) {
+  HWY_DYNAMIC_DISPATCH(SlideStructureRow)
+  (up, mid, down, xx, xy, yy, sum_xx, sum_xy, sum_yy, first, last);
+}
+
+void corner_scores(const std::int32_t* sum_xx, const std::int32_t* sum_xy,
+                   const std::int32_t* sum_yy, int first, int last, float* score) {
+  HWY_DYNAMIC_DISPATCH(CornerScores)(sum_xx, sum_xy, sum_yy, first, last, score);
+}
+
+void copy_rows_past_cache(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
+                          std::ptrdiff_t dst_stride, int width, int rows) {
+  HWY_DYNAMIC_DISPATCH(CopyRowsPastCache)(src, src_stride, dst, dst_stride, width, rows);
+}
 
 void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std::uint8_t* out) {
   HWY_DYNAMIC_DISPATCH(DownsampleRow)(a, b, count, out);
@@ -280,6 +377,41 @@ void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std
   for (int u = 0; u < count; ++u) {
     const unsigned sum = 2u + a[2 * u] + a[2 * u + 1] + b[2 * u] + b[2 * u + 1];
     out[u] = static_cast<std::uint8_t>(sum >> 2);
+  }
+}
+
+void copy_rows_past_cache(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
+                          std::ptrdiff_t dst_stride, int width, int rows) {
+  for (int v = 0; v < rows; ++v)
+    std::memcpy(dst + v * dst_stride, src + v * src_stride, static_cast<std::size_t>(width));
+}
+
+void slide_structure_row(const std::uint8_t* up, const std::uint8_t* mid, const std::uint8_t* down,
+                         std::int32_t* xx, std::int32_t* xy, std::int32_t* yy, std::int32_t* sum_xx,
+                         std::int32_t* sum_xy, std::int32_t* sum_yy, int first, int last) {
+  for (int u = first; u < last; ++u) {
+    const std::int32_t gx = mid[u + 1] - mid[u - 1];
+    const std::int32_t gy = down[u] - up[u];
+    const std::int32_t pxx = gx * gx, pxy = gx * gy, pyy = gy * gy;
+    sum_xx[u] += pxx - xx[u];
+    sum_xy[u] += pxy - xy[u];
+    sum_yy[u] += pyy - yy[u];
+    xx[u] = pxx;
+    xy[u] = pxy;
+    yy[u] = pyy;
+  }
+}
+
+void corner_scores(const std::int32_t* sum_xx, const std::int32_t* sum_xy,
+                   const std::int32_t* sum_yy, int first, int last, float* score) {
+  for (int u = first; u < last; ++u) {
+    const std::int32_t a = sum_xx[u - 1] + sum_xx[u] + sum_xx[u + 1];
+    const std::int32_t c = sum_yy[u - 1] + sum_yy[u] + sum_yy[u + 1];
+    const std::int32_t b = sum_xy[u - 1] + sum_xy[u] + sum_xy[u + 1];
+    const float half_difference = 0.5f * static_cast<float>(a - c);
+    const float bf = static_cast<float>(b);
+    score[u] =
+        0.5f * static_cast<float>(a + c) - std::sqrt(half_difference * half_difference + bf * bf);
   }
 }
 

@@ -188,6 +188,25 @@ void transpose16(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_
 // a and b at 2u and 2u + 1.
 void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std::uint8_t* out);
 
+// Copies `rows` rows of `width` bytes, with stores that bypass the cache where the target has
+// them: for a copy read again only frames later, which would otherwise first read every
+// destination line in and push out what the frame's next stages read.
+void copy_rows_past_cache(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
+                          std::ptrdiff_t dst_stride, int width, int rows);
+
+// The corners' sliding structure tensor sums, for u in [first, last): the products of row `mid`'s
+// doubled central differences (gx = mid[u+1] - mid[u-1], gy = down[u] - up[u]) added to the
+// column sums in place of those of the row three above, which xx, xy, yy hold and then take.
+void slide_structure_row(const std::uint8_t* up, const std::uint8_t* mid, const std::uint8_t* down,
+                         std::int32_t* xx, std::int32_t* xy, std::int32_t* yy, std::int32_t* sum_xx,
+                         std::int32_t* sum_xy, std::int32_t* sum_yy, int first, int last);
+
+// The smaller eigenvalue of the structure tensor [a b; b c] at u in [first, last), into score[u]:
+// a, b, c the sums of sum_xx, sum_xy, sum_yy over u - 1 .. u + 1 (each below 2^24, so exact as
+// floats). The vectors round like the scalar reference, operation by operation.
+void corner_scores(const std::int32_t* sum_xx, const std::int32_t* sum_xy,
+                   const std::int32_t* sum_yy, int first, int last, float* score);
+
 namespace reference {
 void column_maxima(const std::uint8_t* image, std::ptrdiff_t stride, int begin, int end, int height,
                    std::uint8_t* max, std::uint16_t* first, std::uint16_t* last,
@@ -195,6 +214,13 @@ void column_maxima(const std::uint8_t* image, std::ptrdiff_t stride, int begin, 
 void transpose16(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
                  std::ptrdiff_t dst_stride);
 void downsample_row(const std::uint8_t* a, const std::uint8_t* b, int count, std::uint8_t* out);
+void copy_rows_past_cache(const std::uint8_t* src, std::ptrdiff_t src_stride, std::uint8_t* dst,
+                          std::ptrdiff_t dst_stride, int width, int rows);
+void corner_scores(const std::int32_t* sum_xx, const std::int32_t* sum_xy,
+                   const std::int32_t* sum_yy, int first, int last, float* score);
+void slide_structure_row(const std::uint8_t* up, const std::uint8_t* mid, const std::uint8_t* down,
+                         std::int32_t* xx, std::int32_t* xy, std::int32_t* yy, std::int32_t* sum_xx,
+                         std::int32_t* sum_xy, std::int32_t* sum_yy, int first, int last);
 void refine_columns(const RefineColumns& columns, int n, float* rows);
 // (Reads and writes only the candidates i < n.)
 void best_priors(const PriorLine& line, int n, float* best, std::int32_t* from,
