@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
+#include <utility>
 #include <vector>
 
 #include <hwy/targets.h>
@@ -63,6 +64,19 @@ struct Image {
   }
   ImageView view() const { return {pixels.data(), width, height, width}; }
 };
+
+// The valid points of `out` and the largest distance of one from centre(u).
+template <typename Centre>
+std::pair<int, double> valid_points_and_worst(const Profile& out, Centre centre) {
+  double worst = 0;
+  int n = 0;
+  for (const ProfilePoint& p : out.points()) {
+    if (!p.valid) continue;
+    worst = std::max(worst, std::abs(p.v - centre(p.u)));
+    ++n;
+  }
+  return {n, worst};
+}
 
 TEST(RowNormalisation, MakesTheLineWidthConstantAndMapsBothWays) {
   const ScannerGeometry g = small_geometry();
@@ -425,13 +439,7 @@ TEST(Frontend, LineAtTheEdgeOfTheBackgroundStaysSubPixel) {
   frontend.set_frame_minus_background(current.view(), background.view(), h);
   Profile out(static_cast<std::size_t>(g.width) * 4);
   frontend.find_candidates(out);
-  double worst = 0;
-  int n = 0;
-  for (const ProfilePoint& p : out.points()) {
-    if (!p.valid) continue;
-    worst = std::max(worst, std::abs(p.v - centre(p.u)));
-    ++n;
-  }
+  const auto [n, worst] = valid_points_and_worst(out, centre);
   ASSERT_GT(n, g.width * 9 / 10);
   EXPECT_LT(worst, 0.05);  // (taken as dark, they moved it by 0.16 rows)
 }
@@ -456,13 +464,7 @@ TEST(Frontend, ClippedLineAlongATextureEdgeIsCentredOnTheLaserAlone) {
   frontend.set_frame_minus_background(current.view(), background.view(), Homography{});
   Profile out(static_cast<std::size_t>(g.width) * 4);
   frontend.find_candidates(out);
-  double worst = 0;
-  int n = 0;
-  for (const ProfilePoint& p : out.points()) {
-    if (!p.valid) continue;
-    worst = std::max(worst, std::abs(p.v - centre(p.u)));
-    ++n;
-  }
+  const auto [n, worst] = valid_points_and_worst(out, centre);
   ASSERT_GT(n, g.width * 9 / 10);
   EXPECT_LT(worst, 0.45);  // (centred on the frame itself: up to a pixel toward the bright side)
 }
