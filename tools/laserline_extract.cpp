@@ -84,9 +84,9 @@ constexpr const char* kUsage =
     "  --all-candidates   also write rejected candidates (valid = 0)\n"
     "  --keep-sheet-width  fir, background, backprojection size their filters for the line\n"
     "                     width the calibration predicts (laser.sheet_width_m); where the\n"
-    "                     line in the first frames is over twice as wide or half as wide, they\n"
-    "                     are sized for the width measured (and it is said). This keeps the\n"
-    "                     calibration's width\n"
+    "                     line in the first frames of the images and videos is over twice as\n"
+    "                     wide or half as wide, they are sized for the width measured (and it\n"
+    "                     is said). This keeps the calibration's width\n"
     "  --output FILE      CSV: frame,source,u,v,x,y,snr_db,segment,valid (source: the image\n"
     "                     file, or the video's frame or the log's event; u the epipolar line and\n"
     "                     v the position along it, x y the frame pixel: for a laser above or\n"
@@ -296,9 +296,9 @@ Region region_of(const Options& o, int width, int height,
 // The front end's filters are sized for the line width the calibration predicts (f l_w / Z, from
 // laser.sheet_width_m); a line several times wider (blur, bloom, a clipped core) or narrower is
 // answered weakly, and a guessed sheet width is common on someone else's images. The width is
-// measured on the first frames; off by more than kWidthTolerance, the filters are sized for what
-// was measured (measured again: a detection sized for a width far off finds the line poorly), and
-// it is said.
+// measured on the first frames of the images and videos; off by more than kWidthTolerance, the
+// filters are sized for what was measured (measured again: a detection sized for a width far off
+// finds the line poorly), and it is said.
 void fit_sheet_width(const Options& options, const laserline::hal::Calibration& calibration,
                      const Region& region, const std::vector<InputKind>& kinds,
                      const CalibrationInUse& in_use,
@@ -309,6 +309,16 @@ void fit_sheet_width(const Options& options, const laserline::hal::Calibration& 
   if (options.keep_sheet_width || !laserline::daemon::searches_depth_range(options.detector)) {
     return;
   }
+  // Images, folders and videos: a log was recorded by laserlined with the calibration it carries,
+  // and is read whole before its frames (its laser states), which a probe would repeat.
+  std::vector<std::string> probed;
+  std::vector<InputKind> probed_kinds;
+  for (std::size_t i = 0; i < options.inputs.size(); ++i) {
+    if (kinds[i] == InputKind::kLog) continue;
+    probed.push_back(options.inputs[i]);
+    probed_kinds.push_back(kinds[i]);
+  }
+  if (probed.empty()) return;
   const double stated = detector_options.geometry.sheet_width_m;
   std::size_t measured = 0;
   for (int pass = 0; pass < 3; ++pass) {
@@ -318,7 +328,7 @@ void fit_sheet_width(const Options& options, const laserline::hal::Calibration& 
                     laserline::pipeline::make_detector(options.detector, detector_options), region,
                     nullptr, nullptr, nullptr);
     probe.measure_width_only(meter, kWidthFrames);
-    laserline::tools::extract::extract_inputs(probe, options.inputs, kinds, in_use);
+    laserline::tools::extract::extract_inputs(probe, probed, probed_kinds, in_use);
     if (meter.measured() < kMinimumPoints) break;
     const double ratio = meter.ratio();
     if (ratio < kWidthTolerance && ratio > 1.0 / kWidthTolerance) break;
