@@ -127,8 +127,8 @@ void window_sums(const std::int32_t* ring, const std::size_t* above, const std::
 // clipped core (its pixel at or above `saturation`: the caller centres the run, whose flanks may
 // reach beyond the rows these samples may read), else the Gaussian 3-point fit over the straight
 // baseline through the samples `edge` rows on either side (where they lie in the frame: else the
-// peak's row). Reads 4 bytes from each pixel it samples: u + 4 <= the
-// frame's width, and the background's columns x + 4 <= its width.
+// peak's row). Reads 4 bytes from each pixel it samples: u + 4 <= the frame's width, and the
+// background's columns x + 4 <= its width.
 struct RefineColumns {
   const std::int32_t* u;
   const std::int32_t* centre;
