@@ -158,9 +158,11 @@ void read_detector_options(hal::YamlMap& detector, pipeline::DetectorOptions& op
   read(selection, "amplitude_cap_db", l.amplitude_cap_db);
   read(selection, "jump_free_px", l.jump_free_px);
   read(selection, "jump_cost_db_per_px", l.jump_cost_db_per_px);
+  read(selection, "jump_cost_cap_db", l.jump_cost_cap_db);
   read(selection, "gap_cost_db", l.gap_cost_db);
   read(selection, "max_gap", l.max_gap);
   read(selection, "previous_bonus_db", l.previous_bonus_db);
+  read(selection, "previous_other_bonus_db", l.previous_other_bonus_db);
   read(selection, "previous_tolerance_px", l.previous_tolerance_px);
   checked(selection, [&] { l.validate(); });
   selection.finish();

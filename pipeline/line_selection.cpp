@@ -35,6 +35,7 @@ void LineSelector::reset(int lines, int per_line) {
   column_best_.assign(static_cast<std::size_t>(lines), 0.0f);
   previous_.assign(candidates, kNaN);
   previous_count_.assign(static_cast<std::size_t>(lines), 0);
+  previous_chosen_.assign(static_cast<std::size_t>(lines), kNaN);
   const std::size_t lanes = whole_lanes(per_line);
   line_position_.assign(lanes, 0.0f);
   line_best_.assign(lanes, 0.0f);
@@ -45,7 +46,42 @@ void LineSelector::reset(int lines, int per_line) {
 
 void LineSelector::forget() {
   std::fill(previous_count_.begin(), previous_count_.end(), 0);
+  std::fill(previous_chosen_.begin(), previous_chosen_.end(), kNaN);
   has_previous_ = false;
+}
+
+void LineSelector::add_path_end(const PathEnd& end, float running_best, int& end_count) {
+  const auto jump_cap = static_cast<float>(options_.jump_cost_cap_db);
+  const auto jump_cost = static_cast<float>(options_.jump_cost_db_per_px);
+  const auto free = static_cast<float>(options_.jump_free_px);
+  // A new piece pays at most jump_cap to start after an end: an end that many below the best
+  // path's (or not above the empty path's 0) never starts one.
+  if (!(end.score > 0.0f) || end.score <= running_best - jump_cap) return;
+  // An earlier end e, which allows more free jump, is at least as good a start as this one for
+  // every later candidate when it is above it by what the jump between them can cost; this one
+  // is for e when it is above by that plus the free jump e has more (or by jump_cap).
+  const int k = per_line_;
+  int kept = 0;
+  for (int e = 0; e < end_count; ++e) {
+    const PathEnd& other = ends_[static_cast<std::size_t>(e)];
+    const float apart = std::abs(end.position - other.position);
+    if (other.score - end.score >= std::min(jump_cap, jump_cost * apart)) return;
+    const float more_free = free * static_cast<float>(end.at / k - other.at / k);
+    const bool dominated =
+        end.score - other.score >= std::min(jump_cap, jump_cost * (apart + more_free));
+    const bool useless = other.score <= running_best - jump_cap;
+    if (!dominated && !useless) ends_[static_cast<std::size_t>(kept++)] = other;
+  }
+  end_count = kept;
+  if (end_count < static_cast<int>(ends_.size())) {
+    ends_[static_cast<std::size_t>(end_count++)] = end;
+    return;
+  }
+  // Full (rare: ends far apart and close in score): the lowest goes.
+  auto lowest =
+      std::min_element(ends_.begin(), ends_.end(),
+                       [](const PathEnd& a, const PathEnd& b) { return a.score < b.score; });
+  if (lowest->score < end.score) *lowest = end;
 }
 
 void LineSelector::select(std::span<const LineCandidate> candidates,
@@ -59,7 +95,9 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
   const auto jump_cost = static_cast<float>(o.jump_cost_db_per_px);
   const auto gap_cost = static_cast<float>(o.gap_cost_db);
   const auto bonus = static_cast<float>(o.previous_bonus_db);
+  const auto other_bonus = static_cast<float>(o.previous_other_bonus_db);
   const auto tolerance = static_cast<float>(o.previous_tolerance_px);
+  const auto jump_cap = static_cast<float>(o.jump_cost_cap_db);
   std::fill(chosen.begin(), chosen.end(), -1);
 
   if (!o.enabled) {
@@ -76,6 +114,7 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
 
   float running_best = 0.0f;  // the best total of any path so far (the empty path: 0)
   std::int32_t running_at = -1;
+  int end_count = 0;  // ends_: where a new piece may start from
   float* __restrict best = line_best_.data();
   std::int32_t* __restrict from = line_from_.data();
   float* __restrict unary = line_unary_.data();
@@ -106,19 +145,30 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
         }
         if (previous[j] > c.position) break;  // and farther above from here on
       }
-      if (persistent) unary[i] += bonus;
-      // A new piece of curve after the best path so far, or the continuation of a piece that
-      // ended at most max_gap lines before. A new piece far from where that path ended pays the
-      // jump cost too, up to a second restart: glints and texture edges start anywhere, the
-      // laser resumes near where it was seen (beyond an occlusion, or after a depth jump).
-      best[i] = running_best - restart;
-      if (running_at >= 0) {
-        const float lines_between = static_cast<float>(line - running_at / k);
-        const float jump =
-            std::abs(c.position - candidates[static_cast<std::size_t>(running_at)].position);
-        best[i] -= std::min(restart, jump_cost * std::max(0.0f, jump - free * lines_between));
+      if (std::abs(c.position - previous_chosen_[static_cast<std::size_t>(line)]) <= tolerance) {
+        unary[i] += bonus;
+      } else if (persistent) {
+        unary[i] += other_bonus;
       }
-      from[i] = running_at;
+      // A new piece of curve, after the best path that ends on an earlier line (or none), or the
+      // continuation of a piece that ended at most max_gap lines before. A new piece far from
+      // where that path ended pays the jump too, up to jump_cost_cap_db: glints and texture edges
+      // start anywhere, the laser resumes near where it was seen (beyond an occlusion, or after
+      // a depth jump).
+      best[i] = -restart;
+      from[i] = -1;
+      for (int e = 0; e < end_count; ++e) {
+        const PathEnd& end = ends_[static_cast<std::size_t>(e)];
+        const float lines_between = static_cast<float>(line - end.at / k);
+        const float jump = std::abs(c.position - end.position);
+        const float total =
+            end.score - restart -
+            std::min(jump_cap, jump_cost * std::max(0.0f, jump - free * lines_between));
+        if (total > best[i]) {
+          best[i] = total;
+          from[i] = end.at;
+        }
+      }
     }
     // The candidates of the line all at once against each line before it: a line before can only
     // improve a candidate whose best is below that line's best total less the gap's cost (the jump
@@ -157,14 +207,21 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
         running_at = at;
       }
     }
+    for (int i = 0; i < n; ++i)
+      add_path_end({score_[static_cast<std::size_t>(line * k + i)], position[i], line * k + i},
+                   running_best, end_count);
     column_best_[static_cast<std::size_t>(line)] = column_best;
   }
   // The best path, back from its end.
   for (std::int32_t at = running_at; at >= 0; at = from_[static_cast<std::size_t>(at)])
     chosen[static_cast<std::size_t>(at / k)] = at % k;
   has_previous_ = true;
-  // Every candidate of this frame: the laser stays where it was, texture moves with the scene.
+  // This frame's candidates, and its choice: the laser stays where it was, texture moves with
+  // the scene (or stays too, when the camera holds still).
   for (int line = 0; line < lines_; ++line) {
+    const int c = chosen[static_cast<std::size_t>(line)];
+    previous_chosen_[static_cast<std::size_t>(line)] =
+        c >= 0 ? candidates[static_cast<std::size_t>(line * k + c)].position : kNaN;
     const int n = counts[static_cast<std::size_t>(line)];
     previous_count_[static_cast<std::size_t>(line)] = static_cast<std::uint8_t>(n);
     for (int i = 0; i < n; ++i) {

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -14,12 +15,13 @@ namespace laserline::pipeline {
 // texture moves with the scene. So the choice maximises, over all ways of picking at most one
 // candidate per line,
 //   sum of (amplitude in dB - threshold, at most amplitude_cap_db, + previous_bonus_db where the
-//           previous frame had a candidate within previous_tolerance_px on that line)
+//           previous frame chose a point within previous_tolerance_px on that line, else
+//           previous_other_bonus_db where it had another candidate there)
 //   - (jump beyond jump_free_px per line step) * jump_cost_db_per_px - skipped lines * gap_cost_db
 //   - restart_cost_db for every new piece of curve, plus the jump cost from where the best path
-//     before it ended (at most restart_cost_db more),
+//     before it ended (at most jump_cost_cap_db more),
 // by dynamic programming along the lines (as industrial profile sensors trace their line). A piece
-// of curve apart from the rest is kept only when its points earn twice restart_cost_db.
+// of curve apart from the rest is kept only when its points earn its restarts and jumps.
 struct LineSelectionOptions {
   bool enabled = true;  // false: the strongest candidate of each line
   // The laser line is one curve; a new piece (after a jump of the depth, or elsewhere) must earn
@@ -33,9 +35,18 @@ struct LineSelectionOptions {
   double amplitude_cap_db = 6.0;
   double jump_free_px = 2.0;
   double jump_cost_db_per_px = 2.0;
+  // What a new piece's jump from where the line was last seen costs at most (three restarts: 34
+  // lines at the amplitude cap). A piece of texture between two parts of the line pays it twice,
+  // going and coming back, so a long texture edge beside a stretch where the line is faint does
+  // not draw the path away; a depth jump that holds to the end of the image pays it once.
+  double jump_cost_cap_db = 150.0;
   double gap_cost_db = 1.0;
   int max_gap = 8;  // lines a piece of curve can skip (a dark patch, an occlusion)
+  // The previous frame's chosen point earns the bonus in full; its other candidates a half: when
+  // the camera holds still, texture stays as well, and only the line's own history tells them
+  // apart (a new piece of line, not chosen before, still gains from staying).
   double previous_bonus_db = 6.0;
+  double previous_other_bonus_db = 3.0;
   double previous_tolerance_px = 2.5;
 
   // Throws OptionError (pipeline/options.hpp) naming the first field outside what the pipeline
@@ -63,21 +74,33 @@ class LineSelector {
   // candidates[line * per_line + i] for i < counts[line], each line's sorted by position; writes
   // chosen[line] = the index of its chosen candidate, or -1. threshold_db: the SNR a candidate
   // needed (its amplitude is at least that, in grey levels: the noise is at least 1). Remembers
-  // the candidates as the previous frame's.
+  // the candidates and the choice as the previous frame's.
   void select(std::span<const LineCandidate> candidates, std::span<const std::uint8_t> counts,
               float threshold_db, std::span<int> chosen);
   // Forgets the previous frame (e.g. after a frame without points of its own).
   void forget();
 
  private:
+  // The end of a path (its total, its last candidate's position and index) from which a new piece
+  // may start: the ends no other end outdoes for every later candidate, at most kPathEnds.
+  struct PathEnd {
+    float score;
+    float position;
+    std::int32_t at;
+  };
+  static constexpr std::size_t kPathEnds = 16;
+  void add_path_end(const PathEnd& end, float running_best, int& end_count);
+
   LineSelectionOptions options_;
   int lines_ = 0, per_line_ = 0;
+  std::array<PathEnd, kPathEnds> ends_{};
   std::vector<float> score_;        // per candidate: the best total of a path ending there
   std::vector<float> position_;     // per candidate: its position (contiguous per line)
   std::vector<std::int32_t> from_;  // per candidate: its predecessor on that path, -1 none
   std::vector<float> column_best_;  // per line: the best total of a path ending on it
   std::vector<float> previous_;     // per line: the previous frame's candidates' positions
   std::vector<std::uint8_t> previous_count_;
+  std::vector<float> previous_chosen_;  // per line: the previous frame's choice, NaN none
   // The line in hand, per candidate (in whole groups of lanes): its position, its best total
   // before its own amplitude, from where, its amplitude's part.
   std::vector<float> line_position_, line_best_, line_unary_;

@@ -92,9 +92,11 @@ void LineSelectionOptions::validate() const {
   within("amplitude_cap_db", amplitude_cap_db, 0.1, 1000.0);
   within("jump_free_px", jump_free_px, 0.0, 1000.0);
   within("jump_cost_db_per_px", jump_cost_db_per_px, 0.0, 1000.0);
+  within("jump_cost_cap_db", jump_cost_cap_db, 0.0, 100000.0);
   within("gap_cost_db", gap_cost_db, 0.0, 1000.0);
   within("max_gap", max_gap, 0, 64);
   within("previous_bonus_db", previous_bonus_db, 0.0, 1000.0);
+  within("previous_other_bonus_db", previous_other_bonus_db, 0.0, 1000.0);
   within("previous_tolerance_px", previous_tolerance_px, 0.0, 1000.0);
 }
 

@@ -32,8 +32,9 @@ class Lines {
     }
   }
 
-  std::vector<float> select(LineSelector& selector) {
-    selector.reset(kLines, kPerLine);
+  // A new sequence (reset) or, with `next_frame`, the frame after the one selected before.
+  std::vector<float> select(LineSelector& selector, bool next_frame = false) {
+    if (!next_frame) selector.reset(kLines, kPerLine);
     std::vector<int> chosen(kLines, -1);
     selector.select(candidates_, counts_, 0.0f, chosen);
     std::vector<float> positions(kLines, -1.0f);
@@ -64,7 +65,9 @@ class ReferenceSelector {
         from_(static_cast<std::size_t>(lines * per_line)),
         column_best_(static_cast<std::size_t>(lines)),
         previous_(static_cast<std::size_t>(lines * per_line)),
-        previous_count_(static_cast<std::size_t>(lines), 0) {}
+        previous_count_(static_cast<std::size_t>(lines), 0),
+        previous_chosen_(static_cast<std::size_t>(lines), std::numeric_limits<float>::quiet_NaN()) {
+  }
 
   void select(std::span<const LineCandidate> candidates, std::span<const std::uint8_t> counts,
               float threshold_db, std::span<int> chosen) {
@@ -75,29 +78,43 @@ class ReferenceSelector {
     const auto jump_cost = static_cast<float>(o_.jump_cost_db_per_px);
     const auto gap_cost = static_cast<float>(o_.gap_cost_db);
     const auto bonus = static_cast<float>(o_.previous_bonus_db);
+    const auto other_bonus = static_cast<float>(o_.previous_other_bonus_db);
     const auto tolerance = static_cast<float>(o_.previous_tolerance_px);
+    const auto jump_cap = static_cast<float>(o_.jump_cost_cap_db);
     std::fill(chosen.begin(), chosen.end(), -1);
     auto at = [](int i) { return static_cast<std::size_t>(i); };
     float running_best = 0.0f;
     int running_at = -1;
+    ends_.clear();
     for (int line = 0; line < lines_; ++line) {
       const int n = counts[at(line)];
       for (int i = 0; i < n; ++i) {
         const LineCandidate& c = candidates[at(line * k + i)];
         float unary = std::min(c.amplitude_db - threshold_db, cap);
-        for (int j = 0; j < previous_count_[at(line)]; ++j) {
-          if (std::abs(c.position - previous_[at(line * k + j)]) <= tolerance) {
-            unary += bonus;
-            break;
+        if (std::abs(c.position - previous_chosen_[at(line)]) <= tolerance) {
+          unary += bonus;
+        } else {
+          for (int j = 0; j < previous_count_[at(line)]; ++j) {
+            if (std::abs(c.position - previous_[at(line * k + j)]) <= tolerance) {
+              unary += other_bonus;
+              break;
+            }
           }
         }
-        float best = running_best - restart;
-        if (running_at >= 0) {
-          const float lines_between = static_cast<float>(line - running_at / k);
-          const float jump = std::abs(c.position - candidates[at(running_at)].position);
-          best -= std::min(restart, jump_cost * std::max(0.0f, jump - free * lines_between));
+        // A new piece: after the best of the path ends kept (or none), paying its capped jump.
+        float best = -restart;
+        int from = -1;
+        for (const End& end : ends_) {
+          const float lines_between = static_cast<float>(line - end.at / k);
+          const float jump = std::abs(c.position - end.position);
+          const float total =
+              end.score - restart -
+              std::min(jump_cap, jump_cost * std::max(0.0f, jump - free * lines_between));
+          if (total > best) {
+            best = total;
+            from = end.at;
+          }
         }
-        int from = running_at;
         for (int gap = 0; gap <= o_.max_gap && line - 1 - gap >= 0; ++gap) {
           const int before = line - 1 - gap;
           const float skipped = gap_cost * static_cast<float>(gap);
@@ -133,10 +150,43 @@ class ReferenceSelector {
           running_at = line * k + i;
         }
       }
+      // The line's candidates as path ends: kept unless an end kept outdoes them for every later
+      // candidate; they drop the ends they outdo, and those too far below the best path's.
+      for (int i = 0; i < n; ++i) {
+        const End end{score_[at(line * k + i)], candidates[at(line * k + i)].position,
+                      line * k + i};
+        if (!(end.score > 0.0f) || end.score <= running_best - jump_cap) continue;
+        bool outdone = false;
+        for (const End& other : ends_) {
+          if (other.score - end.score >=
+              std::min(jump_cap, jump_cost * std::abs(end.position - other.position))) {
+            outdone = true;
+            break;
+          }
+        }
+        if (outdone) continue;
+        std::erase_if(ends_, [&](const End& other) {
+          const float apart = std::abs(end.position - other.position);
+          const float more_free = free * static_cast<float>(end.at / k - other.at / k);
+          return end.score - other.score >= std::min(jump_cap, jump_cost * (apart + more_free)) ||
+                 other.score <= running_best - jump_cap;
+        });
+        if (ends_.size() < kEnds) {
+          ends_.push_back(end);
+        } else {
+          auto lowest =
+              std::min_element(ends_.begin(), ends_.end(),
+                               [](const End& a, const End& b) { return a.score < b.score; });
+          if (lowest->score < end.score) *lowest = end;
+        }
+      }
     }
     for (int i = running_at; i >= 0; i = from_[at(i)])
       chosen[at(i / k)] = i % k;
     for (int line = 0; line < lines_; ++line) {
+      const int c = chosen[at(line)];
+      previous_chosen_[at(line)] =
+          c >= 0 ? candidates[at(line * k + c)].position : std::numeric_limits<float>::quiet_NaN();
       previous_count_[at(line)] = counts[at(line)];
       for (int i = 0; i < counts[at(line)]; ++i)
         previous_[at(line * k + i)] = candidates[at(line * k + i)].position;
@@ -151,6 +201,13 @@ class ReferenceSelector {
   std::vector<float> column_best_;
   std::vector<float> previous_;
   std::vector<std::uint8_t> previous_count_;
+  std::vector<float> previous_chosen_;
+  struct End {
+    float score, position;
+    int at;
+  };
+  static constexpr std::size_t kEnds = 16;
+  std::vector<End> ends_;
 };
 
 TEST(LineSelection, FollowsTheContinuousCurveNotTheStrongestCandidate) {
@@ -200,18 +257,63 @@ TEST(LineSelection, ABrightTextureRidgeDoesNotOutweighTheLinesContinuity) {
   EXPECT_EQ(lines.select(counting_in_full)[30], 104.0f);
 }
 
-// A depth jump: the line goes on 300 px away for 40 lines. That piece earns its restart and its
-// jump (at most a second restart), so it is kept.
-TEST(LineSelection, ALongPieceAfterADepthJumpIsKept) {
+// The camera holds still: the line is too faint to be a candidate over lines 20..39 (it crosses
+// bright patches), and a texture edge 300 px away runs there, as still as the line, frame after
+// frame. The edge earns more than a restart, but not its jump going to it and coming back, and
+// only the line's own history earns the full bonus: the path skips from one part of the line to
+// the other.
+TEST(LineSelection, AStillTextureEdgeBesideAFaintStretchOfTheLineIsNotChosen) {
   Lines lines;
   lines.piece(0, 19, 100.0f, 10.0f);
-  lines.piece(20, kLines - 1, 400.0f, 10.0f);
+  lines.piece(20, 39, 400.0f, 10.0f);
+  lines.piece(40, kLines - 1, 101.0f, 10.0f);
   LineSelector selector;
-  const std::vector<float> chosen = lines.select(selector);
-  for (int line = 0; line < 20; ++line)
-    EXPECT_EQ(chosen[line], 100.0f) << line;
-  for (int line = 20; line < kLines; ++line)
-    EXPECT_EQ(chosen[line], 400.0f) << line;
+  for (int frame = 0; frame < 3; ++frame) {
+    const std::vector<float> chosen = lines.select(selector, frame > 0);
+    for (int line = 0; line < kLines; ++line) {
+      EXPECT_EQ(chosen[line], line < 20   ? 100.0f
+                              : line < 40 ? -1.0f
+                                          : 101.0f)
+          << "frame " << frame << " line " << line;
+    }
+  }
+
+  // Jumps that cost at most one more restart, and every still candidate's bonus in full: from the
+  // second frame on the edge earns as much as the line, and is taken.
+  LineSelectionOptions cheap_jumps;
+  cheap_jumps.jump_cost_cap_db = cheap_jumps.restart_cost_db;
+  cheap_jumps.previous_other_bonus_db = cheap_jumps.previous_bonus_db;
+  LineSelector drawn_away(cheap_jumps);
+  for (int frame = 0; frame < 3; ++frame) {
+    const std::vector<float> chosen = lines.select(drawn_away, frame > 0);
+    if (frame > 0) {
+      EXPECT_EQ(chosen[30], 400.0f) << "frame " << frame;
+    }
+  }
+}
+
+// A depth jump: the line goes on 300 px away. A side of the jump is kept when its points earn
+// their restart and the jump (at most jump_cost_cap_db, 150): in the first frame 25 lines at the
+// amplitude cap (6) do not, and the path keeps the longer side alone; from the next frame on, the
+// laser stays where it was and the candidates there earn the previous frame's bonus (3 where not
+// chosen) as well: 25 lines then do, 15 lines never.
+TEST(LineSelection, APieceBeyondADepthJumpIsKeptWhenItEarnsTheJump) {
+  for (const int first_beyond : {35, 45}) {
+    Lines lines;
+    lines.piece(0, first_beyond - 1, 100.0f, 10.0f);
+    lines.piece(first_beyond, kLines - 1, 400.0f, 10.0f);
+    LineSelector selector;
+    for (int frame = 0; frame < 3; ++frame) {
+      const std::vector<float> chosen = lines.select(selector, frame > 0);
+      const bool kept = frame > 0 && first_beyond == 35;
+      for (int line = 0; line < kLines; ++line) {
+        EXPECT_EQ(chosen[line], line < first_beyond ? 100.0f
+                                : kept              ? 400.0f
+                                                    : -1.0f)
+            << "from line " << first_beyond << ", frame " << frame << ", line " << line;
+      }
+    }
+  }
 }
 
 // Frames of random candidates (a line wandering among texture, many lines full) on positions and
@@ -225,9 +327,12 @@ TEST(LineSelection, ChoosesAsTheReferenceDoesTiesIncluded) {
   cases[1].jump_free_px = 0.0;
   cases[2].max_gap = 0;
   cases[2].restart_cost_db = 4.0;
+  cases[2].jump_cost_cap_db = 4.0;
+  cases[2].previous_other_bonus_db = 0.0;
   cases[3].max_gap = 20;
   cases[3].jump_cost_db_per_px = 0.25;
   cases[3].previous_tolerance_px = 0.0;
+  cases[3].previous_other_bonus_db = 6.0;
   for (std::size_t o = 0; o < cases.size(); ++o) {
     for (const int per_line : {1, 3, kFull}) {
       LineSelector selector(cases[o]);
