@@ -15,6 +15,11 @@ namespace {
 // this weight: straight segments (texture edges, flat walls) then match by their extent, curved
 // ones by their shape as well. A step of 0.5 px weighs as much as the presence.
 constexpr double kChainCodeWeight = 4.0;
+// Steps are counted up to this (pixels): a segment joined to a neighbour (a texture artefact, a
+// stretch beyond a depth jump) steps by up to max_neighbour_gap_px where it joins, which the
+// segment found in the other frame, joined elsewhere, does not; counted in full, that one step
+// outweighs hundreds of columns that agree.
+constexpr float kChainCodeStepLimit = 1.0f;
 constexpr double kShiftMargin = 0.05;
 
 // Whether the bounding boxes of a and b lie more than `distance` apart.
@@ -161,7 +166,8 @@ void segment_candidates(const Profile& profile, const ValidationOptions& options
     }
     for (int u = seg.u_min; u < seg.u_max; ++u) {
       const auto at = static_cast<std::size_t>(seg.code_first + (u - seg.u_min));
-      out.chain_code.push_back(out.rows[at + 1] - out.rows[at]);
+      out.chain_code.push_back(
+          std::clamp(out.rows[at + 1] - out.rows[at], -kChainCodeStepLimit, kChainCodeStepLimit));
     }
     out.chain_code.push_back(0.0f);  // keeps chain_code indexed like rows
     out.segments.push_back(seg);
