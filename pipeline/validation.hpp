@@ -88,13 +88,14 @@ struct SegmentMatch {
 
 // One laser-line segment of a frame (IV-B): candidates linked along the line, one per column.
 struct LineSegment {
-  static constexpr int kMaxMatches = 3;
+  static constexpr int kMaxMatches = 8;
   int first = 0, count = 0;  // its points: SegmentedFrame::points[first, first + count)
   int u_min = 0, u_max = 0;  // bounding box
   float v_min = 0, v_max = 0;
   int code_first = 0;  // rows (u_max - u_min + 1 values) and chain code (one fewer)
   // The best associations with segments of the previous frame, best first (a segment split
-  // differently in the two frames has several).
+  // differently in the two frames has several: a long stretch of the line may span four or five
+  // pieces of it there, besides texture that fits somewhere along it).
   std::array<SegmentMatch, kMaxMatches> matches{};
   int match_count = 0;
   bool background = false;  // IV-D verdict
