@@ -3,6 +3,7 @@
 // reach in each, and how they stand against `fir` and `maxvalue`.
 #include <gtest/gtest.h>
 
+#include <cstdint>
 #include <cstdio>
 #include <map>
 #include <string>
@@ -80,6 +81,42 @@ TEST(Scenarios, BackprojectionKeepsThePrecisionOfBackgroundOrBetter) {
     EXPECT_GE(v.recall(), b.recall() - 0.02) << f.scenario;
   }
   EXPECT_GE(score("pier", "backprojection").precision(), 0.99);
+}
+
+// Scored on another draw of the scenario (texture, relief, particles, noise, motion), as
+// laserline-evaluate --seed does.
+Score score_drawn(const std::string& scenario, const std::string& detector, std::uint64_t seed) {
+  for (Scenario s : standard_scenarios()) {
+    if (s.name != scenario) continue;
+    s.scene.seed += seed;
+    return evaluate(s, detector, {}, 2.0);
+  }
+  ADD_FAILURE() << "no scenario " << scenario;
+  return {};
+}
+
+// The hard scenes on draws the floors above were not set on. On the pier, backprojection follows
+// the line through the previous frames however it was split there (it lost 1.3 to 4.5 points of
+// recall against background on these draws when a joined neighbour or a long line spanning many
+// pieces crowded out its true match). Holding station in daylight, a still texture edge beside a
+// faint stretch of the line does not draw the line selection away (mean precision 96.6 % when
+// every still candidate earned the previous frame's bonus and a jump cost at most a restart).
+TEST(Scenarios, HardScenesOnOtherDraws) {
+  for (const std::uint64_t seed : {1, 2, 3, 4}) {
+    const Score b = score_drawn("pier", "background", seed);
+    const Score v = score_drawn("pier", "backprojection", seed);
+    std::printf("pier seed %llu: recall background %.2f%%, backprojection %.2f%%\n",
+                static_cast<unsigned long long>(seed), 100 * b.recall(), 100 * v.recall());
+    EXPECT_GE(v.recall(), b.recall() - 0.015) << "pier seed " << seed;
+  }
+  double precision = 0;
+  for (const std::uint64_t seed : {1, 2, 3, 4, 5}) {
+    const Score h = score_drawn("hover-daylight", "background", seed);
+    std::printf("hover-daylight seed %llu: recall %.2f%% precision %.2f%%\n",
+                static_cast<unsigned long long>(seed), 100 * h.recall(), 100 * h.precision());
+    precision += h.precision() / 5;
+  }
+  EXPECT_GE(precision, 0.98);
 }
 
 // `background` is never worse than `fir` (it searches the frame as it is when no earlier frame
