@@ -18,8 +18,8 @@ namespace laserline::pipeline {
 //           previous frame chose a point within previous_tolerance_px on that line, else
 //           previous_other_bonus_db where it had another candidate there)
 //   - (jump beyond jump_free_px per line step) * jump_cost_db_per_px - skipped lines * gap_cost_db
-//   - restart_cost_db for every new piece of curve, plus the jump cost from where the best path
-//     before it ended (at most jump_cost_cap_db more),
+//   - restart_cost_db for every new piece of curve, plus the jump cost from where the path it
+//     continues ended (at most jump_cost_cap_db more; or none, a path of its own),
 // by dynamic programming along the lines (as industrial profile sensors trace their line). A piece
 // of curve apart from the rest is kept only when its points earn its restarts and jumps.
 struct LineSelectionOptions {
@@ -35,10 +35,11 @@ struct LineSelectionOptions {
   double amplitude_cap_db = 6.0;
   double jump_free_px = 2.0;
   double jump_cost_db_per_px = 2.0;
-  // What a new piece's jump from where the line was last seen costs at most (three restarts: 34
-  // lines at the amplitude cap). A piece of texture between two parts of the line pays it twice,
-  // going and coming back, so a long texture edge beside a stretch where the line is faint does
-  // not draw the path away; a depth jump that holds to the end of the image pays it once.
+  // What a new piece's jump from where the line was last seen costs at most (three restarts: with
+  // its own restart, 34 lines at the amplitude cap). A piece of texture between two parts of the
+  // line pays it twice, going and coming back, so a long texture edge beside a stretch where the
+  // line is faint does not draw the path away; a depth jump that holds to the end of the image pays
+  // it once.
   double jump_cost_cap_db = 150.0;
   double gap_cost_db = 1.0;
   int max_gap = 8;  // lines a piece of curve can skip (a dark patch, an occlusion)
