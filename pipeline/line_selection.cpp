@@ -207,9 +207,12 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
         running_at = at;
       }
     }
-    for (int i = 0; i < n; ++i)
-      add_path_end({score_[static_cast<std::size_t>(line * k + i)], position[i], line * k + i},
-                   running_best, end_count);
+    // (Most candidates are far below the best path: the test is made here, before the call.)
+    for (int i = 0; i < n; ++i) {
+      const float score = score_[static_cast<std::size_t>(line * k + i)];
+      if (score > 0.0f && score > running_best - jump_cap)
+        add_path_end({score, position[i], line * k + i}, running_best, end_count);
+    }
     column_best_[static_cast<std::size_t>(line)] = column_best;
   }
   // The best path, back from its end.
