@@ -41,22 +41,17 @@ void LineSelector::reset(int lines, int per_line) {
   line_best_.assign(lanes, 0.0f);
   line_from_.assign(lanes, -1);
   line_unary_.assign(lanes, 0.0f);
-  has_previous_ = false;
 }
 
 void LineSelector::forget() {
   std::fill(previous_count_.begin(), previous_count_.end(), 0);
   std::fill(previous_chosen_.begin(), previous_chosen_.end(), kNaN);
-  has_previous_ = false;
 }
 
 void LineSelector::add_path_end(const PathEnd& end, float running_best, int& end_count) {
   const auto jump_cap = static_cast<float>(options_.jump_cost_cap_db);
   const auto jump_cost = static_cast<float>(options_.jump_cost_db_per_px);
   const auto free = static_cast<float>(options_.jump_free_px);
-  // A new piece pays at most jump_cap to start after an end: an end that many below the best
-  // path's (or not above the empty path's 0) never starts one.
-  if (!(end.score > 0.0f) || end.score <= running_best - jump_cap) return;
   // An earlier end e, which allows more free jump, is at least as good a start as this one for
   // every later candidate when it is above it by what the jump between them can cost; this one
   // is for e when it is above by that plus the free jump e has more (or by jump_cap).
@@ -207,7 +202,8 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
         running_at = at;
       }
     }
-    // (Most candidates are far below the best path: the test is made here, before the call.)
+    // A new piece pays at most jump_cap to start after an end: an end that many below the best
+    // path's (or not above the empty path's 0) never starts one. (Most candidates are.)
     for (int i = 0; i < n; ++i) {
       const float score = score_[static_cast<std::size_t>(line * k + i)];
       if (score > 0.0f && score > running_best - jump_cap)
@@ -218,7 +214,6 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
   // The best path, back from its end.
   for (std::int32_t at = running_at; at >= 0; at = from_[static_cast<std::size_t>(at)])
     chosen[static_cast<std::size_t>(at / k)] = at % k;
-  has_previous_ = true;
   // This frame's candidates, and its choice: the laser stays where it was, texture moves with
   // the scene (or stays too, when the camera holds still).
   for (int line = 0; line < lines_; ++line) {

@@ -90,6 +90,7 @@ class LineSelector {
     std::int32_t at;
   };
   static constexpr std::size_t kPathEnds = 16;
+  // Offers `end` (above 0 and within jump_cost_cap_db of running_best) to ends_[0, end_count).
   void add_path_end(const PathEnd& end, float running_best, int& end_count);
 
   LineSelectionOptions options_;
@@ -106,7 +107,6 @@ class LineSelector {
   // before its own amplitude, from where, its amplitude's part.
   std::vector<float> line_position_, line_best_, line_unary_;
   std::vector<std::int32_t> line_from_;
-  bool has_previous_ = false;
 };
 
 }  // namespace laserline::pipeline
