@@ -195,6 +195,38 @@ TEST(SimScene, LaserOffHasNoTruthAndChangesOnlyTheLine) {
   EXPECT_GT(changed, 3 * lit.width);  // and the line is there
 }
 
+// A fan of 24 degrees on a camera of 49 degrees across: the line lies on a middle stretch of the
+// columns (its ends at 1.2 m about 0.25 m either side of the centre, some 74 px), no light beyond
+// its ends, and a wider fan lights more.
+TEST(SimScene, LaserFanLightsAMiddleStretchOfTheLineOnly) {
+  SimSceneOptions o = small_options();
+  o.laser_fan_deg = 24;
+  SimScene scene(o);
+  const std::uint64_t seq = 4;
+  const SimGroundTruth truth = truth_of(scene, seq, true);
+  const int width = o.calibration.camera.width;
+  int first = -1, last = -1;
+  for (int u = 0; u < width; ++u) {
+    if (std::isnan(truth.position[static_cast<std::size_t>(u)])) continue;
+    if (first < 0) first = u;
+    last = u;
+  }
+  ASSERT_GE(first, 0);
+  EXPECT_EQ(finite_count(truth.position), last - first + 1);  // one stretch
+  EXPECT_NEAR(first, width / 2 - 74, 12);
+  EXPECT_NEAR(last, width / 2 + 74, 12);
+  const Image lit = render(scene, seq, true), dark = render(scene, seq, false);
+  for (int u = 0; u < lit.width; ++u) {
+    if (u >= first && u <= last) continue;
+    for (int v = 0; v < lit.height; ++v)
+      ASSERT_EQ(lit.at(u, v), dark.at(u, v))
+          << "light beyond the fan at (" << u << ", " << v << ")";
+  }
+  o.laser_fan_deg = 36;
+  SimScene wider(o);
+  EXPECT_GT(finite_count(truth_of(wider, seq, true).position), last - first + 40);
+}
+
 TEST(SimScene, GroundTruthIsExactForAFlatSurface) {
   SimScene scene(laser_only(small_options()));
   const SimGroundTruth truth = truth_of(scene, 0, true);

@@ -80,6 +80,13 @@ FrameGeometry make_geometry(const SimSceneOptions& o, const Mat3& r, const Vec3&
   g.cx = cam.cx;
   g.cy = cam.cy;
   g.lp = o.calibration.laser.plane_coefficients();
+  if (o.laser_fan_deg > 0) {
+    const Vec3 normal = g.lp.head<3>().normalized();
+    g.fan_apex = -g.lp[3] / g.lp.head<3>().norm() * normal;
+    g.fan_axis = (Vec3::UnitZ() - normal.z() * normal).normalized();
+    g.fan_side = normal.cross(g.fan_axis);
+    g.fan_tan_half = std::tan(0.5 * o.laser_fan_deg * kDeg);
+  }
 
   // The surface in the world: through p0, normal n_w toward the camera, texture axes e1, e2.
   const Mat3 basis = rot_x(o.tilt_x_deg * kDeg) * rot_y(o.tilt_y_deg * kDeg);
@@ -233,8 +240,14 @@ LineHit solve_relief(const FrameGeometry& g, const SimLineFamily& lines, double 
 
 LineHit solve_line(const FrameGeometry& g, const SimLineFamily& lines, double k,
                    const float* relief, double relief_max) {
-  return relief == nullptr ? solve_flat(g, lines, k)
-                           : solve_relief(g, lines, k, relief, relief_max);
+  LineHit hit =
+      relief == nullptr ? solve_flat(g, lines, k) : solve_relief(g, lines, k, relief, relief_max);
+  if (hit.hit && g.fan_tan_half > 0) {
+    const auto [x, y] = lines.to_image(k, hit.position);
+    const Vec3 from_apex = hit.z * Vec3((x - g.cx) / g.fx, (y - g.cy) / g.fy, 1.0) - g.fan_apex;
+    hit.hit = std::abs(g.fan_side.dot(from_apex)) <= g.fan_tan_half * g.fan_axis.dot(from_apex);
+  }
+  return hit;
 }
 
 double line_sigma(const SimSceneOptions& o, const SimLineFamily& lines, double z) {

@@ -35,6 +35,10 @@ struct FrameGeometry {
   double c1 = 0, c2 = 0;
   double texel_m = 1;
   double object_shift_m = 0;  // how far the relief (objects) moved along x (object_speed_m_s)
+  // The laser's fan (SimSceneOptions::laser_fan_deg): a lit point X has
+  // |fan_side . (X - fan_apex)| <= fan_tan_half * fan_axis . (X - fan_apex); none when 0.
+  Vec3 fan_apex = Vec3::Zero(), fan_axis = Vec3::Zero(), fan_side = Vec3::Zero();
+  double fan_tan_half = 0;
 };
 
 // The geometry of a frame whose camera-to-world rotation is r and position t.

@@ -63,6 +63,7 @@ SimSceneOptions read_sim_options(YamlMap& sim, const Calibration& calibration,
   o.snow_brightness = sim.number("snow_brightness", o.snow_brightness, 0.0, 100.0);
   o.snow_min_depth_m = sim.number("snow_min_depth_m", o.snow_min_depth_m, 0.01, 100.0);
   o.marks_per_m2 = sim.number("marks_per_m2", o.marks_per_m2, 0.0, 10000.0);
+  o.laser_fan_deg = sim.number("laser_fan_deg", o.laser_fan_deg, 0.0, 179.0);
   o.marks_albedo = sim.number("marks_albedo", o.marks_albedo, 0.0, 100.0);
   const std::string colour = sim.choice(
       "colour", "mono", {"mono", "rgb", "bayer_rggb", "bayer_grbg", "bayer_gbrg", "bayer_bggr"});

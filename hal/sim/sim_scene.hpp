@@ -58,7 +58,11 @@ struct SimSceneOptions {
   // Light, in grey levels of the 8-bit image.
   double ambient = 40.0;  // ambient light on a surface of albedo 1
   double laser_peak =
-      180.0;                 // peak of the laser line on a surface of albedo 1 (before attenuation)
+      180.0;  // peak of the laser line on a surface of albedo 1 (before attenuation)
+  // The laser's fan (full angle within the sheet; 0: wider than the image): the line ends inside
+  // the image, and the surface beyond its ends shows only the ambient light. The fan's apex is the
+  // sheet's point nearest the camera, its axis the optical axis projected onto the sheet.
+  double laser_fan_deg = 0.0;
   double blur_px = 0.7;      // optical blur (Gaussian sigma) added to the projected sheet width
   double noise_sigma = 2.0;  // additive Gaussian sensor noise
   double backscatter = 0.0;  // glow of the sheet in the water just in front of the surface
