@@ -163,6 +163,7 @@ void read_detector_options(hal::YamlMap& detector, pipeline::DetectorOptions& op
   read(selection, "max_gap", l.max_gap);
   read(selection, "previous_bonus_db", l.previous_bonus_db);
   read(selection, "previous_other_bonus_db", l.previous_other_bonus_db);
+  read(selection, "faint_piece_db", l.faint_piece_db);
   read(selection, "previous_tolerance_px", l.previous_tolerance_px);
   checked(selection, [&] { l.validate(); });
   selection.finish();

@@ -33,6 +33,8 @@ void LineSelector::reset(int lines, int per_line) {
   position_.assign(candidates, 0.0f);
   from_.assign(candidates, -1);
   column_best_.assign(static_cast<std::size_t>(lines), 0.0f);
+  unary_.assign(candidates, 0.0f);
+  starts_piece_.assign(candidates, 0);
   previous_.assign(candidates, kNaN);
   previous_count_.assign(static_cast<std::size_t>(lines), 0);
   previous_chosen_.assign(static_cast<std::size_t>(lines), kNaN);
@@ -41,6 +43,7 @@ void LineSelector::reset(int lines, int per_line) {
   line_best_.assign(lanes, 0.0f);
   line_from_.assign(lanes, -1);
   line_unary_.assign(lanes, 0.0f);
+  line_start_.assign(lanes, 0.0f);
 }
 
 void LineSelector::forget() {
@@ -79,6 +82,57 @@ void LineSelector::add_path_end(const PathEnd& end, float running_best, int& end
   if (lowest->score < end.score) *lowest = end;
 }
 
+void LineSelector::drop_faint_pieces(std::span<const LineCandidate> candidates, float threshold_db,
+                                     std::span<int> chosen) const {
+  // Two walks over the chosen points, line by line: the pieces' evidence and mean amplitude,
+  // then the drop. A piece runs from a point that starts one, or that a jump costing half a restart
+  // or more reaches (a continuation across a depth jump, or onto texture beside the line's end),
+  // to the point before the next.
+  const int k = per_line_;
+  const auto cap = static_cast<float>(options_.amplitude_cap_db);
+  const auto free = static_cast<float>(options_.jump_free_px);
+  const auto jump_cost = static_cast<float>(options_.jump_cost_db_per_px);
+  const auto restart = static_cast<float>(options_.restart_cost_db);
+  float reference_db = 0.0f, most_evidence = -std::numeric_limits<float>::infinity();
+  auto pieces = [&](auto&& on_piece) {
+    int first = -1, count = 0, last_line = 0;
+    float evidence = 0.0f, amplitude = 0.0f, last_position = 0.0f;
+    for (int line = 0; line <= lines_; ++line) {
+      const int c = line < lines_ ? chosen[static_cast<std::size_t>(line)] : -1;
+      const auto at = static_cast<std::size_t>(line * k + c);
+      if (line == lines_ ||
+          (c >= 0 &&
+           (starts_piece_[at] || jump_cost * (std::abs(candidates[at].position - last_position) -
+                                              free * static_cast<float>(line - last_line)) >=
+                                     0.5f * restart))) {
+        if (count > 0) on_piece(first, line, evidence, amplitude / static_cast<float>(count));
+        first = line;
+        count = 0;
+        evidence = amplitude = 0.0f;
+      }
+      if (c < 0) continue;
+      last_line = line;
+      last_position = candidates[at].position;
+      // (The amplitude beyond the cap counts here: the line is the bright curve.)
+      const float above = candidates[at].amplitude_db - threshold_db;
+      evidence += unary_[at] + std::max(0.0f, above - cap);
+      amplitude += candidates[at].amplitude_db;
+      ++count;
+    }
+  };
+  pieces([&](int, int, float evidence, float mean_db) {
+    if (evidence > most_evidence) {
+      most_evidence = evidence;
+      reference_db = mean_db;
+    }
+  });
+  const auto faint = static_cast<float>(options_.faint_piece_db);
+  pieces([&](int first, int end, float, float mean_db) {
+    if (mean_db >= reference_db - faint) return;
+    std::fill(chosen.begin() + first, chosen.begin() + end, -1);
+  });
+}
+
 void LineSelector::select(std::span<const LineCandidate> candidates,
                           std::span<const std::uint8_t> counts, float threshold_db,
                           std::span<int> chosen) {
@@ -113,6 +167,7 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
   float* __restrict best = line_best_.data();
   std::int32_t* __restrict from = line_from_.data();
   float* __restrict unary = line_unary_.data();
+  float* __restrict start = line_start_.data();
   for (int line = 0; line < lines_; ++line) {
     const int n = counts[static_cast<std::size_t>(line)];
     float* __restrict position = line_position_.data();
@@ -164,6 +219,7 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
           from[i] = end.at;
         }
       }
+      start[i] = best[i];
     }
     // The candidates of the line all at once against each line before it: a line before can only
     // improve a candidate whose best is below that line's best total less the gap's cost (the jump
@@ -196,6 +252,9 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
       const float score = unary[i] + best[i];
       score_[static_cast<std::size_t>(at)] = score;
       from_[static_cast<std::size_t>(at)] = from[i];
+      unary_[static_cast<std::size_t>(at)] = unary[i];
+      // (A continuation only ever raises the best: unchanged, it is the new piece's.)
+      starts_piece_[static_cast<std::size_t>(at)] = best[i] == start[i] ? 1 : 0;
       column_best = std::max(column_best, score);
       if (score > running_best) {
         running_best = score;
@@ -214,6 +273,7 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
   // The best path, back from its end.
   for (std::int32_t at = running_at; at >= 0; at = from_[static_cast<std::size_t>(at)])
     chosen[static_cast<std::size_t>(at / k)] = at % k;
+  if (o.faint_piece_db > 0) drop_faint_pieces(candidates, threshold_db, chosen);
   // This frame's candidates, and its choice: the laser stays where it was, texture moves with
   // the scene (or stays too, when the camera holds still).
   for (int line = 0; line < lines_; ++line) {

@@ -21,7 +21,11 @@ namespace laserline::pipeline {
 //   - restart_cost_db for every new piece of curve, plus the jump cost from where the path it
 //     continues ended (at most jump_cost_cap_db more; or none, a path of its own),
 // by dynamic programming along the lines (as industrial profile sensors trace their line). A piece
-// of curve apart from the rest is kept only when its points earn its restarts and jumps.
+// of curve apart from the rest is kept only when its points earn its restarts and jumps. Then a
+// piece whose points are on average faint_piece_db fainter than those of the piece with the most
+// evidence (the largest sum of amplitudes above the threshold, uncapped, and bonuses) is dropped:
+// beyond the ends of the line (a fan narrower than the image, an object on a turntable) texture
+// and noise still form curves, much fainter than the laser where the line is exposed for.
 struct LineSelectionOptions {
   bool enabled = true;  // false: the strongest candidate of each line
   // The laser line is one curve; a new piece (after a jump of the depth, or elsewhere) must earn
@@ -49,6 +53,10 @@ struct LineSelectionOptions {
   double previous_bonus_db = 6.0;
   double previous_other_bonus_db = 3.0;
   double previous_tolerance_px = 2.5;
+  // How much fainter (mean amplitude, dB) than the piece with the most evidence a piece may be
+  // and be kept; 0: every piece kept. The line's own brightness varies with the surface's albedo
+  // along it (a factor 2 either way on textured walls); 12 dB is a factor 4.
+  double faint_piece_db = 12.0;
 
   // Throws OptionError (pipeline/options.hpp) naming the first field outside what the pipeline
   // supports.
@@ -92,20 +100,25 @@ class LineSelector {
   static constexpr std::size_t kPathEnds = 16;
   // Offers `end` (above 0 and within jump_cost_cap_db of running_best) to ends_[0, end_count).
   void add_path_end(const PathEnd& end, float running_best, int& end_count);
+  // Drops from `chosen` the pieces faint_piece_db fainter than the one with the most evidence.
+  void drop_faint_pieces(std::span<const LineCandidate> candidates, float threshold_db,
+                         std::span<int> chosen) const;
 
   LineSelectionOptions options_;
   int lines_ = 0, per_line_ = 0;
   std::array<PathEnd, kPathEnds> ends_{};
-  std::vector<float> score_;        // per candidate: the best total of a path ending there
-  std::vector<float> position_;     // per candidate: its position (contiguous per line)
-  std::vector<std::int32_t> from_;  // per candidate: its predecessor on that path, -1 none
-  std::vector<float> column_best_;  // per line: the best total of a path ending on it
-  std::vector<float> previous_;     // per line: the previous frame's candidates' positions
+  std::vector<float> score_;                // per candidate: the best total of a path ending there
+  std::vector<float> position_;             // per candidate: its position (contiguous per line)
+  std::vector<std::int32_t> from_;          // per candidate: its predecessor on that path, -1 none
+  std::vector<float> column_best_;          // per line: the best total of a path ending on it
+  std::vector<float> unary_;                // per candidate: its amplitude's part, bonus included
+  std::vector<std::uint8_t> starts_piece_;  // per candidate: its best path starts a piece there
+  std::vector<float> previous_;             // per line: the previous frame's candidates' positions
   std::vector<std::uint8_t> previous_count_;
   std::vector<float> previous_chosen_;  // per line: the previous frame's choice, NaN none
   // The line in hand, per candidate (in whole groups of lanes): its position, its best total
   // before its own amplitude, from where, its amplitude's part.
-  std::vector<float> line_position_, line_best_, line_unary_;
+  std::vector<float> line_position_, line_best_, line_unary_, line_start_;
   std::vector<std::int32_t> line_from_;
 };
 

@@ -97,6 +97,7 @@ void LineSelectionOptions::validate() const {
   within("max_gap", max_gap, 0, 64);
   within("previous_bonus_db", previous_bonus_db, 0.0, 1000.0);
   within("previous_other_bonus_db", previous_other_bonus_db, 0.0, 1000.0);
+  within("faint_piece_db", faint_piece_db, 0.0, 1000.0);
   within("previous_tolerance_px", previous_tolerance_px, 0.0, 1000.0);
 }
 

@@ -53,8 +53,8 @@ class Lines {
 };
 
 // The selection as first written: every candidate against every candidate of the max_gap lines
-// before it, scanning the previous frame's candidates for each. LineSelector::select() must choose
-// exactly as this does, ties included.
+// before it, scanning the previous frame's candidates for each, then the faint pieces dropped.
+// LineSelector::select() must choose exactly as this does, ties included.
 class ReferenceSelector {
  public:
   ReferenceSelector(const LineSelectionOptions& options, int lines, int per_line)
@@ -62,7 +62,9 @@ class ReferenceSelector {
         lines_(lines),
         k_(per_line),
         score_(static_cast<std::size_t>(lines * per_line)),
+        unary_(static_cast<std::size_t>(lines * per_line)),
         from_(static_cast<std::size_t>(lines * per_line)),
+        starts_piece_(static_cast<std::size_t>(lines * per_line)),
         column_best_(static_cast<std::size_t>(lines)),
         previous_(static_cast<std::size_t>(lines * per_line)),
         previous_count_(static_cast<std::size_t>(lines), 0),
@@ -104,6 +106,7 @@ class ReferenceSelector {
         // A new piece: after the best of the path ends kept (or none), paying its capped jump.
         float best = -restart;
         int from = -1;
+        bool starts_piece = true;
         for (const End& end : ends_) {
           const float lines_between = static_cast<float>(line - end.at / k);
           const float jump = std::abs(c.position - end.position);
@@ -130,6 +133,7 @@ class ReferenceSelector {
             best_here = std::max(best_here, value(j));
           if (best_here - skipped > best) {
             best = best_here - skipped;
+            starts_piece = false;
             for (int j = 0; j < counts[at(before)]; ++j) {
               if (value(j) == best_here) {
                 from = before * k + j;
@@ -139,7 +143,9 @@ class ReferenceSelector {
           }
         }
         score_[at(line * k + i)] = unary + best;
+        unary_[at(line * k + i)] = unary;
         from_[at(line * k + i)] = from;
+        starts_piece_[at(line * k + i)] = starts_piece;
       }
       column_best_[at(line)] = -std::numeric_limits<float>::infinity();
       for (int i = 0; i < n; ++i) {
@@ -183,6 +189,48 @@ class ReferenceSelector {
     }
     for (int i = running_at; i >= 0; i = from_[at(i)])
       chosen[at(i / k)] = i % k;
+    // The pieces of the path (first line, end line, evidence, mean amplitude), then those too
+    // faint against the one with the most evidence dropped.
+    struct Piece {
+      int first, end;
+      float evidence, amplitude_sum;
+      int count;
+    };
+    std::vector<Piece> pieces;
+    int last_line = 0;
+    for (int line = 0; line < lines_; ++line) {
+      const int c = chosen[at(line)];
+      if (c < 0) continue;
+      const float position = candidates[at(line * k + c)].position;
+      const float last_position =
+          pieces.empty() ? 0.0f : candidates[at(last_line * k + chosen[at(last_line)])].position;
+      const bool jumped =
+          !pieces.empty() && jump_cost * (std::abs(position - last_position) -
+                                          free * static_cast<float>(line - last_line)) >=
+                                 0.5f * restart;
+      last_line = line;
+      if (starts_piece_[at(line * k + c)] || jumped) {
+        if (!pieces.empty()) pieces.back().end = line;
+        pieces.push_back({line, lines_, 0.0f, 0.0f, 0});
+      }
+      const float above = candidates[at(line * k + c)].amplitude_db - threshold_db;
+      pieces.back().evidence += unary_[at(line * k + c)] + std::max(0.0f, above - cap);
+      pieces.back().amplitude_sum += candidates[at(line * k + c)].amplitude_db;
+      ++pieces.back().count;
+    }
+    if (o_.faint_piece_db > 0 && !pieces.empty()) {
+      const Piece* strongest = &pieces.front();
+      for (const Piece& piece : pieces)
+        if (piece.evidence > strongest->evidence) strongest = &piece;
+      const float reference_db = strongest->amplitude_sum / static_cast<float>(strongest->count);
+      for (const Piece& piece : pieces) {
+        if (piece.amplitude_sum / static_cast<float>(piece.count) <
+            reference_db - static_cast<float>(o_.faint_piece_db)) {
+          for (int line = piece.first; line < piece.end; ++line)
+            chosen[at(line)] = -1;
+        }
+      }
+    }
     for (int line = 0; line < lines_; ++line) {
       const int c = chosen[at(line)];
       previous_chosen_[at(line)] =
@@ -196,8 +244,9 @@ class ReferenceSelector {
  private:
   LineSelectionOptions o_;
   int lines_, k_;
-  std::vector<float> score_;
+  std::vector<float> score_, unary_;
   std::vector<int> from_;
+  std::vector<bool> starts_piece_;
   std::vector<float> column_best_;
   std::vector<float> previous_;
   std::vector<std::uint8_t> previous_count_;
@@ -316,6 +365,36 @@ TEST(LineSelection, APieceBeyondADepthJumpIsKeptWhenItEarnsTheJump) {
   }
 }
 
+// A laser fan narrower than the image: the line lies on lines 20..39 only. Beyond its ends texture
+// forms curves 30 px from it, long enough to earn their restarts and jumps (20 points at the
+// amplitude cap), 18 dB fainter than the line: they are dropped. A piece of the line itself beyond
+// a depth jump, on a darker surface (8 dB fainter), is kept.
+TEST(LineSelection, CurvesFarFainterThanTheLineBeyondItsEndsAreDropped) {
+  Lines lines;
+  lines.piece(0, 19, 130.0f, 12.0f);
+  lines.piece(20, 39, 100.0f, 30.0f);
+  lines.piece(40, kLines - 1, 70.0f, 12.0f);
+  LineSelector selector;
+  const std::vector<float> chosen = lines.select(selector);
+  for (int line = 0; line < kLines; ++line)
+    EXPECT_EQ(chosen[line], line >= 20 && line < 40 ? 100.0f : -1.0f) << line;
+
+  LineSelectionOptions keep_all;
+  keep_all.faint_piece_db = 0.0;
+  LineSelector keeping(keep_all);
+  const std::vector<float> kept = lines.select(keeping);
+  EXPECT_EQ(kept[5], 130.0f);
+  EXPECT_EQ(kept[30], 100.0f);
+  EXPECT_EQ(kept[50], 70.0f);
+
+  Lines depth_jump;
+  depth_jump.piece(0, 29, 100.0f, 30.0f);
+  depth_jump.piece(30, kLines - 1, 150.0f, 22.0f);
+  const std::vector<float> both = depth_jump.select(selector);
+  EXPECT_EQ(both[10], 100.0f);
+  EXPECT_EQ(both[50], 150.0f);
+}
+
 // Frames of random candidates (a line wandering among texture, many lines full) on positions and
 // amplitudes of a coarse grid, so that totals tie often, and options that make them tie more: the
 // selector chooses what the reference does in every frame.
@@ -325,6 +404,8 @@ TEST(LineSelection, ChoosesAsTheReferenceDoesTiesIncluded) {
   std::vector<LineSelectionOptions> cases(4);
   cases[1].gap_cost_db = 0.0;
   cases[1].jump_free_px = 0.0;
+  cases[1].faint_piece_db = 0.0;
+  cases[2].faint_piece_db = 3.0;
   cases[2].max_gap = 0;
   cases[2].restart_cost_db = 4.0;
   cases[2].jump_cost_cap_db = 4.0;
