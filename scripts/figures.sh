@@ -74,13 +74,6 @@ counted false are the line itself 2 to 5 px off, along such rims; a stretch of s
 the line is faint rarely draws the line selection away (it pays a capped jump going and coming
 back, and only the line's own history earns the previous frame's full bonus).
 
-It falls short as well on \`fan-daylight\` (the laser's fan lights only the middle half of the
-image; seed 0: 71 %, seed 1: 80 % precision, 99 % on the other draws): beyond the line's ends,
-texture as bright as the laser forms curves the line selection takes for pieces of the line. With
-moderate light (\`fan\`) they are far fainter than the line and dropped (\`faint_piece_db\`,
-[extraction.md](extraction.md)); here nothing in a single frame tells them apart, and where
-\`background\` subtracts an earlier frame, what is left of their edges still forms such curves.
-
 ## Every figure
 
 \`\`\`

@@ -524,6 +524,42 @@ TEST(Frontend, LineOnADarkPatchInGlowingWaterIsWhereTheGlowEnds) {
   EXPECT_LT(std::abs(sum / on_patch), 0.3);
 }
 
+// The glow runs along the whole line; texture beside the line is brighter in front of it at some
+// columns and behind it at others. Here at 60 % of the columns in front: the median column says
+// "glow", but the water does not glow.
+TEST(Frontend, WaterGlowsWhenTheBrightnessInFrontRunsAlongTheWholeLine) {
+  ScannerGeometry g = small_geometry();
+  Frontend frontend(g, {});
+  frontend.reset(g.width, g.height);
+  const int near = frontend.rows().near_side();
+  auto render = [&](bool glow, bool texture) {
+    Image image(g.width, g.height, 0);
+    for (int u = 0; u < g.width; ++u) {
+      const double centre = 128.3 + 0.011 * u;
+      const double sigma = frontend.rows().width_px(centre) / 2.3548;
+      const bool patch_in_front = (u / 16) % 5 < 3;
+      for (int v = 0; v < g.height; ++v) {
+        const double d = v - centre;
+        const double in_front = near * d;
+        double value = 30.0 + 50.0 * std::exp(-d * d / (2 * sigma * sigma));
+        if (glow && in_front > 0) value += 20.0 * std::exp(-in_front / 150.0);
+        // A patch 25 grey levels brighter, from 2 px off the line, on one side.
+        if (texture && std::abs(d) > 2.0 && (in_front > 0) == patch_in_front) value += 25.0;
+        image.pixels[v * g.width + u] =
+            static_cast<std::uint8_t>(std::clamp(std::round(value), 0.0, 255.0));
+      }
+    }
+    return image;
+  };
+  Profile out(static_cast<std::size_t>(g.width) * 4);
+  const Image plain = render(false, false);
+  frontend.set_frame(plain.view());
+  frontend.find_candidates(out);  // where the line is: where the glow is looked for
+  EXPECT_FALSE(frontend.water_glows(plain.view()));
+  EXPECT_TRUE(frontend.water_glows(render(true, false).view()));
+  EXPECT_FALSE(frontend.water_glows(render(false, true).view()));
+}
+
 TEST(Detectors, AreMadeByNameAndRefuseImpossibleOptions) {
   DetectorOptions o;
   o.geometry = small_geometry();
