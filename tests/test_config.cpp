@@ -125,6 +125,8 @@ TEST(Config, OutOfRangeNamesTheLimits) {
             "test.yaml:3: camera.sim.relief_max_slope: must be between 0.05 and 1, got 2");
   EXPECT_EQ(error_of("camera:\n  sim:\n    vehicle_speed_m_s: 20\n"),
             "test.yaml:3: camera.sim.vehicle_speed_m_s: must be between -10 and 10, got 20");
+  EXPECT_EQ(error_of("camera:\n  sim:\n    laser_fan_deg: 180\n"),
+            "test.yaml:3: camera.sim.laser_fan_deg: must be between 0 and 179, got 180");
   EXPECT_EQ(error_of("camera:\n  sim: {relief_height_m: 0.3, relief_max_slope: 0.3}\n"),
             "test.yaml:2: camera.sim.relief_max_slope: must be at least relief_height_m / 0.72 = "
             "0.417 (features must fit the 5.12 m relief tile)");
@@ -147,6 +149,15 @@ TEST(Config, DetectorOptionsTakeThePipelinesRanges) {
             "pyramid_levels), got 4");
   EXPECT_EQ(error_of("detector:\n  frontend:\n    selection: {max_gap: 65}\n"),
             "test.yaml:3: detector.frontend.selection.max_gap: must be between 0 and 64, got 65");
+  EXPECT_EQ(error_of("detector:\n  frontend:\n    selection: {faint_piece_db: -1}\n"),
+            "test.yaml:3: detector.frontend.selection.faint_piece_db: must be between 0 and 1000, "
+            "got -1");
+  EXPECT_EQ(
+      parse_config(hal::load_yaml_text("detector: {frontend: {selection: {faint_piece_db: 0}}}\n",
+                                       "test.yaml"),
+                   "test.yaml")
+          .detector_options.frontend.selection.faint_piece_db,
+      0.0);
   EXPECT_EQ(error_of("detector:\n  frontend: {min_depth_m: 3}\n"),
             "test.yaml:2: detector.frontend.max_depth_m: must be above min_depth_m");
   EXPECT_EQ(error_of("detector:\n  background:\n    history_frames: 0\n"),
