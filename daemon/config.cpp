@@ -234,6 +234,19 @@ pipeline::ScannerGeometry scanner_geometry(const hal::Calibration& calibration) 
   return g;
 }
 
+DepthsSeen depths_seen(const hal::Calibration& calibration) {
+  const pipeline::ScannerGeometry g = scanner_geometry(calibration);
+  // 1/Z on the sheet is affine in the pixel (distortion left out, as the front-end does), so its
+  // range over the image is its range over the four corners, whichever way the line runs.
+  const double right = g.width - 1, bottom = g.height - 1;
+  const double corners[] = {g.inverse_depth(0, 0), g.inverse_depth(right, 0),
+                            g.inverse_depth(0, bottom), g.inverse_depth(right, bottom)};
+  const double nearest = *std::max_element(std::begin(corners), std::end(corners));
+  const double farthest = *std::min_element(std::begin(corners), std::end(corners));
+  if (!(nearest > 0)) return {nearest, farthest};
+  return {1.0 / nearest, farthest > 0 ? 1.0 / farthest : INFINITY};
+}
+
 void check_laser_sheet_in_view(const hal::Calibration& calibration,
                                const CalibrationSource& calibration_source,
                                const pipeline::FrontendOptions* depth_range,
@@ -247,15 +260,9 @@ void check_laser_sheet_in_view(const hal::Calibration& calibration,
                            " passes through the camera centre: the camera sees it edge-on and "
                            "cannot triangulate (e must not be 0)");
   }
-  // 1/Z on the sheet is affine in the pixel (distortion left out, as the front-end does), so its
-  // range over the image is its range over the four corners, whichever way the line runs.
-  const double right = g.width - 1, bottom = g.height - 1;
-  const double corners[] = {g.inverse_depth(0, 0), g.inverse_depth(right, 0),
-                            g.inverse_depth(0, bottom), g.inverse_depth(right, bottom)};
-  const double nearest = *std::max_element(std::begin(corners), std::end(corners));
-  const double farthest = *std::min_element(std::begin(corners), std::end(corners));
+  const DepthsSeen seen = depths_seen(calibration);
   const std::string image = std::to_string(g.width) + "x" + std::to_string(g.height) + " image";
-  if (!(nearest > 0)) {
+  if (!(seen.nearest > 0)) {
     throw hal::ConfigError(
         where + describe_sheet(calibration.laser) +
         " lies behind the camera at every pixel of the " + image +
@@ -265,9 +272,7 @@ void check_laser_sheet_in_view(const hal::Calibration& calibration,
              : " (check side and angle_deg)"));
   }
   if (depth_range == nullptr) return;
-  // Depths seen: from 1/nearest to 1/farthest, or to infinity where the horizon is in view.
-  const double min_seen = 1.0 / nearest;
-  const double max_seen = farthest > 0 ? 1.0 / farthest : INFINITY;
+  const double min_seen = seen.nearest, max_seen = seen.farthest;
   if (max_seen < depth_range->min_depth_m || min_seen > depth_range->max_depth_m) {
     throw hal::ConfigError(
         where + "the " + image + " sees the laser sheet at depths " + format_number(min_seen) +

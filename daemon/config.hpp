@@ -112,6 +112,13 @@ void check_laser_sheet_in_view(const hal::Calibration& calibration,
                                const CalibrationSource& calibration_source,
                                const pipeline::FrontendOptions* depth_range,
                                const std::string& depth_range_source);
+// The depths (metres) at which the camera sees the laser sheet: from the nearest pixel's to the
+// farthest's, infinity where the horizon is in view; nearest <= 0 when the sheet lies behind the
+// camera at every pixel.
+struct DepthsSeen {
+  double nearest, farthest;
+};
+DepthsSeen depths_seen(const hal::Calibration& calibration);
 // Whether a detector searches only where the sheet lies within the front-end's depth range (all
 // but maxvalue, which takes each line's brightest pixel wherever it is).
 bool searches_depth_range(const std::string& detector);

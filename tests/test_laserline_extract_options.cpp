@@ -323,6 +323,51 @@ TEST_F(LaserlineExtract, ThresholdInTheDetectorsOwnUnit) {
   }
 }
 
+// A desk scanner: the laser 5 cm from the camera, the surface 25 cm away. Without a configuration
+// the tool searches every depth the frames see (and says which); the built-in configuration's
+// range (0.5 to 2.5 m, the vehicle's) would find nothing, as --depth-range or --config with that
+// range shows.
+TEST_F(LaserlineExtract, SearchesEveryDepthTheFramesSeeWithoutAConfiguration) {
+  options_.calibration.laser.baseline_m = 0.05;
+  options_.distance_m = 0.25;
+  hal::SimScene scene(options_);
+  const hal::SimGroundTruth truth = truth_of(scene, 0);
+  ASSERT_GT(std::count_if(truth.position.begin(), truth.position.end(),
+                          [](float v) { return !std::isnan(v); }),
+            kWidth * 9 / 10);
+  ASSERT_TRUE(cv::imwrite(path("f.png"), render(scene, 0)));
+  const std::string desk = write_calibration(
+      "desk.yaml",
+      "{baseline_m: 0.05, angle_deg: " + std::to_string(options_.calibration.laser.angle_deg) +
+          ", sheet_width_m: " + std::to_string(options_.calibration.laser.sheet_width_m) + "}");
+  RunResult r = extract(path("f.png"), "fir", desk);
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("laserline-extract: searching the laser sheet at depths "),
+            std::string::npos)
+      << r.out;
+  expect_frames_match(read_csv(path("points.csv")), {{0, 0}}, scene);
+
+  r = extract("--depth-range 0.5,2.5 " + path("f.png"), "fir", desk);
+  EXPECT_EQ(r.exit_code, 3) << r.out;
+  EXPECT_EQ(read_csv(path("points.csv")).rows, 0u);
+  EXPECT_EQ(r.out.find("searching the laser sheet"), std::string::npos) << r.out;
+  std::ofstream(path("vehicle.yaml"))
+      << "detector:\n  frontend: {min_depth_m: 0.5, max_depth_m: 2.5}\n";
+  r = extract("--config " + path("vehicle.yaml") + " " + path("f.png"), "fir", desk);
+  EXPECT_EQ(r.exit_code, 3) << r.out;
+  r = extract("--depth-range 0.1,0.6 " + path("f.png"), "fir", desk);
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  expect_frames_match(read_csv(path("points.csv")), {{0, 0}}, scene);
+
+  for (const char* bad : {"0.3", "2,1", "0,1", "0.2,2000", "a,b", "0.2,1x"}) {
+    r = extract(std::string("--depth-range ") + bad + " " + path("f.png"), "fir", desk);
+    EXPECT_EQ(r.exit_code, 2) << bad;
+    EXPECT_EQ(r.out,
+              std::string("laserline-extract: --depth-range '") + bad +
+                  "': expected MIN,MAX in metres, 0.01 <= MIN < MAX <= 1000, e.g. 0.2,1.5\n");
+  }
+}
+
 // On/off alternation told with --laser-pattern 10: laser-off frames reach the detector (the
 // background detector subtracts them from the next frame) but give no points.
 TEST_F(LaserlineExtract, LaserPatternOffFramesAreBackgroundsNotLaserFrames) {

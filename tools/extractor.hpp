@@ -71,7 +71,7 @@ struct Options {
   bool override_log_calibration = false;
   std::string calib, config, detector, overlay_dir, output, ply, poses;
   // As given; checked once the calibration and the detector are known.
-  std::string threshold, roi, mask;
+  std::string threshold, roi, mask, depth_range;
   laserline::hal::LaserChannel channel;  // the laser's light in colour frames
   int clipped_from = 255;     // colours at this level or above are clipped (the detector's)
   std::string laser_pattern;  // as given, for messages

@@ -48,7 +48,7 @@ using laserline::tools::extract::Region;
 
 constexpr const char* kUsage =
     "usage: laserline-extract [--calib FILE [--override-log-calibration]] [--config FILE]\n"
-    "                         --detector NAME [--threshold VALUE]\n"
+    "                         --detector NAME [--threshold VALUE] [--depth-range MIN,MAX]\n"
     "                         [--channel NAME|EXPR] [--roi x,y,w,h] [--mask FILE]\n"
     "                         [--laser-pattern BITS] [--overlay-dir DIR] [--all-candidates]\n"
     "                         [--keep-sheet-width]\n"
@@ -67,6 +67,11 @@ constexpr const char* kUsage =
     "                     configuration's: maxvalue a grey level 1..255 that a line's brightest\n"
     "                     pixel must reach (built-in 40); fir, background, backprojection an\n"
     "                     SNR in dB 0..60 (built-in 6)\n"
+    "  --depth-range MIN,MAX  fir, background, backprojection search the line only where the\n"
+    "                     laser sheet lies between these depths (metres, 0.01 to 1000). Default:\n"
+    "                     with --config, its detector.frontend.min_depth_m and max_depth_m;\n"
+    "                     without, every depth the frames see up to 100 baselines (the sheet's\n"
+    "                     distance from the camera centre), said on stderr\n"
     "  --channel NAME|EXPR  the laser's light in colour frames: red, green (default), blue,\n"
     "                     grey, or a weighted sum such as \"red - (green + blue) / 2\" (also\n"
     "                     cancels white light); mono frames are taken as they are\n"
@@ -140,6 +145,7 @@ Options parse_arguments(int argc, char** argv) {
                                   {"config", true},
                                   {"detector", true},
                                   {"threshold", true},
+                                  {"depth-range", true},
                                   {"channel", true},
                                   {"roi", true},
                                   {"mask", true},
@@ -166,6 +172,8 @@ Options parse_arguments(int argc, char** argv) {
       o.detector = value();
     } else if (arg == "--threshold") {
       o.threshold = value();
+    } else if (arg == "--depth-range") {
+      o.depth_range = value();
     } else if (arg == "--channel") {
       try {
         o.channel = laserline::hal::parse_laser_channel(value());
@@ -237,6 +245,42 @@ void apply_threshold(const Options& o, laserline::pipeline::DetectorOptions& det
     }
     detector_options.frontend.snr_threshold_db = value;
   }
+}
+
+// The depths searched (fir, background, backprojection): --depth-range; else a --config's; else
+// every depth the frames see, up to kMaxBaselines baselines: the built-in configuration's range is
+// the vehicle's working distance, and someone else's scanner (a desk scanner, a turntable) may
+// work at a tenth of it. Beyond some 100 baselines a pixel of the line is several percent of its
+// depth, and toward the horizon the rows would be stretched for a line thinner than the blur.
+// Returns the line that says so in the last case (said once the other arguments are checked).
+std::string choose_depth_range(const Options& o, const laserline::hal::Calibration& calibration,
+                               laserline::pipeline::FrontendOptions& frontend) {
+  constexpr double kMaxBaselines = 100.0;
+  const laserline::daemon::DepthsSeen seen = laserline::daemon::depths_seen(calibration);
+  if (!o.depth_range.empty()) {
+    double lo = 0, hi = 0;
+    char tail = 0;
+    if (std::sscanf(o.depth_range.c_str(), "%lf,%lf%c", &lo, &hi, &tail) != 2 ||
+        !std::isfinite(lo) || !std::isfinite(hi) || lo < 0.01 || hi > 1000 || !(lo < hi)) {
+      fatal("--depth-range '" + o.depth_range +
+            "': expected MIN,MAX in metres, 0.01 <= MIN < MAX <= 1000, e.g. 0.2,1.5");
+    }
+    frontend.min_depth_m = lo;
+    frontend.max_depth_m = hi;
+    return {};
+  }
+  if (!o.config.empty() || !(seen.nearest > 0)) return {};  // (the check that follows says why)
+  const Eigen::Vector4d plane = calibration.laser.plane_coefficients();
+  const double baseline = std::abs(plane[3]) / plane.head<3>().norm();
+  frontend.min_depth_m = std::clamp(seen.nearest, 0.01, 999.0);
+  frontend.max_depth_m = std::clamp(std::min(seen.farthest, kMaxBaselines * baseline),
+                                    frontend.min_depth_m * 1.01, 1000.0);
+  char line[200];
+  std::snprintf(line, sizeof line,
+                "laserline-extract: searching the laser sheet at depths %.3g to %.3g m (what the "
+                "frames see, up to %.0f baselines of %.3g m; --depth-range MIN,MAX to change)\n",
+                frontend.min_depth_m, frontend.max_depth_m, kMaxBaselines, baseline);
+  return line;
 }
 
 // --roi and --mask, checked against the frames' size (the calibration's). --roi is also the
@@ -413,6 +457,7 @@ int run_extract(int argc, char** argv) {
                  laserline::hal::calibration_id_text(in_use.id).c_str(), log_path.c_str());
   }
   laserline::pipeline::DetectorOptions detector_options;
+  std::string depth_range_note;
   try {
     // The configuration's detector section (thresholds, front-end, motion); its calibration is
     // replaced by --calib.
@@ -421,12 +466,15 @@ int run_extract(int argc, char** argv) {
                                : laserline::daemon::load_config_file(options.config);
     detector_options = config.detector_options;
     detector_options.geometry = laserline::daemon::scanner_geometry(calibration);
+    if (laserline::daemon::searches_depth_range(options.detector)) {
+      depth_range_note = choose_depth_range(options, calibration, detector_options.frontend);
+    }
     // Before any frame: a sheet the camera cannot see would give no point, or none in 3-D.
     laserline::daemon::check_laser_sheet_in_view(
         calibration, {options.calib, "laser"},
         laserline::daemon::searches_depth_range(options.detector) ? &detector_options.frontend
                                                                   : nullptr,
-        config.source);
+        options.depth_range.empty() ? config.source : "--depth-range " + options.depth_range);
   } catch (const ConfigError& e) {
     fatal(e.what());
   }
@@ -446,6 +494,7 @@ int run_extract(int argc, char** argv) {
     fatal("--detector " + options.detector + ": " + e.what());
   }
   if (!detector) fatal("--detector: unknown detector '" + options.detector + "'");
+  std::fputs(depth_range_note.c_str(), stderr);
 
   if (!options.overlay_dir.empty()) {
     std::error_code ec;
