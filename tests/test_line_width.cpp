@@ -56,7 +56,7 @@ double measured_ratio(const std::string& name, double stated, int frames = 4) {
 // too narrow, the meter says so by the same factor. On the checkerboard, a detector sized for a
 // line three times too wide puts a good part of its points on the squares' edges, which measure
 // wider: the ratio is then off by up to a third, still far beyond laserline-extract's tolerance
-// (a quarter), which measures again once its filters are sized for it.
+// (twice or half), which measures again once its filters are sized for it.
 TEST(LineWidth, MeasuredAgainstTheStatedWidth) {
   for (const std::string name : {"clean", "checkerboard", "beside"}) {
     const double right = measured_ratio(name, 1.0);

@@ -342,16 +342,14 @@ Region region_of(const Options& o, int width, int height,
 // answered weakly, and a guessed sheet width is common on someone else's images. The width is
 // measured on the first frames of the images and videos; off by more than kWidthTolerance, the
 // filters are sized for what was measured (measured again: a detection sized for a width far off
-// finds the line poorly), and it is said. The tolerance is small: a line measured twice as wide
-// as sized for already loses a tenth of its points, and sizing for the width measured costs
-// nothing where the calibration was right (the lens and the pixels widen every line a little).
+// finds the line poorly), and it is said.
 void fit_sheet_width(const Options& options, const laserline::hal::Calibration& calibration,
                      const Region& region, const std::vector<InputKind>& kinds,
                      const CalibrationInUse& in_use,
                      laserline::pipeline::DetectorOptions& detector_options) {
   constexpr std::int64_t kWidthFrames = 12;
   constexpr std::size_t kMinimumPoints = 200;
-  constexpr double kWidthTolerance = 1.25;
+  constexpr double kWidthTolerance = 2.0;
   if (options.keep_sheet_width || !laserline::daemon::searches_depth_range(options.detector)) {
     return;
   }
