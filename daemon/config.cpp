@@ -145,6 +145,7 @@ void read_detector_options(hal::YamlMap& detector, pipeline::DetectorOptions& op
   read(frontend, "min_depth_m", f.min_depth_m);
   read(frontend, "max_depth_m", f.max_depth_m);
   read(frontend, "normalised_width_px", f.normalised_width_px);
+  read(frontend, "line_blur_px", f.line_blur_px);
   read(frontend, "passband_ratio", f.passband_ratio);
   read(frontend, "noise_rows", f.noise_rows);
   read(frontend, "noise_columns", f.noise_columns);

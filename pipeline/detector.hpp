@@ -22,6 +22,13 @@ struct FrontendOptions {
   double min_depth_m = 0.5;
   double max_depth_m = 2.5;
   double normalised_width_px = 3.0;  // laser width after width normalisation (III-B)
+  // The width of the image of a sheet far thinner than a pixel: the line is taken as
+  // sqrt(l(v)^2 + line_blur_px^2) wide, l(v) the sheet's projected width. A sheet a millimetre or
+  // two thick is under a pixel wide at a few metres, and filters sized for that answer the line
+  // weakly. 0.7: the pixel's own width (a one-pixel box spreads light as a Gaussian of 0.68 px full
+  // width at half maximum does), the part of the blur every camera has; the lens adds its own.
+  // 0: the projected width alone (paper III-B).
+  double line_blur_px = 0.7;
   // Band-pass (III-C): inner box = normalised width, outer box = passband_ratio times it. A wider
   // passband tolerates backscatter and non-Lambertian surfaces at some loss of SNR.
   double passband_ratio = 3.0;

@@ -58,6 +58,7 @@ RowNormalisation::RowNormalisation(const ScannerGeometry& g, const FrontendOptio
   }
   const double gamma = -g.fy * g.sheet_width_m * a / (e * g.fx);
   scale_ = options.normalised_width_px;
+  blur_ = options.line_blur_px;
   const double l_far = g.fy * g.sheet_width_m / options.max_depth_m;
   const double l_near = g.fy * g.sheet_width_m / options.min_depth_m;
   // The rows where some column sees the sheet within the depth range: the union over the first
@@ -86,6 +87,7 @@ RowNormalisation::RowNormalisation(const ScannerGeometry& g, const FrontendOptio
   single_inverse_beta_ = static_cast<float>(1.0 / beta_);
   single_rate_ = static_cast<float>(beta_ / scale_);
   single_r0_ = static_cast<float>(r0_);
+  single_blur_ = static_cast<float>(blur_);
   source_row_.resize(static_cast<std::size_t>(count));
   const float last = static_cast<float>(g.height - 1);
   for (int r = 0; r < count; ++r) {
@@ -94,17 +96,23 @@ RowNormalisation::RowNormalisation(const ScannerGeometry& g, const FrontendOptio
   }
 }
 
+// dr/dv = W / w(v), w(v) = sqrt(l(v)^2 + b^2): r = (W / beta) asinh(l(v) / b), which for b = 0
+// is (W / beta) ln l(v) (up to a constant); l(v) > 0 wherever the sheet is in front of the camera.
 double RowNormalisation::to_normalised(double v) const {
-  // dr/dv = W / l(v); l(v) > 0 wherever the sheet is in front of the camera.
-  return scale_ / beta_ * std::log(std::max(alpha_ + beta_ * v, 1e-12)) + r0_;
+  const double sheet = alpha_ + beta_ * v;
+  const double t = blur_ > 0.0 ? std::asinh(sheet / blur_) : std::log(std::max(sheet, 1e-12));
+  return scale_ / beta_ * t + r0_;
 }
 
 double RowNormalisation::to_source(double r) const {
-  return (std::exp((r - r0_) * beta_ / scale_) - alpha_) / beta_;
+  const double t = (r - r0_) * beta_ / scale_;
+  return ((blur_ > 0.0 ? blur_ * std::sinh(t) : std::exp(t)) - alpha_) / beta_;
 }
 
 float RowNormalisation::to_source_single(float r) const {
-  return (std::exp((r - single_r0_) * single_rate_) - single_alpha_) * single_inverse_beta_;
+  const float t = (r - single_r0_) * single_rate_;
+  return ((single_blur_ > 0.0f ? single_blur_ * std::sinh(t) : std::exp(t)) - single_alpha_) *
+         single_inverse_beta_;
 }
 
 // ---------------------------------------------------------------------------------------------

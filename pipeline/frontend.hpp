@@ -1,6 +1,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <span>
 #include <type_traits>
@@ -38,16 +39,21 @@ class RowNormalisation {
   // candidates, thousands per frame.
   float to_source_single(float r) const;
   // Laser width in original pixels at original row v.
-  double width_px(double v) const { return alpha_ + beta_ * v; }
+  double width_px(double v) const {
+    const double sheet = alpha_ + beta_ * v;
+    return std::sqrt(sheet * sheet + blur_ * blur_);
+  }
   // +1 when rows further down see the sheet nearer the camera, -1 when further up: the side of the
   // line where the laser lights the water in front of the surface.
   int near_side() const { return beta_ > 0 ? 1 : -1; }
 
  private:
   double alpha_ = 0, beta_ = 0;  // l(v) = alpha + beta v
+  double blur_ = 0;              // FrontendOptions::line_blur_px
   double scale_ = 1;             // normalised width W
   double r0_ = 0;                // normalised row offset
   float single_alpha_ = 0, single_inverse_beta_ = 1, single_rate_ = 0, single_r0_ = 0;
+  float single_blur_ = 0;
   std::vector<float> source_row_;
 };
 

@@ -106,6 +106,7 @@ void FrontendOptions::validate() const {
   within("max_depth_m", max_depth_m, 0.01, 1000.0);
   if (!(max_depth_m > min_depth_m)) throw OptionError("max_depth_m", "must be above min_depth_m");
   within("normalised_width_px", normalised_width_px, 1.0, 32.0);
+  within("line_blur_px", line_blur_px, 0.0, 32.0);
   within("passband_ratio", passband_ratio, 1.5, 16.0);
   within("noise_rows", noise_rows, 3, 1001);
   within("noise_columns", noise_columns, 1, 101);

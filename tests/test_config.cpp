@@ -158,6 +158,13 @@ TEST(Config, DetectorOptionsTakeThePipelinesRanges) {
                    "test.yaml")
           .detector_options.frontend.selection.faint_piece_db,
       0.0);
+  EXPECT_EQ(error_of("detector:\n  frontend:\n    line_blur_px: 33\n"),
+            "test.yaml:3: detector.frontend.line_blur_px: must be between 0 and 32, got 33");
+  EXPECT_EQ(
+      parse_config(hal::load_yaml_text("detector: {frontend: {line_blur_px: 0.5}}\n", "test.yaml"),
+                   "test.yaml")
+          .detector_options.frontend.line_blur_px,
+      0.5);
   EXPECT_EQ(error_of("detector:\n  frontend: {min_depth_m: 3}\n"),
             "test.yaml:2: detector.frontend.max_depth_m: must be above min_depth_m");
   EXPECT_EQ(error_of("detector:\n  background:\n    history_frames: 0\n"),

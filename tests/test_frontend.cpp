@@ -82,6 +82,7 @@ TEST(RowNormalisation, MakesTheLineWidthConstantAndMapsBothWays) {
   const ScannerGeometry g = small_geometry();
   FrontendOptions o;
   o.normalised_width_px = 3.0;
+  o.line_blur_px = 0.0;  // the paper's model: the sheet's projected width
   const RowNormalisation rows(g, o, 5);
   // Paper eq. 3 in the OpenCV convention: l(v) = f l_w / Z(v).
   for (double v : {20.0, 80.0, 150.0}) {
@@ -98,6 +99,34 @@ TEST(RowNormalisation, MakesTheLineWidthConstantAndMapsBothWays) {
   // Only rows with the sheet between min and max depth (plus the margins) are kept.
   const double v_far = g.cy + g.fy * (-(g.laser_plane[2] + g.laser_plane[3] / o.max_depth_m));
   EXPECT_NEAR(rows.source_row(rows.rows() - 1 - 5), v_far, 1.0);
+}
+
+// The pixel and the lens make a line at least about a pixel wide: the model takes the line as
+// sqrt(l(v)^2 + b^2) wide, and still normalises it to W rows, both ways, everywhere.
+TEST(RowNormalisation, TakesTheLineAsWideAsTheBlurWhereTheSheetIsThinner) {
+  ScannerGeometry g = small_geometry();
+  g.sheet_width_m *= 0.1;  // a tenth of a pixel or so
+  FrontendOptions o;
+  o.normalised_width_px = 3.0;
+  o.line_blur_px = 1.2;
+  const RowNormalisation rows(g, o, 5);
+  for (double v : {20.0, 80.0, 150.0}) {
+    const double sheet = g.fy * g.sheet_width_m * g.inverse_depth(g.cx, v);
+    ASSERT_LT(sheet, 0.5) << "row " << v;
+    EXPECT_NEAR(rows.width_px(v), std::hypot(sheet, 1.2), 1e-9);
+    const double drdv = (rows.to_normalised(v + 1e-3) - rows.to_normalised(v - 1e-3)) / 2e-3;
+    EXPECT_NEAR(drdv * rows.width_px(v), 3.0, 1e-6) << "row " << v;
+    EXPECT_NEAR(rows.to_source(rows.to_normalised(v)), v, 1e-9);
+  }
+  for (float r = 0; r < static_cast<float>(rows.rows()); r += 0.37f)
+    EXPECT_NEAR(rows.to_source_single(r), rows.to_source(r), 1e-3) << "normalised row " << r;
+  // A line at least 1.2 px wide everywhere: at most W / 1.2 normalised rows per row, where the
+  // sheet's own width would have asked for W / l(v), several times more.
+  const double span = rows.to_normalised(150.0) - rows.to_normalised(20.0);
+  EXPECT_LE(span, 3.0 / 1.2 * 130.0);
+  o.line_blur_px = 0.0;
+  const RowNormalisation sheet_only(g, o, 5);
+  EXPECT_GT(sheet_only.to_normalised(150.0) - sheet_only.to_normalised(20.0), 2.0 * span);
 }
 
 TEST(RowNormalisation, RefusesGeometryThatCannotWork) {
@@ -325,9 +354,10 @@ TEST(Frontend, EveryKernelTargetFindsTheSameCandidates) {
     current.pixels[i] = static_cast<std::uint8_t>(60 + (state >> 27));
     background.pixels[i] = static_cast<std::uint8_t>(40 + (state >> 28) * 3);
   }
-  auto line = [](int u) { return 90.0 + 0.2 * u; };
-  current.add_line(line, 120.0, 1.0);  // about as wide as the model (f l_w / Z ~ 1 px)
-  // Over the right half a brighter line whose core clips: the refinement's other path.
+  // Over the left half a line about as wide as the model (f l_w / Z ~ 1 px, and the pixel), over
+  // the right half a brighter one whose core clips: the refinement's two paths.
+  auto line = [](int u) { return u < 200 ? 90.0 + 0.2 * u : -1000.0; };
+  current.add_line(line, 120.0, 1.0);
   auto clipped = [](int u) { return u < 160 ? -1000.0 : 40.0 + 0.1 * u; };
   current.add_line(clipped, 600.0, 2.5);
   Homography h;

@@ -273,6 +273,19 @@ std::vector<Scenario> standard_scenarios(int width, int height) {
     s.scene.laser_fan_deg = 24.0;
     out.push_back(s);
   }
+  {
+    Scenario s{"thin-sheet",
+               "as ambient, a sheet 0.4 mm thick (or 1.5 mm at 4.5 m): its projection is half a "
+               "pixel wide, the line in the image wider (the pixels and the lens)",
+               base};
+    s.scene.ambient = 150;
+    s.scene.texture_contrast = 0.6;
+    s.scene.laser_peak = 100;
+    s.scene.noise_sigma = 2.0;
+    s.scene.seed = 59;
+    s.scene.calibration.laser.sheet_width_m = 0.0004;
+    out.push_back(s);
+  }
   return out;
 }
 
