@@ -55,8 +55,8 @@ double measured_ratio(const std::string& name, double stated, int frames = 4) {
 // the pixels and the lens widen it (by half at this size). Told a sheet three times too wide or
 // too narrow, the meter says so by the same factor. On the checkerboard, a detector sized for a
 // line three times too wide puts a good part of its points on the squares' edges, which measure
-// wider: the ratio is then off by up to a third, still far beyond laserline-extract's tolerance
-// (twice or half), which measures again once its filters are sized for it.
+// wider: the ratio is then off by up to a third, still beyond laserline-extract's tolerance
+// (half again, or two thirds), which measures again once its filters are sized for it.
 TEST(LineWidth, MeasuredAgainstTheStatedWidth) {
   for (const std::string name : {"clean", "checkerboard", "beside"}) {
     const double right = measured_ratio(name, 1.0);

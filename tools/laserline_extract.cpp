@@ -342,14 +342,16 @@ Region region_of(const Options& o, int width, int height,
 // answered weakly, and a guessed sheet width is common on someone else's images. The width is
 // measured on the first frames of the images and videos; off by more than kWidthTolerance, the
 // filters are sized for what was measured (measured again: a detection sized for a width far off
-// finds the line poorly), and it is said.
+// finds the line poorly), and it is said. (Sized for the width the calibration predicts, the
+// filters find the line best though the lens and the pixels widen it by a third or so; a line
+// measured twice as wide as predicted loses a good part of its points.)
 void fit_sheet_width(const Options& options, const laserline::hal::Calibration& calibration,
                      const Region& region, const std::vector<InputKind>& kinds,
                      const CalibrationInUse& in_use,
                      laserline::pipeline::DetectorOptions& detector_options) {
   constexpr std::int64_t kWidthFrames = 12;
   constexpr std::size_t kMinimumPoints = 200;
-  constexpr double kWidthTolerance = 2.0;
+  constexpr double kWidthTolerance = 1.5;
   if (options.keep_sheet_width || !laserline::daemon::searches_depth_range(options.detector)) {
     return;
   }
