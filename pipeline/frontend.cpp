@@ -98,21 +98,31 @@ RowNormalisation::RowNormalisation(const ScannerGeometry& g, const FrontendOptio
 
 // dr/dv = W / w(v), w(v) = sqrt(l(v)^2 + b^2): r = (W / beta) asinh(l(v) / b), which for b = 0
 // is (W / beta) ln l(v) (up to a constant); l(v) > 0 wherever the sheet is in front of the camera.
+// (asinh and sinh from exp, log and sqrt: the libraries of every architecture give these the same
+// results, and the profiles must be the same on all of them.)
 double RowNormalisation::to_normalised(double v) const {
   const double sheet = alpha_ + beta_ * v;
-  const double t = blur_ > 0.0 ? std::asinh(sheet / blur_) : std::log(std::max(sheet, 1e-12));
+  double t = 0.0;
+  if (blur_ > 0.0) {
+    const double x = std::abs(sheet / blur_);
+    t = std::copysign(std::log(x + std::sqrt(x * x + 1.0)), sheet);
+  } else {
+    t = std::log(std::max(sheet, 1e-12));
+  }
   return scale_ / beta_ * t + r0_;
 }
 
 double RowNormalisation::to_source(double r) const {
   const double t = (r - r0_) * beta_ / scale_;
-  return ((blur_ > 0.0 ? blur_ * std::sinh(t) : std::exp(t)) - alpha_) / beta_;
+  const double sheet = blur_ > 0.0 ? 0.5 * blur_ * (std::exp(t) - std::exp(-t)) : std::exp(t);
+  return (sheet - alpha_) / beta_;
 }
 
 float RowNormalisation::to_source_single(float r) const {
   const float t = (r - single_r0_) * single_rate_;
-  return ((single_blur_ > 0.0f ? single_blur_ * std::sinh(t) : std::exp(t)) - single_alpha_) *
-         single_inverse_beta_;
+  const float sheet =
+      single_blur_ > 0.0f ? 0.5f * single_blur_ * (std::exp(t) - std::exp(-t)) : std::exp(t);
+  return (sheet - single_alpha_) * single_inverse_beta_;
 }
 
 // ---------------------------------------------------------------------------------------------
