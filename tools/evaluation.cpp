@@ -274,14 +274,12 @@ std::vector<Scenario> standard_scenarios(int width, int height) {
     out.push_back(s);
   }
   {
-    Scenario s{"thin-sheet",
-               "as ambient, a sheet 0.4 mm thick (or 1.5 mm at 4.5 m): its projection is half a "
-               "pixel wide, the line in the image wider (the pixels and the lens)",
-               base};
-    s.scene.ambient = 150;
-    s.scene.texture_contrast = 0.6;
-    s.scene.laser_peak = 100;
-    s.scene.noise_sigma = 2.0;
+    Scenario s = *std::find_if(out.begin(), out.end(),
+                               [](const Scenario& a) { return a.name == "ambient"; });
+    s.name = "thin-sheet";
+    s.description =
+        "as ambient, a sheet 0.4 mm thick (or 1.5 mm at 4.5 m): its projection is half a pixel "
+        "wide, the line in the image wider (the pixels and the lens)";
     s.scene.seed = 59;
     s.scene.calibration.laser.sheet_width_m = 0.0004;
     out.push_back(s);
