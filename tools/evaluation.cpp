@@ -258,24 +258,23 @@ std::vector<Scenario> standard_scenarios(int width, int height) {
     s.scene.calibration.laser.plane = Eigen::Vector4d{-s30, c30, -t, 0.25};
     out.push_back(s);
   }
-  for (const char* light : {"", "-daylight"}) {
-    const bool daylight = light[0] != 0;
-    Scenario s{std::string("fan") + light,
-               std::string(daylight ? "as ambient" : "as clean") +
-                   ", the laser's fan (24 degrees) lights the middle half of the image only: the "
-                   "wall beyond the line's ends shows its texture alone",
-               base};
-    s.scene.ambient = daylight ? 150 : 40;
-    s.scene.texture_contrast = daylight ? 0.6 : 0.5;
-    s.scene.laser_peak = daylight ? 100 : 180;
-    s.scene.noise_sigma = daylight ? 2.0 : 1.5;
+  // Scenes that change one thing of an earlier one.
+  const auto like = [&out](const std::string& name) {
+    return *std::find_if(out.begin(), out.end(), [&](const Scenario& s) { return s.name == name; });
+  };
+  for (const char* from : {"clean", "ambient"}) {
+    Scenario s = like(from);
+    const bool daylight = s.name == "ambient";
+    s.name = daylight ? "fan-daylight" : "fan";
+    s.description = std::string("as ") + from +
+                    ", the laser's fan (24 degrees) lights the middle half of the image only: the "
+                    "wall beyond the line's ends shows its texture alone";
     s.scene.seed = 53;
     s.scene.laser_fan_deg = 24.0;
     out.push_back(s);
   }
   {
-    Scenario s = *std::find_if(out.begin(), out.end(),
-                               [](const Scenario& a) { return a.name == "ambient"; });
+    Scenario s = like("ambient");
     s.name = "thin-sheet";
     s.description =
         "as ambient, a sheet 0.4 mm thick (or 1.5 mm at 4.5 m): its projection is half a pixel "
