@@ -92,6 +92,8 @@ FramePath::~FramePath() {
 
 bool FramePath::start(std::string* error) {
   format_ = camera_.format();
+  frame_rate_hz_ =
+      camera_.own_frame_rate_hz() > 0 ? camera_.own_frame_rate_hz() : config_.frame_rate_hz;
   try {
     detector_->use_parts(parts_);
     detector_->reset(format_.width, format_.height);  // allocates: before any thread runs
@@ -128,9 +130,10 @@ bool FramePath::start(std::string* error) {
   publisher_->status().camera_backend = config_.camera_backend;
   publisher_->status().strobe_state.reserve(kStrobeLineBytes);
   encoder_ = std::make_unique<RawFrameEncoder>(config_.raw_frames, format_);
-  // Enough room for every frame of a status period at 4x the nominal rate.
+  // Enough room for every frame of a status period at 4x the nominal rate (a memory camera's
+  // rate can be far beyond what the frame path takes: at most 2^20 samples, 8 MB).
   const auto window = static_cast<std::size_t>(
-      std::ceil(config_.frame_rate_hz * config_.status_period_s * 4.0) + 64);
+      std::min(std::ceil(frame_rate_hz_ * config_.status_period_s * 4.0) + 64, 1048576.0));
   latency_ = std::make_unique<LatencyStats>(window);
   pipeline_ = std::make_unique<LatencyStats>(window);
 
@@ -239,7 +242,7 @@ void FramePath::camera_loop() {
   const bool lossless = camera_.paced_by_consumer();
   bool frames_flowing = true;  // until a grab fails; the laser stays off until frames return
   LaserMode laser_mode = config_.laser_mode;
-  hal::FrameLaserDecider laser_decider(strobe_, config_.frame_rate_hz);
+  hal::FrameLaserDecider laser_decider(strobe_, frame_rate_hz_);
   auto switch_recorded = [&](bool on) {
     hal::LaserSwitch record;
     record.mono_ns = 0;
@@ -316,7 +319,7 @@ void FramePath::camera_loop() {
 void FramePath::worker_loop() {
   std::int64_t processed = 0;
   const bool lossless = camera_.paced_by_consumer();
-  const auto budget_ns = static_cast<std::int64_t>(1e9 / config_.frame_rate_hz);
+  const auto budget_ns = static_cast<std::int64_t>(1e9 / frame_rate_hz_);
   // Raw frames at most this often (arrival times, so no clock read here).
   const std::int64_t image_interval_ns =
       config_.raw_frames.max_rate_hz > 0
@@ -447,8 +450,7 @@ void FramePath::describe_strobe(std::int64_t now_mono, std::int64_t matched, std
   if (size == 0) return;
   out[0] = '\0';
   if (strobe_ == nullptr) return;
-  hal::describe_strobe_health(*strobe_, config_.frame_rate_hz, now_mono, matched, unmatched, out,
-                              size);
+  hal::describe_strobe_health(*strobe_, frame_rate_hz_, now_mono, matched, unmatched, out, size);
 }
 
 void FramePath::publisher_loop() {

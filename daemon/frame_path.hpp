@@ -93,6 +93,9 @@ class FramePath {
   // is given them (Detector::use_parts()) before its reset().
   pipeline::PartRunner& detection_parts() { return parts_; }
 
+  // The frames' nominal rate after start(): the camera's own (the memory camera's rate_hz) or
+  // camera.frame_rate_hz. The per-frame budget and the latency windows follow it.
+  double frame_rate_hz() const { return frame_rate_hz_; }
   // True once the camera ended by itself (a replayed recording reached its end).
   bool source_ended() const { return source_ended_.load(std::memory_order_acquire); }
   // The strobe's health in one line into `out` (no allocation): "" without laser.strobe_line,
@@ -119,6 +122,7 @@ class FramePath {
   lcm::LCM& lcm_;
   std::unique_ptr<lcm::LCM> image_lcm_;  // raw frames over UDP: their own socket and lock
   hal::FrameFormat format_;
+  double frame_rate_hz_ = 0;
 
   std::unique_ptr<SpscRing<FrameSlot>> frames_;
   std::unique_ptr<SpscRing<ProfileSlot>> profiles_;

@@ -411,7 +411,7 @@ int run_daemon(int argc, char** argv) {
   const auto format = backends.camera->format();
   log(LogLevel::kInfo,
       "laserlined: running %s camera %dx%d at %.1f Hz, detector %s, laser %s, LCM %s",
-      config.camera_backend.c_str(), format.width, format.height, config.frame_rate_hz,
+      config.camera_backend.c_str(), format.width, format.height, path.frame_rate_hz(),
       config.detector.c_str(), config.laser_backend.c_str(), config.lcm_url.c_str());
   if (takes_commands) {
     log(LogLevel::kInfo, "laserlined: commands on %s, answers on %s%s",

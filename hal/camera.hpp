@@ -105,6 +105,10 @@ class Camera {
   // processed, which makes a replay deterministic. A live camera cannot wait: false.
   virtual bool paced_by_consumer() const { return false; }
 
+  // The rate frames come at when the source sets it itself rather than following
+  // camera.frame_rate_hz (the memory camera's rate_hz); 0: camera.frame_rate_hz is the rate.
+  virtual double own_frame_rate_hz() const { return 0.0; }
+
   // Counters by failure kind; backends without any report zeros.
   virtual CameraHealth health() const { return {}; }
 

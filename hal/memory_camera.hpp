@@ -54,6 +54,7 @@ class MemoryCamera final : public Camera {
                   std::chrono::milliseconds timeout) override;
   void stop() override;
   bool paced_by_consumer() const override { return options_.rate_hz == 0; }
+  double own_frame_rate_hz() const override { return options_.rate_hz; }
   CameraHealth health() const override;
 
   // Frames held after open() (fewer than options.frames when a recording has fewer).

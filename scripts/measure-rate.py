@@ -106,7 +106,8 @@ def status_socket():
 def run_rate(args, rate, status_t):
     """Runs the daemon at `rate` for args.seconds; returns what held."""
     scale = args.width / 1280.0
-    # The nominal rate sizes the daemon's latency windows and its per-frame budget.
+    # The daemon's latency windows and per-frame budget follow memory.rate_hz; at rate 0 (as fast
+    # as taken) camera.frame_rate_hz, its highest.
     nominal = min(rate, 1000) if rate > 0 else 1000
     config = CONFIG.format(nominal=nominal, frames=args.frames, rate=rate, seconds=args.seconds,
                            width=args.width, height=args.height,

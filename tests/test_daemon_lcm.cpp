@@ -448,15 +448,16 @@ TEST_F(DaemonOverLcm, AlternatingLaserSwitchesPerFrameAndSigintStops) {
   EXPECT_FALSE(rx.statuses.back().laser_on);
 }
 
-// The memory camera through the real daemon: 100 frames/s held in memory, four frames looped
-// twenty times; the daemon stops by itself at their end. Counts and content, not speed: every frame
-// is delivered or counted as lost, each profile carries the time its frame was due (10 ms apart),
+// The memory camera through the real daemon: 100 frames/s held in memory (its own rate_hz, not
+// camera.frame_rate_hz: the daemon's start line and budget follow it), four frames looped twenty
+// times; the daemon stops by itself at their end. Counts and content, not speed: every frame is
+// delivered or counted as lost, each profile carries the time its frame was due (10 ms apart),
 // and lit and unlit frames follow the alternating laser.
 TEST_F(DaemonOverLcm, MemoryCameraDeliversItsFramesAtTheSetRateAndEnds) {
   std::string config_text = test_config("mode: alternate");
   config_text.replace(config_text.find("backend: sim"), 12,
-                      "backend: memory\n  memory: {frames: 4, loops: 20}");
-  config_text.replace(config_text.find("frame_rate_hz: 50"), 17, "frame_rate_hz: 100");
+                      "backend: memory\n  memory: {frames: 4, loops: 20, rate_hz: 100}");
+  ASSERT_NE(config_text.find("frame_rate_hz: 50"), std::string::npos);
   const std::string config_path = write_config(config_text);
   lcm::LCM lcm(kUrl);
   ASSERT_TRUE(lcm.good());
@@ -472,6 +473,8 @@ TEST_F(DaemonOverLcm, MemoryCameraDeliversItsFramesAtTheSetRateAndEnds) {
   ASSERT_TRUE(WIFEXITED(status)) << daemon_log();
   EXPECT_EQ(WEXITSTATUS(status), 0) << daemon_log();
   EXPECT_NE(daemon_log().find("stopped (end of recording)"), std::string::npos) << daemon_log();
+  EXPECT_NE(daemon_log().find("memory camera 640x480 at 100.0 Hz"), std::string::npos)
+      << daemon_log();
   ASSERT_FALSE(rx.statuses.empty());
   const laserline::status_t& last = rx.statuses.back();
   EXPECT_EQ(last.camera_backend, "memory");

@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "allocation_counter.hpp"
@@ -266,6 +267,31 @@ TEST_F(MemoryCameraLog, RefusesALiveSourceAndItself) {
   } catch (const hal::ConfigError& e) {
     EXPECT_NE(std::string(e.what()).find("camera.memory.source"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("live"), std::string::npos) << e.what();
+  }
+}
+
+// The frame path's per-frame budget and latency windows follow the rate the memory camera
+// delivers at (rate_hz), not camera.frame_rate_hz; as fast as the frame path takes them (rate_hz
+// 0), camera.frame_rate_hz stays the nominal rate.
+TEST(MemoryCameraFramePath, TakesTheCamerasOwnRateAsTheNominalRate) {
+  for (const auto& [memory, nominal] : {std::pair{"{frames: 2, rate_hz: 400}", 400.0},
+                                        std::pair{"{frames: 2, rate_hz: 0}", 25.0}}) {
+    SCOPED_TRACE(memory);
+    daemon::DaemonConfig config =
+        make_config(std::string("camera:\n  backend: memory\n"
+                                "  frame_rate_hz: 25\n  memory: ") +
+                    memory + "\nlcm: {url: \"memq://\", image_every_n: 0}\n" + kSmallCamera);
+    daemon::Backends backends = daemon::create_backends(config);
+    std::string error;
+    ASSERT_TRUE(backends.laser->open(&error)) << error;
+    ASSERT_TRUE(backends.camera->open(&error)) << error;
+    lcm::LCM lcm(config.lcm_url);
+    ASSERT_TRUE(lcm.good());
+    daemon::FramePath path(config, *backends.camera, *backends.laser, *backends.detector, lcm);
+    ASSERT_TRUE(path.start(&error)) << error;
+    EXPECT_EQ(path.frame_rate_hz(), nominal);
+    path.stop();
+    EXPECT_FALSE(backends.laser->is_on());
   }
 }
 
