@@ -45,6 +45,9 @@ void BackgroundDetector::reset(int width, int height) {
     h.rows.assign(static_cast<std::size_t>(width) * band_rows_, 0);
   incoming_.assign(static_cast<std::size_t>(width) * band_rows_, 0);
   newest_ = -1;
+  width_ratios_ = {};
+  width_ratio_next_ = width_ratio_count_ = 0;
+  motion_width_scale_ = 1.0;
   width_ = width;
   height_ = height;
 }
@@ -56,7 +59,7 @@ BackgroundDetector::Motion BackgroundDetector::motion_across_line(const History&
   auto probe = [&](double u, double v) {
     const auto [hu, hv] = h.to_history.map(u, v);
     (void)hu;
-    const double width = std::max(rows.width_px(v), 1.0);
+    const double width = std::max(rows.width_px(v) * motion_width_scale_, 1.0);
     least.across = std::min(least.across, std::abs(hv - v) / width);
     least.toward_far = std::min(least.toward_far, far * (hv - v) / width);
   };
@@ -100,6 +103,107 @@ void BackgroundDetector::detect(const ImageView& image, const FrameContext& fram
   if (frame.laser_on) select_line(out);
 }
 
+void BackgroundDetector::select_line(Profile& out) {
+  frontend_.select_line(out);
+  if (image_.data != nullptr) measure_line_width(image_);
+}
+
+namespace {
+
+// The line's full width at half its height across column u of `image`, about row v: the peak
+// within `within` rows; the floor on each side where the profile (three columns' mean, for less
+// noise) stops falling (rises again, or off the peak falls less than the noise over `flat_rows`:
+// the surface beside the line, not a texture edge beyond it), the higher of the two (a line
+// beside a dark patch is not made wider by it). NaN where no line stands out or a side does not
+// fall to half within reach.
+double width_across(const ImageView& image, int u, double v, int within, int flat_rows) {
+  constexpr int kReach = 96;      // rows either side
+  constexpr double kRise = 6.0;   // grey levels: less is no line
+  constexpr double kNoise = 1.5;  // grey levels of the mean's noise
+  constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  const int u0 = std::max(u - 1, 0), u1 = std::min(u + 1, image.width - 1);
+  auto at = [&](int r) {
+    if (r < 0 || r >= image.height) return kNaN;
+    int sum = 0;
+    for (int c = u0; c <= u1; ++c)
+      sum += image.at(c, r);
+    return static_cast<double>(sum) / (u1 - u0 + 1);
+  };
+  const int start = static_cast<int>(std::lround(v));
+  int centre = start;
+  double peak = -1;
+  for (int r = start - within; r <= start + within; ++r) {
+    const double value = at(r);
+    if (value > peak) {
+      peak = value;
+      centre = r;
+    }
+  }
+  if (!(peak >= 0)) return kNaN;
+  double floor_level = 0;
+  for (const int side : {-1, 1}) {
+    double lowest = peak;
+    for (int k = 1; k <= kReach; ++k) {
+      const double value = at(centre + side * k);
+      if (!(value <= lowest + kNoise)) break;
+      if (k > flat_rows && lowest < peak - kRise &&
+          !(value < at(centre + side * (k - flat_rows)) - kNoise)) {
+        break;
+      }
+      lowest = std::min(lowest, value);
+    }
+    floor_level = std::max(floor_level, lowest);
+  }
+  if (!(peak - floor_level >= kRise)) return kNaN;
+  const double half = 0.5 * (peak + floor_level);
+  double width = 0;
+  for (const int side : {-1, 1}) {
+    double previous = peak;
+    int k = 1;
+    for (; k <= kReach; ++k) {
+      const double value = at(centre + side * k);
+      if (!(value > half)) break;  // (NaN: off the image)
+      previous = value;
+    }
+    const double value = at(centre + side * k);
+    if (k > kReach || std::isnan(value)) return kNaN;
+    width += k - 1 + (previous - half) / std::max(previous - value, 1e-9);
+  }
+  return width;
+}
+
+}  // namespace
+
+void BackgroundDetector::measure_line_width(const ImageView& image) {
+  // Lines measure 1.1 to 1.5 times the model at full size, up to 3 times where the model is about
+  // a pixel wide (the lens's own blur) or texture crowds them; a Gaussian line's extent, where it
+  // has fallen to a fifth of its height, is 1.5 times its half-maximum width.
+  constexpr double kWideLine = 3.0;
+  constexpr double kExtentPerWidth = 1.5;
+  constexpr std::size_t kEnough = 8;
+  const RowNormalisation& rows = frontend_.rows();
+  std::array<double, Frontend::kProbes> ratios{};
+  std::size_t count = 0;
+  for (const auto& [u, v] : frontend_.probes()) {
+    const double model = std::max(rows.width_px(v), 1.0);
+    const double width = width_across(image, static_cast<int>(u), v,
+                                      std::max(2, static_cast<int>(std::ceil(0.5 * model))),
+                                      std::max(2, static_cast<int>(std::ceil(model))));
+    if (std::isfinite(width)) ratios[count++] = width / model;
+  }
+  if (count < kEnough) return;
+  const auto middle = ratios.begin() + static_cast<std::ptrdiff_t>(count / 2);
+  std::nth_element(ratios.begin(), middle, ratios.begin() + static_cast<std::ptrdiff_t>(count));
+  // The median of the last three frames' (one frame's texture can mislead it).
+  width_ratios_[width_ratio_next_] = *middle;
+  width_ratio_next_ = (width_ratio_next_ + 1) % width_ratios_.size();
+  width_ratio_count_ = std::min(width_ratio_count_ + 1, width_ratios_.size());
+  std::array<double, 3> last = width_ratios_;
+  std::sort(last.begin(), last.begin() + static_cast<std::ptrdiff_t>(width_ratio_count_));
+  const double ratio = last[width_ratio_count_ / 2];
+  motion_width_scale_ = ratio > kWideLine ? kExtentPerWidth * ratio : 1.0;
+}
+
 void BackgroundDetector::collect_candidates(const ImageView& image, const FrameContext& frame,
                                             Profile& out) {
   out.clear();
@@ -126,6 +230,7 @@ void BackgroundDetector::collect_candidates(const ImageView& image, const FrameC
     h.usable = h.usable && last_motion_.valid;
     if (h.usable) h.to_history = h.to_history.after(to_previous);
   }
+  image_ = image;
   if (frame.laser_on) {
     const History* background = choose_background(image);
     if (background != nullptr) {

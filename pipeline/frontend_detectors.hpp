@@ -57,9 +57,9 @@ class BackgroundDetector final : public Detector {
   DetectionRegion region() const override { return frontend_.region(); }
   // detect() in two steps, for a validation in between (BackprojectionDetector): the frame's
   // candidates, all eligible (Frontend::collect_candidates()); then the line among those still
-  // eligible (Frontend::select_line()).
+  // eligible (Frontend::select_line()), with the same frame in hand.
   void collect_candidates(const ImageView& image, const FrameContext& frame, Profile& out);
-  void select_line(Profile& out) { frontend_.select_line(out); }
+  void select_line(Profile& out);
 
   const Frontend& frontend() const { return frontend_; }
   const MotionEstimator& motion() const { return motion_; }
@@ -83,6 +83,12 @@ class BackgroundDetector final : public Detector {
     double across = 0, toward_far = 0;
   };
   Motion motion_across_line(const History& h) const;
+  // The line's width across itself (full width at half maximum) in `image` at the points where it
+  // was just found, against the width the model predicts there: the median, and the median of the
+  // last three frames'. A line blurred or bloomed to more than three times the model must move by
+  // its own extent (1.5 times that width) before an earlier frame's line leaves it alone;
+  // narrower, the model's width is what it moves by (motion_across_line()).
+  void measure_line_width(const ImageView& image);
 
   Frontend frontend_;
   ScannerGeometry geometry_;
@@ -96,7 +102,11 @@ class BackgroundDetector final : public Detector {
   std::vector<std::uint8_t> incoming_;
   PartRunner* runner_ = &one_part();
   int parts_ = 1;
-  int newest_ = -1;                     // index in history_ of the last frame kept
+  int newest_ = -1;  // index in history_ of the last frame kept
+  ImageView image_;  // the frame between collect_candidates() and select_line()
+  std::array<double, 3> width_ratios_{};  // measure_line_width(): the last three frames'
+  std::size_t width_ratio_next_ = 0, width_ratio_count_ = 0;
+  double motion_width_scale_ = 1.0;     // the model's width -> the width the line moves by
   int band_first_ = 0, band_rows_ = 0;  // which rows of a frame are kept
   int width_ = 0, height_ = 0;
 };

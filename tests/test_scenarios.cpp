@@ -3,6 +3,7 @@
 // reach in each, and how they stand against `fir` and `maxvalue`.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <map>
@@ -65,6 +66,7 @@ constexpr Floor kBackground[] = {
     {"fan", 99.5, 99.9},
     {"fan-daylight", 99.5, 99.5},
     {"thin-sheet", 98.0, 99.5},
+    {"bloom", 97.0, 99.5},
 };
 
 TEST(Scenarios, DefaultDetectorReachesItsFloorInEveryScene) {
@@ -102,6 +104,15 @@ TEST(Scenarios, ASheetThinnerThanAPixelIsSearchedAsWideAsTheBlur) {
     EXPECT_LT(without.recall(), 0.9);
     EXPECT_GE(with.recall(), without.recall() + 0.1);
   }
+}
+
+// A line 6.5 times as wide as the model (a soft lens, a saturated core): an earlier frame is
+// subtracted only once the scene moved by the line's own extent. (Moved by the model's width, the
+// earlier line's glow took the near flank off: recall 95.2 %, precision 95.3 %, bias -0.51 px.)
+TEST(Scenarios, ALineFarWiderThanTheModelIsNotSubtractedByItsOwnGlow) {
+  const Score& b = score("bloom", "background");
+  EXPECT_LE(std::abs(b.bias()), 0.05);
+  EXPECT_LE(b.rms(), score("bloom", "fir").rms());
 }
 
 // Scored on another draw of the scenario (texture, relief, particles, noise, motion), as

@@ -283,6 +283,16 @@ std::vector<Scenario> standard_scenarios(int width, int height) {
     s.scene.calibration.laser.sheet_width_m = 0.0004;
     out.push_back(s);
   }
+  {
+    Scenario s = like("clipped");
+    s.name = "bloom";
+    s.description =
+        "as clipped, through a soft lens (a blur of 6 px): the line, a saturated core in a "
+        "glow, is 6.5 times as wide as the sheet predicts";
+    s.scene.seed = 61;
+    s.scene.blur_px = 6.0;
+    out.push_back(s);
+  }
   return out;
 }
 
