@@ -243,6 +243,13 @@ bool Frontend::in_clipped_core(int u, int v) const {
   return true;
 }
 
+bool Frontend::beside_clipped_run(int u, int v) const {
+  const RefineStart start = refine_start(static_cast<float>(v));
+  for (int t = start.lo; t <= start.hi; ++t)
+    if (current_.at(u, t) >= options_.saturation_level) return true;
+  return false;
+}
+
 float Frontend::refine_row(int u, float v_guess) const {
   const int last = height_ - 1;
   const auto [spacing, edge, centre, lo, hi] = refine_start(v_guess);

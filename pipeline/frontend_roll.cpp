@@ -85,7 +85,6 @@ struct Frontend::RollPass {
   int start = 0;           // the first band-pass row of the pass
   int edge = 0;            // rows nearer the ends are outside the depth range: no candidates there
   bool near_down = false;  // glow below the line (see water_glows())
-  int saturation = 0;
   std::size_t image_stride = 0;
   float threshold = 0;      // SNR, as an amplitude ratio
   Lane lane_threshold = 0;  // in band-pass units: at or above it where the band-pass is
@@ -140,7 +139,6 @@ LASERLINE_ROW_KERNEL Frontend::RollPass<Lane> Frontend::roll_pass() const {
   pass.look = std::max({noise_half_, reach_, ridge_});
   pass.edge = std::max({margin_, reach_, ridge_});
   pass.near_down = rows_.near_side() > 0;
-  pass.saturation = options_.saturation_level;
   pass.image_stride = static_cast<std::size_t>(stride_);
   pass.threshold = std::pow(10.0f, static_cast<float>(options_.snr_threshold_db) / 20.0f);
   // (Beyond the lanes' range, as a high threshold in 16-bit lanes can be: never reached.)
@@ -367,10 +365,9 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
     const int needed =
         glowing_ ? (pass.near_down ? lowest_up : lowest_down) : std::max(lowest_up, lowest_down);
     // (A clipped core much wider than the model is flat: the band-pass sees its two flanks as
-    // edges. Its run is found and centred by the refinement.)
-    if (8 * needed > -static_cast<int>(lane) && current_.at(u, source_row) < pass.saturation) {
-      continue;
-    }
+    // edges, its peak on the run or just beside it. The run is found and centred by the
+    // refinement, whose window reaches it.)
+    if (8 * needed > -static_cast<int>(lane) && !beside_clipped_run(u, source_row)) continue;
     const int n = column_count_[u];
     if (n < pass.per_column) column_count_[u] = static_cast<std::uint8_t>(n + 1);
     // Sub-row position of the band-pass peak, mapped back to an original row: the guess the

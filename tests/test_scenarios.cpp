@@ -66,7 +66,7 @@ constexpr Floor kBackground[] = {
     {"fan", 99.5, 99.9},
     {"fan-daylight", 99.5, 99.5},
     {"thin-sheet", 98.0, 99.5},
-    {"bloom", 97.0, 99.5},
+    {"bloom", 99.0, 99.5},
 };
 
 TEST(Scenarios, DefaultDetectorReachesItsFloorInEveryScene) {
@@ -107,12 +107,15 @@ TEST(Scenarios, ASheetThinnerThanAPixelIsSearchedAsWideAsTheBlur) {
 }
 
 // A line 6.5 times as wide as the model (a soft lens, a saturated core): an earlier frame is
-// subtracted only once the scene moved by the line's own extent. (Moved by the model's width, the
-// earlier line's glow took the near flank off: recall 95.2 %, precision 95.3 %, bias -0.51 px.)
+// subtracted only once the scene moved by the line's own extent (moved by the model's width, the
+// earlier line's glow took the near flank off: recall 95.2 %, precision 95.3 %, bias -0.51 px),
+// and the band-pass peaks on the flanks of its clipped core, on the run or beside it, are taken
+// without a ridge (asked for one, fir lost 2.3 % of the line).
 TEST(Scenarios, ALineFarWiderThanTheModelIsNotSubtractedByItsOwnGlow) {
   const Score& b = score("bloom", "background");
   EXPECT_LE(std::abs(b.bias()), 0.05);
   EXPECT_LE(b.rms(), score("bloom", "fir").rms());
+  EXPECT_GE(score("bloom", "fir").recall(), 0.995);
 }
 
 // Scored on another draw of the scenario (texture, relief, particles, noise, motion), as
