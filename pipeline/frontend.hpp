@@ -282,9 +282,9 @@ class Frontend {
   // along column u no longer than kClippedCoreWidths laser widths. A longer run is a bright patch
   // clipped by the exposure (texture, a lamp's reflection): its ends are edges, not a line.
   bool in_clipped_core(int u, int v) const;
-  // Whether a pixel at or above the saturation level lies along column u within the window the
-  // refinement searches about row v (refine_start()): a peak there is centred on its clipped run.
-  bool beside_clipped_run(int u, int v) const;
+  // Whether (u, v) or a pixel beside it along column u is at or above the saturation level: a
+  // peak there is centred on its clipped run by the refinement (whose window reaches it).
+  bool touches_clipped_run(int u, int v) const;
   static constexpr double kClippedCoreWidths = 2.5;
   static constexpr float kClippedCoreRank = 1e6f;  // above any band-pass amplitude
   // refine_row() of the first `count` points waiting for it (refine_columns_, ...): into the

@@ -243,10 +243,10 @@ bool Frontend::in_clipped_core(int u, int v) const {
   return true;
 }
 
-bool Frontend::beside_clipped_run(int u, int v) const {
-  const RefineStart start = refine_start(static_cast<float>(v));
-  for (int t = start.lo; t <= start.hi; ++t)
-    if (current_.at(u, t) >= options_.saturation_level) return true;
+bool Frontend::touches_clipped_run(int u, int v) const {
+  const int saturation = options_.saturation_level;
+  for (int t = std::max(v - 1, 0); t <= std::min(v + 1, height_ - 1); ++t)
+    if (current_.at(u, t) >= saturation) return true;
   return false;
 }
 

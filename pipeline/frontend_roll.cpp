@@ -365,9 +365,9 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
     const int needed =
         glowing_ ? (pass.near_down ? lowest_up : lowest_down) : std::max(lowest_up, lowest_down);
     // (A clipped core much wider than the model is flat: the band-pass sees its two flanks as
-    // edges, its peak on the run or just beside it. The run is found and centred by the
-    // refinement, whose window reaches it.)
-    if (8 * needed > -static_cast<int>(lane) && !beside_clipped_run(u, source_row)) continue;
+    // edges, its peak on the run or a pixel beside it. The run is found and centred by the
+    // refinement.)
+    if (8 * needed > -static_cast<int>(lane) && !touches_clipped_run(u, source_row)) continue;
     const int n = column_count_[u];
     if (n < pass.per_column) column_count_[u] = static_cast<std::uint8_t>(n + 1);
     // Sub-row position of the band-pass peak, mapped back to an original row: the guess the
