@@ -85,9 +85,11 @@ void LineSelector::add_path_end(const PathEnd& end, float running_best, int& end
 void LineSelector::drop_faint_pieces(std::span<const LineCandidate> candidates, float threshold_db,
                                      std::span<int> chosen) const {
   // Two walks over the chosen points, line by line: the pieces' evidence and mean amplitude,
-  // then the drop. A piece runs from a point that starts one, or that a jump costing half a restart
+  // then the drop. A piece runs from a point that starts one, that a jump costing half a restart
   // or more reaches (a continuation across a depth jump, or onto texture beside the line's end),
-  // to the point before the next.
+  // or that resumes after skipped lines more than the free jump away (the line resumes beyond a
+  // dark patch where it was; texture beyond its ends hops through gaps), to the point before the
+  // next.
   const int k = per_line_;
   const auto cap = static_cast<float>(options_.amplitude_cap_db);
   const auto free = static_cast<float>(options_.jump_free_px);
@@ -101,10 +103,12 @@ void LineSelector::drop_faint_pieces(std::span<const LineCandidate> candidates, 
       const int c = line < lines_ ? chosen[static_cast<std::size_t>(line)] : -1;
       const auto at = static_cast<std::size_t>(line * k + c);
       if (line == lines_ ||
-          (c >= 0 &&
-           (starts_piece_[at] || jump_cost * (std::abs(candidates[at].position - last_position) -
-                                              free * static_cast<float>(line - last_line)) >=
-                                     0.5f * restart))) {
+          (c >= 0 && (starts_piece_[at] ||
+                      (count > 0 && line - last_line > 1 &&
+                       std::abs(candidates[at].position - last_position) > free) ||
+                      jump_cost * (std::abs(candidates[at].position - last_position) -
+                                   free * static_cast<float>(line - last_line)) >=
+                          0.5f * restart))) {
         if (count > 0) on_piece(first, line, evidence, amplitude / static_cast<float>(count));
         first = line;
         count = 0;
