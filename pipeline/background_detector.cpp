@@ -198,9 +198,11 @@ void BackgroundDetector::measure_line_width(const ImageView& image) {
   width_ratios_[width_ratio_next_] = *middle;
   width_ratio_next_ = (width_ratio_next_ + 1) % width_ratios_.size();
   width_ratio_count_ = std::min(width_ratio_count_ + 1, width_ratios_.size());
-  std::array<double, 3> last = width_ratios_;
-  std::sort(last.begin(), last.begin() + static_cast<std::ptrdiff_t>(width_ratio_count_));
-  const double ratio = last[width_ratio_count_ / 2];
+  const auto& r = width_ratios_;
+  const double ratio =
+      width_ratio_count_ < 3
+          ? std::max(r[0], r[1])  // (the one measured, or the larger of two: unset ones are 0)
+          : std::max(std::min(r[0], r[1]), std::min(std::max(r[0], r[1]), r[2]));
   motion_width_scale_ = ratio > kWideLine ? kExtentPerWidth * ratio : 1.0;
 }
 
