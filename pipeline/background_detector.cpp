@@ -100,12 +100,12 @@ const BackgroundDetector::History* BackgroundDetector::choose_background(
 
 void BackgroundDetector::detect(const ImageView& image, const FrameContext& frame, Profile& out) {
   collect_candidates(image, frame, out);
-  if (frame.laser_on) select_line(out);
+  if (frame.laser_on) select_line(image, out);
 }
 
-void BackgroundDetector::select_line(Profile& out) {
+void BackgroundDetector::select_line(const ImageView& image, Profile& out) {
   frontend_.select_line(out);
-  if (image_.data != nullptr) measure_line_width(image_);
+  measure_line_width(image);
 }
 
 namespace {
@@ -232,7 +232,6 @@ void BackgroundDetector::collect_candidates(const ImageView& image, const FrameC
     h.usable = h.usable && last_motion_.valid;
     if (h.usable) h.to_history = h.to_history.after(to_previous);
   }
-  image_ = image;
   if (frame.laser_on) {
     const History* background = choose_background(image);
     if (background != nullptr) {

@@ -27,7 +27,7 @@ void BackprojectionDetector::detect(const ImageView& image, const FrameContext& 
   motion.translation = estimate.camera.translation;
   motion.relative_scale = estimate.camera.relative_scale;
   validator_.validate(out, motion, image, estimate.valid ? &estimate.previous_to_current : nullptr);
-  if (frame.laser_on) background_.select_line(out);
+  if (frame.laser_on) background_.select_line(image, out);
 }
 
 }  // namespace laserline::pipeline

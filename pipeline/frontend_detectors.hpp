@@ -57,9 +57,9 @@ class BackgroundDetector final : public Detector {
   DetectionRegion region() const override { return frontend_.region(); }
   // detect() in two steps, for a validation in between (BackprojectionDetector): the frame's
   // candidates, all eligible (Frontend::collect_candidates()); then the line among those still
-  // eligible (Frontend::select_line()), with the same frame in hand.
+  // eligible (Frontend::select_line()), in the same frame (where the line's width is measured).
   void collect_candidates(const ImageView& image, const FrameContext& frame, Profile& out);
-  void select_line(Profile& out);
+  void select_line(const ImageView& image, Profile& out);
 
   const Frontend& frontend() const { return frontend_; }
   const MotionEstimator& motion() const { return motion_; }
@@ -102,8 +102,7 @@ class BackgroundDetector final : public Detector {
   std::vector<std::uint8_t> incoming_;
   PartRunner* runner_ = &one_part();
   int parts_ = 1;
-  int newest_ = -1;  // index in history_ of the last frame kept
-  ImageView image_;  // the frame between collect_candidates() and select_line()
+  int newest_ = -1;                       // index in history_ of the last frame kept
   std::array<double, 3> width_ratios_{};  // measure_line_width(): the last three frames'
   std::size_t width_ratio_next_ = 0, width_ratio_count_ = 0;
   double motion_width_scale_ = 1.0;     // the model's width -> the width the line moves by
