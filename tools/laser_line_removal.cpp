@@ -274,20 +274,27 @@ double full_width_at_half_maximum(const cv::Mat& image, cv::Point2d p, cv::Point
   }
   if (!(peak >= 0) || peak >= saturation) return std::numeric_limits<double>::quiet_NaN();
   // Each side's floor: where the profile stops falling (beyond lies other light).
-  double floor_level = peak;
-  for (const int sign : {-1, 1}) {
+  double floor_level[2] = {peak, peak};
+  for (const int side : {0, 1}) {
+    const int sign = side == 0 ? -1 : 1;
     double lowest = peak;
     for (int k = 1; k <= kReach; ++k) {
       const double v = at(centre + sign * k);
       if (!(v <= lowest + 0.5)) break;  // rising again, or off the image
       lowest = std::min(lowest, v);
     }
-    floor_level = std::min(floor_level, lowest);
+    floor_level[side] = lowest;
   }
-  if (!(peak - floor_level >= kMinRise)) return std::numeric_limits<double>::quiet_NaN();
-  const double half = 0.5 * (peak + floor_level);
+  if (!(peak - std::max(floor_level[0], floor_level[1]) >= kMinRise)) {
+    return std::numeric_limits<double>::quiet_NaN();
+  }
+  // Each side half way down from the peak to its own floor: a line at the end of a glow (the
+  // water in front of the surface lit by the sheet) or beside a brighter surface stands higher on
+  // that side, and half way down to the other side's floor would lie out in the glow.
   double width = 0;
-  for (const int sign : {-1, 1}) {
+  for (const int side : {0, 1}) {
+    const int sign = side == 0 ? -1 : 1;
+    const double half = 0.5 * (peak + floor_level[side]);
     double previous = peak, crossing = std::numeric_limits<double>::quiet_NaN();
     for (int k = 1; k <= kReach; ++k) {
       const double v = at(centre + sign * k);

@@ -34,10 +34,11 @@ std::vector<std::size_t> straight_line_inliers(const std::vector<cv::Point2d>& p
                                                double tolerance);
 
 // The line's full width at half maximum across it at `p`, in pixels, along the unit `normal`:
-// its peak within `peak_within_px` of `p`, its floor the lower of the two sides where the profile
-// stops falling. NaN where the core is clipped (at or above `saturation`: the width at half of a
-// clipped height is too wide), or where the profile does not fall to half on both sides within
-// kMaxHalfWidthPx.
+// its peak within `peak_within_px` of `p`, each side's floor where the profile stops falling, and
+// each side measured half way down to its own floor (a glow in front of the line or a brighter
+// surface beside it raises one side's). NaN where the core is clipped (at or above `saturation`:
+// the width at half of a clipped height is too wide), or where the profile does not fall to half on
+// both sides within kMaxHalfWidthPx.
 double full_width_at_half_maximum(const cv::Mat& image, cv::Point2d p, cv::Point2d normal,
                                   double saturation, double peak_within_px = 1.0);
 
