@@ -36,7 +36,7 @@ struct FrontendOptions {
   int noise_rows = 31;
   int noise_columns = 9;
   double snr_threshold_db = 6.0;  // III-E: paper 3 - 6 dB
-  int max_candidates_per_column = 8;
+  int max_candidates_per_column = 16;
   // A run at or above this is a clipped core: its centre is the peak. Below 255: a camera's
   // processing (white balance after the sensor clipped, lossy compression) leaves clipped pixels a
   // few levels under it, and a single such pixel would break the run.

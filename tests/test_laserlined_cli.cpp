@@ -318,7 +318,7 @@ TEST_F(CheckConfigHostile, DerivedSizesAreCheckedAsTheStartDoes) {
   expect_refused(file("huge.yaml",
                       "calibration: {camera: {width: 16384, height: 16384, fx: "
                       "20000, fy: 20000}}\npipeline: {frame_slots: 1024}\n"),
-                 "huge.yaml: pipeline.frame_memory_limit_mb: frames of 16384x16384 need 276781.1 "
+                 "huge.yaml: pipeline.frame_memory_limit_mb: frames of 16384x16384 need 276860.8 "
                  "MB (pipeline.frame_slots 1024, image_slots 2, profile_slots 16 and the "
                  "raw-frame buffers), more than the limit of 1024 MB: fewer slots, a smaller "
                  "camera or a higher limit");

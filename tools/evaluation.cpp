@@ -293,6 +293,33 @@ std::vector<Scenario> standard_scenarios(int width, int height) {
     s.scene.blur_px = 6.0;
     out.push_back(s);
   }
+  {
+    Scenario s = like("pier");
+    s.name = "pier-sunlit";
+    s.description =
+        "as pier, in bright sun on fine growth (features from 3 mm): the line at a third of the "
+        "light, more texture ridges along each column brighter than the line than along pier";
+    s.scene.seed = 67;
+    s.scene.ambient = 130;
+    s.scene.texture_contrast = 0.8;
+    s.scene.texture_scale_m = 0.003;
+    s.scene.laser_peak = 50;
+    s.scene.marks_per_m2 = 10;
+    s.scene.marks_albedo = 1.8;
+    out.push_back(s);
+  }
+  {
+    Scenario s = like("caustics");
+    s.name = "caustics-noon";
+    s.description =
+        "as caustics, at noon in shallower water: a denser network of caustics five times the "
+        "ambient light, drifting across a fainter line";
+    s.scene.seed = 71;
+    s.scene.caustic_peak = 5.0;
+    s.scene.caustic_scale_m = 0.12;
+    s.scene.laser_peak = 80;
+    out.push_back(s);
+  }
   return out;
 }
 
