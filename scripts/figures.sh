@@ -74,6 +74,13 @@ counted false are the line itself 2 to 5 px off, along such rims; a stretch of s
 the line is faint rarely draws the line selection away (it pays a capped jump going and coming
 back, and only the line's own history earns the previous frame's full bonus).
 
+\`pier-sunlit\` and \`caustics-noon\` fall short too. Among fine growth in sunlight, where the
+line is a third of the light, the growth's own ridges crossing the line leave it no ridge in many
+columns; caustics five times the ambient light cross the line every few columns and, where a
+caustic runs along the line for a while, it is chosen. There \`backprojection\` also loses about 4
+points of recall to \`background\`: the line's segments join caustics or growth where they cross,
+and such segments are not followed through three frames.
+
 ## Every figure
 
 \`\`\`
