@@ -38,6 +38,8 @@ void LineSelector::reset(int lines, int per_line) {
   previous_.assign(candidates, kNaN);
   previous_count_.assign(static_cast<std::size_t>(lines), 0);
   previous_chosen_.assign(static_cast<std::size_t>(lines), kNaN);
+  previous_chosen_db_ = kNaN;
+  line_brightest_.assign(static_cast<std::size_t>(lines), 0.0f);
   const std::size_t lanes = whole_lanes(per_line);
   line_position_.assign(lanes, 0.0f);
   line_best_.assign(lanes, 0.0f);
@@ -49,6 +51,30 @@ void LineSelector::reset(int lines, int per_line) {
 void LineSelector::forget() {
   std::fill(previous_count_.begin(), previous_count_.end(), 0);
   std::fill(previous_chosen_.begin(), previous_chosen_.end(), kNaN);
+  previous_chosen_db_ = kNaN;
+}
+
+float LineSelector::median_of(int count) {
+  if (count == 0) return kNaN;
+  const auto first = line_brightest_.begin();
+  const auto middle = first + count / 2;
+  std::nth_element(first, middle, first + count);
+  return *middle;
+}
+
+float LineSelector::median_brightest(std::span<const LineCandidate> candidates,
+                                     std::span<const std::uint8_t> counts) {
+  int count = 0;
+  for (int line = 0; line < lines_; ++line) {
+    const int n = counts[static_cast<std::size_t>(line)];
+    if (n == 0) continue;
+    const LineCandidate* c = candidates.data() + static_cast<std::ptrdiff_t>(line) * per_line_;
+    float brightest = c[0].amplitude_db;
+    for (int i = 1; i < n; ++i)
+      brightest = std::max(brightest, c[i].amplitude_db);
+    line_brightest_[static_cast<std::size_t>(count++)] = brightest;
+  }
+  return median_of(count);
 }
 
 void LineSelector::add_path_end(const PathEnd& end, float running_best, int& end_count) {
@@ -165,6 +191,14 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
     return;
   }
 
+  // The previous frame's choice earns its bonus only where it may have been the line: where this
+  // frame's candidates are far brighter, typically (median over the lines) faint_piece_db above
+  // what it chose, the previous frame had no line to choose (the laser off, the line out of
+  // view), and the still texture it chose would earn the bonus over the line (whose amplitude
+  // counts only up to the cap).
+  const float brightest_db = median_brightest(candidates, counts);
+  const bool use_previous = !(o.faint_piece_db > 0 && brightest_db - previous_chosen_db_ >
+                                                          static_cast<float>(o.faint_piece_db));
   float running_best = 0.0f;  // the best total of any path so far (the empty path: 0)
   std::int32_t running_at = -1;
   int end_count = 0;  // ends_: where a new piece may start from
@@ -199,7 +233,10 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
         }
         if (previous[j] > c.position) break;  // and farther above from here on
       }
-      if (std::abs(c.position - previous_chosen_[static_cast<std::size_t>(line)]) <= tolerance) {
+      if (!use_previous) {
+        // (no bonus this frame)
+      } else if (std::abs(c.position - previous_chosen_[static_cast<std::size_t>(line)]) <=
+                 tolerance) {
         unary[i] += bonus;
       } else if (persistent) {
         unary[i] += other_bonus;
@@ -280,6 +317,15 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
   if (o.faint_piece_db > 0) drop_faint_pieces(candidates, threshold_db, chosen);
   // This frame's candidates, and its choice: the laser stays where it was, texture moves with
   // the scene (or stays too, when the camera holds still).
+  int chosen_count = 0;
+  for (int line = 0; line < lines_; ++line) {
+    const int c = chosen[static_cast<std::size_t>(line)];
+    if (c >= 0) {
+      line_brightest_[static_cast<std::size_t>(chosen_count++)] =
+          candidates[static_cast<std::size_t>(line * k + c)].amplitude_db;
+    }
+  }
+  previous_chosen_db_ = median_of(chosen_count);
   for (int line = 0; line < lines_; ++line) {
     const int c = chosen[static_cast<std::size_t>(line)];
     previous_chosen_[static_cast<std::size_t>(line)] =

@@ -49,7 +49,9 @@ struct LineSelectionOptions {
   int max_gap = 8;  // lines a piece of curve can skip (a dark patch, an occlusion)
   // The previous frame's chosen point earns the bonus in full; its other candidates a half: when
   // the camera holds still, texture stays as well, and only the line's own history tells them
-  // apart (a new piece of line, not chosen before, still gains from staying).
+  // apart (a new piece of line, not chosen before, still gains from staying). No bonus where the
+  // frame's candidates are (median of each line's brightest) faint_piece_db brighter than the
+  // previous frame's choice (median): that frame had no line to choose.
   double previous_bonus_db = 6.0;
   double previous_other_bonus_db = 3.0;
   double previous_tolerance_px = 2.5;
@@ -116,6 +118,13 @@ class LineSelector {
   std::vector<float> previous_;             // per line: the previous frame's candidates' positions
   std::vector<std::uint8_t> previous_count_;
   std::vector<float> previous_chosen_;  // per line: the previous frame's choice, NaN none
+  float previous_chosen_db_ = 0;        // the median amplitude of its points, NaN none
+  std::vector<float> line_brightest_;   // scratch: a value per line
+  // The median over the lines with candidates of their brightest candidate's amplitude; the
+  // median of the first `count` values of line_brightest_ (NaN for none; reorders them).
+  float median_brightest(std::span<const LineCandidate> candidates,
+                         std::span<const std::uint8_t> counts);
+  float median_of(int count);
   // The line in hand, per candidate (in whole groups of lanes): its position, its best total
   // before its own amplitude, from where, its amplitude's part.
   std::vector<float> line_position_, line_best_, line_unary_, line_start_;

@@ -85,6 +85,22 @@ class ReferenceSelector {
     const auto jump_cap = static_cast<float>(o_.jump_cost_cap_db);
     std::fill(chosen.begin(), chosen.end(), -1);
     auto at = [](int i) { return static_cast<std::size_t>(i); };
+    // No bonus where this frame's lines' brightest candidates are (median) faint_piece_db above
+    // the previous frame's choice (median): it had no line to choose.
+    std::vector<float> brightest, chosen_db;
+    for (int line = 0; line < lines_; ++line) {
+      float most = -std::numeric_limits<float>::infinity();
+      for (int i = 0; i < counts[at(line)]; ++i)
+        most = std::max(most, candidates[at(line * k + i)].amplitude_db);
+      if (counts[at(line)] > 0) brightest.push_back(most);
+    }
+    auto median = [](std::vector<float> v) {
+      if (v.empty()) return std::numeric_limits<float>::quiet_NaN();
+      std::sort(v.begin(), v.end());
+      return v[v.size() / 2];
+    };
+    const bool use_previous = !(o_.faint_piece_db > 0 && median(brightest) - previous_chosen_db_ >
+                                                             static_cast<float>(o_.faint_piece_db));
     float running_best = 0.0f;
     int running_at = -1;
     ends_.clear();
@@ -93,7 +109,9 @@ class ReferenceSelector {
       for (int i = 0; i < n; ++i) {
         const LineCandidate& c = candidates[at(line * k + i)];
         float unary = std::min(c.amplitude_db - threshold_db, cap);
-        if (std::abs(c.position - previous_chosen_[at(line)]) <= tolerance) {
+        if (!use_previous) {
+          // no bonus this frame
+        } else if (std::abs(c.position - previous_chosen_[at(line)]) <= tolerance) {
           unary += bonus;
         } else {
           for (int j = 0; j < previous_count_[at(line)]; ++j) {
@@ -231,6 +249,10 @@ class ReferenceSelector {
         }
       }
     }
+    for (int line = 0; line < lines_; ++line)
+      if (chosen[at(line)] >= 0)
+        chosen_db.push_back(candidates[at(line * k + chosen[at(line)])].amplitude_db);
+    previous_chosen_db_ = median(chosen_db);
     for (int line = 0; line < lines_; ++line) {
       const int c = chosen[at(line)];
       previous_chosen_[at(line)] =
@@ -251,6 +273,7 @@ class ReferenceSelector {
   std::vector<float> previous_;
   std::vector<std::uint8_t> previous_count_;
   std::vector<float> previous_chosen_;
+  float previous_chosen_db_ = std::numeric_limits<float>::quiet_NaN();
   struct End {
     float score, position;
     int at;
@@ -339,6 +362,30 @@ TEST(LineSelection, AStillTextureEdgeBesideAFaintStretchOfTheLineIsNotChosen) {
       EXPECT_EQ(chosen[30], 400.0f) << "frame " << frame;
     }
   }
+}
+
+// The line's first frame after a frame without it (the laser off, or the line out of view) on a
+// still scene: the texture chosen there stays where it was, but this frame's candidates are far
+// brighter than what the previous frame chose, so the previous frame earns no bonus (which, with
+// the line's amplitude counted only up to the cap, would let the texture outweigh the line).
+TEST(LineSelection, TheLineAfterAFrameWithoutItIsChosenOverTheStillTexture) {
+  Lines texture;  // a 5 dB texture curve over every line
+  texture.piece(0, 29, 150.0f, 5.0f);
+  texture.piece(30, kLines - 1, 151.0f, 5.0f);
+  Lines with_line = texture;
+  with_line.piece(0, kLines - 1, 100.0f, 30.0f);  // the line, 25 dB above the texture
+  LineSelector selector;
+  EXPECT_EQ(texture.select(selector)[0], 150.0f);
+  const std::vector<float> chosen = with_line.select(selector, true);
+  for (int line = 0; line < kLines; ++line)
+    EXPECT_EQ(chosen[line], 100.0f) << "line " << line;
+
+  // As bright as the line, the texture keeps the bonus: the previous frame's choice stays.
+  Lines as_bright = texture;
+  as_bright.piece(0, kLines - 1, 100.0f, 10.0f);
+  LineSelector other;
+  texture.select(other);
+  EXPECT_EQ(as_bright.select(other, true)[0], 150.0f);
 }
 
 // A depth jump: the line goes on 300 px away. A side of the jump is kept when its points earn
