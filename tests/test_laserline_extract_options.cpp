@@ -421,6 +421,45 @@ TEST_F(LaserlineExtract, LaserPatternOffFramesAreBackgroundsNotLaserFrames) {
   }
 }
 
+// On/off alternation not told: the first frames show the line in every other frame only, so the
+// laser is taken to alternate, and it is said; a sequence with the line in every frame is not,
+// and --laser-pattern 1 takes every frame as laser-on whatever the frames show.
+TEST_F(LaserlineExtract, AlternationFoundInTheFramesWhenNotTold) {
+  options_.texture_contrast = 0.5;
+  hal::SimScene scene(options_);
+  fs::create_directories(dir_ / "alt");
+  fs::create_directories(dir_ / "on");
+  for (int k = 0; k < 16; ++k) {
+    const std::string name = "f" + std::string(k < 10 ? "0" : "") + std::to_string(k) + ".png";
+    ASSERT_TRUE(cv::imwrite(path("alt/" + name), render(scene, k, k % 2 == 1)));  // off on off ..
+    ASSERT_TRUE(cv::imwrite(path("on/" + name), render(scene, k, true)));
+  }
+  RunResult r = extract(path("alt"), "background");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("the laser alternates, extracting with --laser-pattern 01 "
+                       "(--laser-pattern 1 takes every frame as laser-on)\n"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("8 of the processed frames were exposed with the laser off (8 from "
+                       "--laser-pattern 01)"),
+            std::string::npos)
+      << r.out;
+  Csv csv = read_csv(path("points.csv"));
+  for (const auto& [frame, points] : csv.frames)
+    EXPECT_EQ(frame % 2, 1) << "a point in laser-off frame " << frame;
+  expect_frames_match(csv, {{3, 3}, {9, 9}, {15, 15}}, scene);
+
+  r = extract(path("on"), "background");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_EQ(r.out.find("alternates"), std::string::npos) << r.out;
+  EXPECT_EQ(read_csv(path("points.csv")).frames.size(), 16u);
+
+  r = extract("--laser-pattern 1 " + path("alt"), "fir");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_EQ(r.out.find("alternates"), std::string::npos) << r.out;
+  EXPECT_TRUE(read_csv(path("points.csv")).frames.count(0)) << "told: every frame laser-on";
+}
+
 // A calibration that states the sheet several times too wide or too narrow (a guess, on someone
 // else's images): the filters are sized for the width measured in the first frames, and it is
 // said; --keep-sheet-width keeps the calibration's. (Ambient light that leaves the line's core

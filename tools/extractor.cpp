@@ -77,6 +77,14 @@ void Extractor::frame(const cv::Mat& raw, const std::string& where,
     if (laser_on) width_meter_->add(mono_, profile_);
     return;
   }
+  if (evidence_ != nullptr) {
+    double evidence = 0;
+    for (const laserline::pipeline::ProfilePoint& p : profile_.points())
+      if (p.valid)
+        evidence += std::max(0.0, static_cast<double>(p.snr_db) - evidence_threshold_db_);
+    evidence_->push_back({sequence_, position_ - 1, evidence});
+    return;
+  }
   if (profile_.overflowed()) ++overflowed_frames_;
   select_reported_points(laser_on);
   if (csv_ != nullptr) write_csv_points(index, where);

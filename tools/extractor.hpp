@@ -120,8 +120,26 @@ class Extractor {
     frame_limit_ = frames;
     progress_.silence();
   }
+  // How much laser line a frame shows: the sum over its valid points of their SNR above the
+  // detector's threshold (dB), and where it stands: its sequence (counted from 0) and its place
+  // in it (the laser pattern's place).
+  struct FrameEvidence {
+    std::int64_t sequence = 0, position = 0;
+    double evidence = 0;
+  };
+  // Instead of writing anything, records the evidence of the first `frames` frames, each taken as
+  // laser-on, into `out`, silently.
+  void measure_evidence_only(std::vector<FrameEvidence>& out, std::int64_t frames,
+                             double threshold_db) {
+    evidence_ = &out;
+    evidence_threshold_db_ = threshold_db;
+    frame_limit_ = frames;
+    progress_.silence();
+  }
   // No more frames wanted (the measuring pass has its frames).
-  bool done() const { return width_meter_ != nullptr && next_frame_ >= frame_limit_; }
+  bool done() const {
+    return (width_meter_ != nullptr || evidence_ != nullptr) && next_frame_ >= frame_limit_;
+  }
 
   // The input that messages are about from now on.
   void start_input(const std::string& input) {
@@ -137,6 +155,7 @@ class Extractor {
   void start_sequence() {
     detector_->reset(width_, height_);
     position_ = 0;
+    ++sequence_;
   }
 
   // One frame, as read (8 or 16 bit; 1 to 4 channels). `where` names it in messages and in the
@@ -202,7 +221,10 @@ class Extractor {
   std::int64_t laser_off_recorded_ = 0, laser_off_by_pattern_ = 0;
   std::int64_t points_written_ = 0, valid_written_ = 0, accepted_ = 0;
   std::int64_t cloud_accepted_ = 0, cloud_triangulated_ = 0, overflowed_frames_ = 0;
+  std::int64_t sequence_ = -1;  // sequences started
   laserline::tools::LineWidthMeter* width_meter_ = nullptr;
+  std::vector<FrameEvidence>* evidence_ = nullptr;
+  double evidence_threshold_db_ = 0;
   std::int64_t frame_limit_ = 0;
   static constexpr int kShownPerInput = 10;
   std::string input_;

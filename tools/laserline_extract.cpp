@@ -83,7 +83,10 @@ constexpr const char* kUsage =
     "                     the start of each sequence (folder, video, log, run of image files):\n"
     "                     10 for on/off alternation. Laser-off frames still reach the detector\n"
     "                     (background keeps them as the next frame's background) but give no\n"
-    "                     points. LCM logs' own laser states (their profiles) take precedence\n"
+    "                     points. LCM logs' own laser states (their profiles) take precedence.\n"
+    "                     Not given (fir, background, backprojection): where the line comes\n"
+    "                     and goes at every frame in the first 16 frames of the images or\n"
+    "                     video, 10 or 01 (and it is said)\n"
     "  --overlay-dir DIR  write DIR/frame_NNNNNN.png per frame: the grey image the detector saw\n"
     "                     with its points (accepted green, rejected red)\n"
     "  --all-candidates   also write rejected candidates (valid = 0)\n"
@@ -390,6 +393,79 @@ void fit_sheet_width(const Options& options, const laserline::hal::Calibration& 
                used / stated, stated, options.calib.c_str(), measured, used, stated);
 }
 
+// A sequence recorded with the laser switched on and off every other frame (the classic on/off
+// method), given without --laser-pattern: every laser-off frame would be searched as a laser-on
+// one, and the texture it shows taken for the line. The first frames of the first sequence of
+// images or video are searched with `fir`, each frame as laser-on; where the line's evidence
+// (the SNR above the threshold summed over its points) goes up and down at every frame (all but
+// one) and is three times as high in one half as in the other, the laser is taken to alternate,
+// and it is said. A sequence whose line merely varies does not go up and down a dozen times in a
+// row.
+bool detect_laser_alternation(Options& options, const laserline::hal::Calibration& calibration,
+                              const Region& region, const std::vector<InputKind>& kinds,
+                              const CalibrationInUse& in_use,
+                              const laserline::pipeline::DetectorOptions& detector_options) {
+  constexpr std::int64_t kFrames = 16;
+  constexpr std::size_t kFewest = 12;
+  constexpr double kRatio = 3.0;
+  // (Searched with fir, as the detectors that search the depth range are; maxvalue's frames are
+  // not probed.)
+  if (!options.laser_on_pattern.empty() ||
+      !laserline::daemon::searches_depth_range(options.detector)) {
+    return false;
+  }
+  std::vector<std::string> probed;
+  std::vector<InputKind> probed_kinds;
+  for (std::size_t i = 0; i < options.inputs.size(); ++i) {
+    if (kinds[i] == InputKind::kLog) continue;  // a log says its frames' laser states
+    probed.push_back(options.inputs[i]);
+    probed_kinds.push_back(kinds[i]);
+  }
+  if (probed.empty()) return false;
+  std::vector<Extractor::FrameEvidence> frames;
+  Extractor probe(options, calibration, laserline::pipeline::make_detector("fir", detector_options),
+                  region, nullptr, nullptr, nullptr);
+  probe.measure_evidence_only(frames, kFrames, detector_options.frontend.snr_threshold_db);
+  laserline::tools::extract::extract_inputs(probe, probed, probed_kinds, in_use);
+  // The first sequence's frames, in an unbroken run from its start.
+  std::vector<double> evidence;
+  for (const Extractor::FrameEvidence& f : frames) {
+    if (f.sequence != frames.front().sequence ||
+        f.position != static_cast<std::int64_t>(evidence.size()))
+      break;
+    evidence.push_back(f.evidence);
+  }
+  if (evidence.size() < kFewest) return false;
+  for (const int first_on : {0, 1}) {
+    int against = 0;  // steps from one frame to the next that do not go the pattern's way
+    std::vector<double> on, off;
+    for (std::size_t i = 0; i < evidence.size(); ++i) {
+      const bool laser_on = static_cast<int>(i % 2) == first_on;
+      (laser_on ? on : off).push_back(evidence[i]);
+      if (i + 1 < evidence.size() && (evidence[i] > evidence[i + 1]) != laser_on) ++against;
+    }
+    // (One step against it is allowed: a frame whose line left the view, or glinted.)
+    const bool alternates = against <= 1;
+    auto median = [](std::vector<double> v) {
+      std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+      return v[v.size() / 2];
+    };
+    const double on_median = median(on), off_median = median(off);
+    if (!alternates || !(on_median > 0) || on_median < kRatio * off_median) continue;
+    options.laser_pattern = first_on == 0 ? "10" : "01";
+    options.laser_on_pattern = {first_on == 0, first_on == 1};
+    std::fprintf(
+        stderr,
+        "laserline-extract: the line comes and goes at every frame in the first %zu frames "
+        "of %s (its evidence %.0f against %.0f dB): the laser alternates, extracting "
+        "with --laser-pattern %s (--laser-pattern 1 takes every frame as laser-on)\n",
+        evidence.size(), probed.front().c_str(), on_median, off_median,
+        options.laser_pattern.c_str());
+    return true;
+  }
+  return false;
+}
+
 int run_extract(int argc, char** argv) {
   // OpenCV's own warnings (e.g. a failing decoder) would duplicate our one line per problem.
   cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);
@@ -528,7 +604,12 @@ int run_extract(int argc, char** argv) {
   }
 
   const double stated_sheet_width = detector_options.geometry.sheet_width_m;
+  // The width first (filters sized for a line far wider or narrower than the calibration says
+  // show it faintly, in laser-on and laser-off frames alike), then whether the laser alternates;
+  // if it does, the width again on the laser-on frames alone.
   fit_sheet_width(options, calibration, region, kinds, in_use, detector_options);
+  if (detect_laser_alternation(options, calibration, region, kinds, in_use, detector_options))
+    fit_sheet_width(options, calibration, region, kinds, in_use, detector_options);
   if (detector_options.geometry.sheet_width_m != stated_sheet_width) {
     detector = laserline::pipeline::make_detector(options.detector, detector_options);
   }
