@@ -3,6 +3,7 @@
 // network namespace made by this test binary, laserline-ctl and the Python example as real
 // processes: each answer, what the next frames carry, refusals in one line, garbage on the command
 // channel counted and survived.
+// Over 600 lines: one path (a command to its answer), through each camera backend on one set-up.
 #include <arv.h>
 #include <gtest/gtest.h>
 #include <signal.h>

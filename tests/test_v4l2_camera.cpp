@@ -4,6 +4,7 @@
 // pixel is compared with the per-pixel reference conversion of it, pixel_reference.hpp), the
 // timestamps, every pixel format with a laser channel, clear errors, and reconnection when the
 // device goes away and comes back.
+// Over 600 lines: one backend, on one stand-in device.
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <linux/videodev2.h>

@@ -3,7 +3,8 @@
 // path (open, QUERYCAP, S_FMT, S_PARM, REQBUFS, QUERYBUF, mmap, QBUF, STREAMON, poll, DQBUF) on
 // this machine, which has no video device. The kernel passes a FUSE file's ioctls on when their
 // argument size is encoded in the command number, which holds for every V4L2 ioctl used here.
-// Test-only: never installed.
+// Test-only: never installed. Over 600 lines: one device, its ioctls, FUSE callbacks and frame
+// producer on one shared state.
 //
 // Controls, as the kernel's control framework (v4l2-ctrls) answers for a driver: "Exposure Time,
 // Absolute" and "Gain" (integers), "Pixel Rate" (64-bit, read-only, as sensors report it),
