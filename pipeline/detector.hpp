@@ -35,6 +35,12 @@ struct FrontendOptions {
   // SNR (III-D): noise = mean |band-pass| over this window (normalised rows x columns).
   int noise_rows = 31;
   int noise_columns = 9;
+  // Where the mean |band-pass| of the window's rows on one side of the pixel is this many times
+  // that on the other, the noise is the quieter side's (a smallest-of CFAR at a clutter edge): an
+  // edge beside the line (a checkerboard's square, the rim of a bright patch) is no noise on the
+  // line, and counted it hid a line on a dark square next to a white one. Texture and noise rarely
+  // differ so much between the sides. 0: always the whole window (paper III-D).
+  double noise_side_ratio = 8.0;
   double snr_threshold_db = 6.0;  // III-E: paper 3 - 6 dB
   int max_candidates_per_column = 16;
   // A run at or above this is a clipped core: its centre is the peak. Below 255: a camera's

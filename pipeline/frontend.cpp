@@ -139,6 +139,7 @@ Frontend::Frontend(const ScannerGeometry& geometry, const FrontendOptions& optio
   guard_ = inner_ / 2 + outer_ / 2;
   noise_half_ = std::max(options.noise_rows / 2, guard_ + 1);
   noise_pad_ = std::max(options.noise_columns, 1) / 2;
+  noise_side_ratio_ = options.noise_side_ratio;
   noise_norm_ = 1.0f / static_cast<float>(2 * (noise_half_ - guard_) * (2 * noise_pad_ + 1));
   // The band-pass as an integer: inner mean - outer mean = g (a S_inner - b S_outer) /
   // (inner outer one), with a = outer / g, b = inner / g (g their gcd) and one the normalised
@@ -233,6 +234,7 @@ void Frontend::reset(int width, int height) {
       buffer->assign(ring, 0);
     part.peak_rank.assign(ring, 0.0f);
     part.window_sum.assign(ring, 0u);
+    part.window_sum_below.assign(ring, 0u);
   }
   zero_normalised_.assign(s, 0);
   column_best_.assign(static_cast<std::size_t>(width) * options_.max_candidates_per_column, {});

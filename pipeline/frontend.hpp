@@ -217,7 +217,7 @@ class Frontend {
     std::vector<std::int32_t> peak_column, peak_slot, peak_clipped;
     std::vector<float> peak_rank;
     std::vector<std::int32_t> window_first;
-    std::vector<std::uint64_t> window_sum;
+    std::vector<std::uint64_t> window_sum, window_sum_below;
   };
   // Each part's strips and warp blocks for a pass within `bounds` (no allocation).
   void place_parts(const PassBounds& bounds);
@@ -274,6 +274,16 @@ class Frontend {
   // window around it, at least 1.
   template <class Lane>
   float noise_level(const Lane* ring, const NoiseWindow& window, int u, int begin) const;
+  // The noise window's sum from twice the sum of its rows above and twice that of its rows below
+  // the pixel: their mean, or the quieter where one is noise_side_ratio times the other (an edge
+  // on one side: a checkerboard's square, the rim of a bright patch).
+  std::uint64_t noise_sum(std::uint64_t above, std::uint64_t below) const {
+    if (noise_side_ratio_ > 0.0 &&
+        (static_cast<double>(above) > noise_side_ratio_ * static_cast<double>(below) ||
+         static_cast<double>(below) > noise_side_ratio_ * static_cast<double>(above)))
+      return std::min(above, below);
+    return (above + below) / 2;
+  }
   // The sub-pixel row of the valid point of column u, from its guess (see find_candidates()).
   struct RefineStart;
   RefineStart refine_start(float v_guess) const;
@@ -304,6 +314,7 @@ class Frontend {
   std::size_t probe_count_ = 0;
   int margin_ = 6;  // normalised rows beyond the depth range on each side (for the filters)
   float noise_norm_ = 1;
+  double noise_side_ratio_ = 0;
   double half_per_normalised_width_ = 0.5;  // 0.5 / normalised_width_px (refine_row())
   // The band-pass, in units of band_unit_ grey levels: band_a_ S_inner - band_b_ S_outer of the
   // normalised rows, which keep 8 - normalised_shift_ fractional bits; 16-bit lanes where it fits.

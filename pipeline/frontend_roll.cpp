@@ -58,17 +58,22 @@ struct Frontend::StageImages {
 
 template <class Lane>
 float Frontend::noise_level(const Lane* ring, const NoiseWindow& window, int u, int begin) const {
-  std::uint64_t sum = 0;
+  // Each half of the window (rows above, rows below) summed twice: see noise_sum().
+  std::uint64_t sum_above = 0, sum_below = 0;
   const int count = 2 * noise_pad_ + 1;
   if (u >= noise_pad_ && u + noise_pad_ < width_) {
-    sum = kernels::window_sum(ring, window.above, window.below, window.rows, u - noise_pad_ - begin,
-                              count);
+    sum_above = kernels::window_sum(ring, window.above, window.above, window.rows,
+                                    u - noise_pad_ - begin, count);
+    sum_below = kernels::window_sum(ring, window.below, window.below, window.rows,
+                                    u - noise_pad_ - begin, count);
   } else {  // at the image's sides the window repeats the edge column
     for (int k = -noise_pad_; k <= noise_pad_; ++k) {
-      sum += kernels::window_sum(ring, window.above, window.below, window.rows,
-                                 std::clamp(u + k, 0, width_ - 1) - begin, 1);
+      const int column = std::clamp(u + k, 0, width_ - 1) - begin;
+      sum_above += kernels::window_sum(ring, window.above, window.above, window.rows, column, 1);
+      sum_below += kernels::window_sum(ring, window.below, window.below, window.rows, column, 1);
     }
   }
+  const std::uint64_t sum = noise_sum(sum_above, sum_below);
   // III-D: the minimal noise level is 1.
   return std::max(static_cast<float>(sum) * band_unit_ * noise_norm_, 1.0f);
 }
@@ -118,6 +123,7 @@ struct Frontend::StripRows {
   float* peak_rank = nullptr;
   std::int32_t* window_first = nullptr;
   std::uint64_t* window_sum = nullptr;
+  std::uint64_t* window_sum_below = nullptr;
 
   LASERLINE_ROW_KERNEL Lane* band(int r) const { return band_ring + band_rows[r - band_base]; }
   LASERLINE_ROW_KERNEL int& row_most(int r) const { return most[band_slots[r - band_base]]; }
@@ -338,8 +344,10 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
       ++peaks;
     }
   }
-  kernels::window_sums(strip.band_ring, noise.above, noise.below, noise.rows, strip.window_first,
+  kernels::window_sums(strip.band_ring, noise.above, noise.above, noise.rows, strip.window_first,
                        peaks, 2 * pass.nw + 1, strip.window_sum);
+  kernels::window_sums(strip.band_ring, noise.below, noise.below, noise.rows, strip.window_first,
+                       peaks, 2 * pass.nw + 1, strip.window_sum_below);
   for (int k = 0; k < peaks; ++k) {
     const int i = strip.peak_column[k];
     const int u = begin + i;
@@ -348,7 +356,10 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
     // (At the image's sides the window repeats the edge column: noise_level() sums it so.)
     const float noise_level_at =
         u >= pass.nw && u + pass.nw < width_
-            ? std::max(static_cast<float>(strip.window_sum[k]) * pass.unit * noise_norm_, 1.0f)
+            ? std::max(
+                  static_cast<float>(noise_sum(strip.window_sum[k], strip.window_sum_below[k])) *
+                      pass.unit * noise_norm_,
+                  1.0f)
             : noise_at(u);
     const float snr = value / noise_level_at;
     // (A short clipped run is taken whatever its SNR: texture ridges beside the laser's crossing
@@ -435,6 +446,7 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, const P
       strip.peak_rank = part.peak_rank.data();
       strip.window_first = part.window_first.data();
       strip.window_sum = part.window_sum.data();
+      strip.window_sum_below = part.window_sum_below.data();
       band_pass_rows(pass, strip, next_band, band_end, images);
       for (int r = std::max(r_begin, bounds.row_begin); r < r_end; ++r)
         row_candidates(pass, strip, r, images);

@@ -110,6 +110,10 @@ void FrontendOptions::validate() const {
   within("passband_ratio", passband_ratio, 1.5, 16.0);
   within("noise_rows", noise_rows, 3, 1001);
   within("noise_columns", noise_columns, 1, 101);
+  if (!(noise_side_ratio == 0.0 || (noise_side_ratio >= 1.0 && noise_side_ratio <= 1000.0))) {
+    throw OptionError("noise_side_ratio",
+                      "must be 0 (off) or between 1 and 1000, got " + text(noise_side_ratio));
+  }
   within("snr_threshold_db", snr_threshold_db, 0.0, 60.0);
   // Candidates are counted per column in a byte.
   within("max_candidates_per_column", max_candidates_per_column, 1, 255);

@@ -185,6 +185,52 @@ TEST(Frontend, SignalToNoiseHasAMinimalNoiseOfOneAndMatchesTheImage) {
   EXPECT_NEAR(frontend.rows().to_source(peak_row), 100.0, 1.5);
 }
 
+// A line on a dark surface 4 px below the edge of a bright one (a checkerboard's black square under
+// a white one), in noise of 2.3 grey levels: the edge's band-pass fills the noise window's rows
+// above the line and, counted as noise, hides the line (SNR about 0.5). The rows below are the
+// line's own surroundings (SNR about 4).
+TEST(Frontend, AnEdgeBesideTheLineIsNoNoiseOnIt) {
+  const ScannerGeometry g = small_geometry();
+  Image image(g.width, g.height, 12);
+  std::uint32_t state = 99;
+  for (int v = 0; v < g.height; ++v) {
+    for (int u = 0; u < g.width; ++u) {
+      state = state * 1664525u + 1013904223u;
+      const int noise = static_cast<int>(state >> 29);  // 0..7 grey levels
+      image.pixels[v * g.width + u] = static_cast<std::uint8_t>((v < 124 ? 180 : 12) + noise);
+    }
+  }
+  image.add_line([](int) { return 128.0; }, 24.0, 1.2);
+  // The share of columns where the line's SNR passes the threshold.
+  auto passing = [&](double side_ratio) {
+    FrontendOptions o;
+    o.noise_side_ratio = side_ratio;
+    Frontend frontend(g, o);
+    frontend.reset(g.width, g.height);
+    frontend.set_frame(image.view());
+    const std::size_t size = static_cast<std::size_t>(frontend.rows().rows()) * frontend.stride();
+    std::vector<float> snr(size);
+    frontend.stage_images({}, {}, snr);
+    int line_row = 0;
+    for (int r = 0; r < frontend.rows().rows(); ++r) {
+      if (std::abs(frontend.rows().to_source(r) - 128.0) <
+          std::abs(frontend.rows().to_source(line_row) - 128.0))
+        line_row = r;
+    }
+    const float threshold = std::pow(10.0f, static_cast<float>(o.snr_threshold_db) / 20.0f);
+    int count = 0;
+    for (int u = 0; u < g.width; ++u) {
+      float best = 0.0f;  // the peak within a row of the line's
+      for (int r = line_row - 1; r <= line_row + 1; ++r)
+        best = std::max(best, snr[r * frontend.stride() + u]);
+      count += best >= threshold ? 1 : 0;
+    }
+    return static_cast<double>(count) / g.width;
+  };
+  EXPECT_GE(passing(FrontendOptions{}.noise_side_ratio), 0.95);
+  EXPECT_LE(passing(0.0), 0.05);
+}
+
 // The pass goes down the rows in blocks and across in strips of columns, with running sums; the
 // same images computed directly, whole, from their definitions (III-C, III-D) must agree, across
 // strip edges and the cut-short boxes at the ends. `inner` and `outer` are the box sizes the
@@ -230,13 +276,18 @@ void expect_pass_matches_stages_computed_whole(const FrontendOptions& o, int inn
   }
   for (int r = 0; r < rows; r += step) {
     for (int u = 0; u < width; u += step) {
-      double sum = 0;
+      double above = 0, below = 0;  // the window's rows above the pixel's guard band, below it
       for (int k = -pad; k <= pad; ++k) {
         const int c = std::clamp(u + k, 0, width - 1);
         for (int j = std::max(r - noise_half, 0); j <= std::min(r + noise_half, rows - 1); ++j) {
-          if (std::abs(j - r) > guard) sum += std::abs(band[j * stride + c]);
+          if (j < r - guard) above += std::abs(band[j * stride + c]);
+          if (j > r + guard) below += std::abs(band[j * stride + c]);
         }
       }
+      // The quieter side where one side is noise_side_ratio times the other, else the window.
+      const double ratio = o.noise_side_ratio;
+      const bool one_sided = ratio > 0 && (above > ratio * below || below > ratio * above);
+      const double sum = one_sided ? 2 * std::min(above, below) : above + below;
       const double noise = std::max(sum / (2.0 * (noise_half - guard) * (2 * pad + 1)), 1.0);
       const double expected = band[r * stride + u] / noise;
       worst_snr = std::max(worst_snr, std::abs(snr[r * stride + u] - expected));
@@ -253,6 +304,12 @@ TEST(Frontend, RollingPassMatchesTheStagesComputedWhole) {
   const FrontendOptions narrow;
   EXPECT_FLOAT_EQ(Frontend(small_geometry(), narrow).band_pass_unit(), 1.0f / 144.0f);
   expect_pass_matches_stages_computed_whole(narrow, 3, 9);
+  // Bands of black and white rows: windows with an edge on one side (the quieter side taken) and
+  // on both; and the whole window always.
+  expect_pass_matches_stages_computed_whole(narrow, 3, 9, true);
+  FrontendOptions whole_window;
+  whole_window.noise_side_ratio = 0.0;
+  expect_pass_matches_stages_computed_whole(whole_window, 3, 9, true);
   // 5 and 19 rows (a passband ratio that is no odd whole number) do not: 32-bit lanes with the
   // 7 fractional bits of the interpolation, unit 1 / (5 * 19 * 128).
   FrontendOptions wide;
