@@ -233,7 +233,7 @@ void Frontend::reset(int width, int height) {
          {&part.peak_column, &part.peak_slot, &part.peak_clipped, &part.window_first})
       buffer->assign(ring, 0);
     part.peak_rank.assign(ring, 0.0f);
-    part.window_sum.assign(ring, 0u);
+    part.window_sum_above.assign(ring, 0u);
     part.window_sum_below.assign(ring, 0u);
   }
   zero_normalised_.assign(s, 0);

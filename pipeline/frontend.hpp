@@ -213,11 +213,11 @@ class Frontend {
     std::vector<std::uint64_t> peak_bits;  // one row of a strip's candidates, as bits
     // One row of a strip's peaks that would be kept, awaiting their noise level: their ring
     // column, the slot they would take, their rank, whether clipped; their noise window's first
-    // ring column and its sum (kernels::window_sums()).
+    // ring column and its sums above and below the row (kernels::window_sums()).
     std::vector<std::int32_t> peak_column, peak_slot, peak_clipped;
     std::vector<float> peak_rank;
     std::vector<std::int32_t> window_first;
-    std::vector<std::uint64_t> window_sum, window_sum_below;
+    std::vector<std::uint64_t> window_sum_above, window_sum_below;
   };
   // Each part's strips and warp blocks for a pass within `bounds` (no allocation).
   void place_parts(const PassBounds& bounds);
@@ -274,15 +274,15 @@ class Frontend {
   // window around it, at least 1.
   template <class Lane>
   float noise_level(const Lane* ring, const NoiseWindow& window, int u, int begin) const;
-  // The noise window's sum from twice the sum of its rows above and twice that of its rows below
-  // the pixel: their mean, or the quieter where one is noise_side_ratio times the other (an edge
-  // on one side: a checkerboard's square, the rim of a bright patch).
+  // The noise window's sum from the sums of its rows above and below the pixel: both, or twice
+  // the quieter where one is noise_side_ratio times the other (an edge on one side: a
+  // checkerboard's square, the rim of a bright patch).
   std::uint64_t noise_sum(std::uint64_t above, std::uint64_t below) const {
     if (noise_side_ratio_ > 0.0 &&
         (static_cast<double>(above) > noise_side_ratio_ * static_cast<double>(below) ||
          static_cast<double>(below) > noise_side_ratio_ * static_cast<double>(above)))
-      return std::min(above, below);
-    return (above + below) / 2;
+      return 2 * std::min(above, below);
+    return above + below;
   }
   // The sub-pixel row of the valid point of column u, from its guess (see find_candidates()).
   struct RefineStart;

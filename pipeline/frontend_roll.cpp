@@ -58,19 +58,18 @@ struct Frontend::StageImages {
 
 template <class Lane>
 float Frontend::noise_level(const Lane* ring, const NoiseWindow& window, int u, int begin) const {
-  // Each half of the window (rows above, rows below) summed twice: see noise_sum().
+  // The window's rows above the pixel and those below, apart (see noise_sum()).
   std::uint64_t sum_above = 0, sum_below = 0;
   const int count = 2 * noise_pad_ + 1;
   if (u >= noise_pad_ && u + noise_pad_ < width_) {
-    sum_above = kernels::window_sum(ring, window.above, window.above, window.rows,
-                                    u - noise_pad_ - begin, count);
-    sum_below = kernels::window_sum(ring, window.below, window.below, window.rows,
-                                    u - noise_pad_ - begin, count);
+    const int first = u - noise_pad_ - begin;
+    sum_above = kernels::window_sum(ring, window.above, window.rows, first, count);
+    sum_below = kernels::window_sum(ring, window.below, window.rows, first, count);
   } else {  // at the image's sides the window repeats the edge column
     for (int k = -noise_pad_; k <= noise_pad_; ++k) {
       const int column = std::clamp(u + k, 0, width_ - 1) - begin;
-      sum_above += kernels::window_sum(ring, window.above, window.above, window.rows, column, 1);
-      sum_below += kernels::window_sum(ring, window.below, window.below, window.rows, column, 1);
+      sum_above += kernels::window_sum(ring, window.above, window.rows, column, 1);
+      sum_below += kernels::window_sum(ring, window.below, window.rows, column, 1);
     }
   }
   const std::uint64_t sum = noise_sum(sum_above, sum_below);
@@ -122,7 +121,7 @@ struct Frontend::StripRows {
   std::int32_t* peak_clipped = nullptr;
   float* peak_rank = nullptr;
   std::int32_t* window_first = nullptr;
-  std::uint64_t* window_sum = nullptr;
+  std::uint64_t* window_sum_above = nullptr;
   std::uint64_t* window_sum_below = nullptr;
 
   LASERLINE_ROW_KERNEL Lane* band(int r) const { return band_ring + band_rows[r - band_base]; }
@@ -344,10 +343,10 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
       ++peaks;
     }
   }
-  kernels::window_sums(strip.band_ring, noise.above, noise.above, noise.rows, strip.window_first,
-                       peaks, 2 * pass.nw + 1, strip.window_sum);
-  kernels::window_sums(strip.band_ring, noise.below, noise.below, noise.rows, strip.window_first,
-                       peaks, 2 * pass.nw + 1, strip.window_sum_below);
+  kernels::window_sums(strip.band_ring, noise.above, noise.rows, strip.window_first, peaks,
+                       2 * pass.nw + 1, strip.window_sum_above);
+  kernels::window_sums(strip.band_ring, noise.below, noise.rows, strip.window_first, peaks,
+                       2 * pass.nw + 1, strip.window_sum_below);
   for (int k = 0; k < peaks; ++k) {
     const int i = strip.peak_column[k];
     const int u = begin + i;
@@ -356,10 +355,10 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
     // (At the image's sides the window repeats the edge column: noise_level() sums it so.)
     const float noise_level_at =
         u >= pass.nw && u + pass.nw < width_
-            ? std::max(
-                  static_cast<float>(noise_sum(strip.window_sum[k], strip.window_sum_below[k])) *
-                      pass.unit * noise_norm_,
-                  1.0f)
+            ? std::max(static_cast<float>(
+                           noise_sum(strip.window_sum_above[k], strip.window_sum_below[k])) *
+                           pass.unit * noise_norm_,
+                       1.0f)
             : noise_at(u);
     const float snr = value / noise_level_at;
     // (A short clipped run is taken whatever its SNR: texture ridges beside the laser's crossing
@@ -445,7 +444,7 @@ LASERLINE_ROW_KERNEL void Frontend::roll_with(const StageImages* images, const P
       strip.peak_clipped = part.peak_clipped.data();
       strip.peak_rank = part.peak_rank.data();
       strip.window_first = part.window_first.data();
-      strip.window_sum = part.window_sum.data();
+      strip.window_sum_above = part.window_sum_above.data();
       strip.window_sum_below = part.window_sum_below.data();
       band_pass_rows(pass, strip, next_band, band_end, images);
       for (int r = std::max(r_begin, bounds.row_begin); r < r_end; ++r)

@@ -245,16 +245,14 @@ void check_window_sum(std::mt19937& random, Lane lo, Lane hi) {
     const auto ring =
         random_values<Lane>(random, static_cast<std::size_t>(2 * rows + 1) * stride + kWindowLanes,
                             lo, hi);  // (with the lanes the kernel may read past the last row)
-    std::vector<std::size_t> above(rows), below(rows);
-    for (int j = 0; j < rows; ++j) {
-      above[j] = static_cast<std::size_t>(j) * stride;
-      below[j] = static_cast<std::size_t>(rows + 1 + j) * stride;
-    }
+    std::vector<std::size_t> offsets(static_cast<std::size_t>(2 * rows));  // a row left out
+    for (int j = 0; j < 2 * rows; ++j)
+      offsets[static_cast<std::size_t>(j)] =
+          static_cast<std::size_t>(j < rows ? j : j + 1) * stride;
     for (const int width : kWidths) {
       for (const int first : {0, 3, 17}) {
-        ASSERT_EQ(
-            window_sum(ring.data(), above.data(), below.data(), rows, first, width),
-            reference::window_sum(ring.data(), above.data(), below.data(), rows, first, width))
+        ASSERT_EQ(window_sum(ring.data(), offsets.data(), 2 * rows, first, width),
+                  reference::window_sum(ring.data(), offsets.data(), 2 * rows, first, width))
             << "rows " << rows << " width " << width << " first " << first;
       }
     }
@@ -268,11 +266,10 @@ void check_window_sums(std::mt19937& random, Lane lo, Lane hi) {
   for (const int rows : {0, 1, 10, 40}) {
     const auto ring = random_values<Lane>(
         random, static_cast<std::size_t>(2 * rows + 1) * stride + kWindowLanes, lo, hi);
-    std::vector<std::size_t> above(rows), below(rows);
-    for (int j = 0; j < rows; ++j) {
-      above[j] = static_cast<std::size_t>(j) * stride;
-      below[j] = static_cast<std::size_t>(rows + 1 + j) * stride;
-    }
+    std::vector<std::size_t> offsets(static_cast<std::size_t>(2 * rows));  // a row left out
+    for (int j = 0; j < 2 * rows; ++j)
+      offsets[static_cast<std::size_t>(j)] =
+          static_cast<std::size_t>(j < rows ? j : j + 1) * stride;
     for (const int width : kWidths) {
       if (width > stride) continue;
       std::uniform_int_distribution<std::int32_t> column(0, stride - width);
@@ -287,14 +284,13 @@ void check_window_sums(std::mt19937& random, Lane lo, Lane hi) {
           firsts[static_cast<std::size_t>(k)] = near(random);
         std::sort(firsts.begin(), firsts.begin() + n / 2);
         std::vector<std::uint64_t> sums(firsts.size() + 1, 7), expected(sums);
-        window_sums(ring.data(), above.data(), below.data(), rows, firsts.data(), n, width,
-                    sums.data());
-        reference::window_sums(ring.data(), above.data(), below.data(), rows, firsts.data(), n,
-                               width, expected.data());
+        window_sums(ring.data(), offsets.data(), 2 * rows, firsts.data(), n, width, sums.data());
+        reference::window_sums(ring.data(), offsets.data(), 2 * rows, firsts.data(), n, width,
+                               expected.data());
         ASSERT_EQ(sums, expected) << "rows " << rows << " width " << width << " windows " << n;
         for (int k = 0; k < n; ++k) {
           ASSERT_EQ(expected[static_cast<std::size_t>(k)],
-                    reference::window_sum(ring.data(), above.data(), below.data(), rows,
+                    reference::window_sum(ring.data(), offsets.data(), 2 * rows,
                                           firsts[static_cast<std::size_t>(k)], width));
         }
       }

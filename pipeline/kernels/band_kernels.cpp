@@ -138,17 +138,17 @@ void PeakBits32(const std::int32_t* ring, const std::size_t* slot, int reach,
 
 #if HWY_TARGET == HWY_SCALAR
 template <class Lane, class Wide>
-std::uint64_t WindowSum(const Lane* ring, const std::size_t* above, const std::size_t* below,
-                        int rows, int first, int count) {
-  return reference::window_sum(ring, above, below, rows, first, count);
+std::uint64_t WindowSum(const Lane* ring, const std::size_t* offsets, int rows, int first,
+                        int count) {
+  return reference::window_sum(ring, offsets, rows, first, count);
 }
 #else
 // |x| of a vector of columns (those past `count` masked to 0), taken as unsigned (exact for the
 // most negative value too), its pairs of lanes summed into lanes twice as wide; summed over the
 // rows, then reduced. (16-bit lanes: a window of up to 2 x 1000 rows of 2 x 32768 fits 32 bits.)
 template <class Lane, class Wide>
-std::uint64_t WindowSum(const Lane* ring, const std::size_t* above, const std::size_t* below,
-                        int rows, int first, int count) {
+std::uint64_t WindowSum(const Lane* ring, const std::size_t* offsets, int rows, int first,
+                        int count) {
   const hn::CappedTag<Lane, 64 / sizeof(Lane)> d;  // at most 512 bits: kWindowLanes or fewer
   const hn::RebindToUnsigned<decltype(d)> du;
   const hn::Repartition<Wide, decltype(d)> dw;
@@ -163,25 +163,23 @@ std::uint64_t WindowSum(const Lane* ring, const std::size_t* above, const std::s
           hn::BitCast(dw, hn::BitCast(du, hn::Abs(hn::IfThenElseZero(wanted, hn::LoadU(d, x)))));
       return hn::Add(hn::And(magnitude, low_half), hn::ShiftRight<8 * sizeof(Lane)>(magnitude));
     };
-    auto up = hn::Zero(dw), down = hn::Zero(dw);
-    for (int j = 0; j < rows; ++j) {
-      up = hn::Add(up, pairs(columns + above[j] + c));
-      down = hn::Add(down, pairs(columns + below[j] + c));
-    }
-    sum += static_cast<std::uint64_t>(hn::GetLane(hn::SumOfLanes(dw, hn::Add(up, down))));
+    auto total = hn::Zero(dw);
+    for (int j = 0; j < rows; ++j)
+      total = hn::Add(total, pairs(columns + offsets[j] + c));
+    sum += static_cast<std::uint64_t>(hn::GetLane(hn::SumOfLanes(dw, total)));
   }
   return sum;
 }
 #endif
 
-std::uint64_t WindowSum16(const std::int16_t* ring, const std::size_t* above,
-                          const std::size_t* below, int rows, int first, int count) {
+std::uint64_t WindowSum16(const std::int16_t* ring, const std::size_t* offsets, int rows, int first,
+                          int count) {
 #if HWY_TARGET == HWY_SCALAR
-  return WindowSum<std::int16_t, std::uint32_t>(ring, above, below, rows, first, count);
+  return WindowSum<std::int16_t, std::uint32_t>(ring, offsets, rows, first, count);
 #else
   // |x| (x > -32768: the band-pass's range) summed in pairs into 32-bit lanes, weighted 1 for
   // the window's columns and 0 past them: a multiply-add of pairs where the CPU has one (AVX2's,
-  // NEON's). Exact: 2 x 1000 rows of 2 x 32767 fit, and so does the whole window's sum.
+  // NEON's). Exact: 1000 rows of 2 x 32767 fit, and so does the whole window's sum.
   const hn::CappedTag<std::int16_t, 32> d;
   const hn::Repartition<std::int32_t, decltype(d)> d32;
   const int n = static_cast<int>(hn::Lanes(d));
@@ -190,23 +188,21 @@ std::uint64_t WindowSum16(const std::int16_t* ring, const std::size_t* above,
   for (int c = 0; c < count; c += n) {
     const auto ones =
         hn::IfThenElseZero(hn::FirstN(d, static_cast<std::size_t>(count - c)), hn::Set(d, 1));
-    auto up = hn::Zero(d32), up_odd = up, down = up, down_odd = up;
+    auto total = hn::Zero(d32), total_other = total;  // (the multiply-add's two halves)
     for (int j = 0; j < rows; ++j) {
-      up = hn::ReorderWidenMulAccumulate(d32, hn::Abs(hn::LoadU(d, columns + above[j] + c)), ones,
-                                         up, up_odd);
-      down = hn::ReorderWidenMulAccumulate(d32, hn::Abs(hn::LoadU(d, columns + below[j] + c)), ones,
-                                           down, down_odd);
+      total = hn::ReorderWidenMulAccumulate(d32, hn::Abs(hn::LoadU(d, columns + offsets[j] + c)),
+                                            ones, total, total_other);
     }
-    const auto both = hn::Add(hn::Add(up, up_odd), hn::Add(down, down_odd));
-    sum += static_cast<std::uint32_t>(hn::GetLane(hn::SumOfLanes(d32, both)));
+    sum +=
+        static_cast<std::uint32_t>(hn::GetLane(hn::SumOfLanes(d32, hn::Add(total, total_other))));
   }
   return sum;
 #endif
 }
 
-std::uint64_t WindowSum32(const std::int32_t* ring, const std::size_t* above,
-                          const std::size_t* below, int rows, int first, int count) {
-  return WindowSum<std::int32_t, std::uint64_t>(ring, above, below, rows, first, count);
+std::uint64_t WindowSum32(const std::int32_t* ring, const std::size_t* offsets, int rows, int first,
+                          int count) {
+  return WindowSum<std::int32_t, std::uint64_t>(ring, offsets, rows, first, count);
 }
 
 // Windows whose columns lie within one vector of the first's (a line crossing the strip, a
@@ -214,8 +210,8 @@ std::uint64_t WindowSum32(const std::int32_t* ring, const std::size_t* above,
 // (From this many windows on that costs less than a window at a time.)
 constexpr int kSharedWindows = 3;
 
-void WindowSums16(const std::int16_t* ring, const std::size_t* above, const std::size_t* below,
-                  int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
+void WindowSums16(const std::int16_t* ring, const std::size_t* offsets, int rows,
+                  const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
 #if HWY_TARGET != HWY_SCALAR
   const hn::CappedTag<std::int16_t, 32> d;
   const hn::RebindToUnsigned<decltype(d)> du;
@@ -238,17 +234,15 @@ void WindowSums16(const std::int16_t* ring, const std::size_t* above, const std:
       if (shared - k >= kSharedWindows) {
         // Per column the sum of |x| down the rows, even and odd columns in 32-bit lanes (|x| as
         // unsigned: exact for -2^15 too); then sums of `count` columns as differences of running
-        // sums along the row. (At most 2 x 1000 rows of 2^15 and 32 columns: fits 32 bits.)
+        // sums along the row. (At most 1000 rows of 2^15 and 32 columns: fits 32 bits.)
         auto even = hn::Zero(dw), odd = even;
         auto add = [&](const std::int16_t* x) HWY_ATTR {
           const auto magnitude = hn::BitCast(dw, hn::BitCast(du, hn::Abs(hn::LoadU(d, x))));
           even = hn::Add(even, hn::And(magnitude, low_half));
           odd = hn::Add(odd, hn::ShiftRight<16>(magnitude));
         };
-        for (int j = 0; j < rows; ++j) {
-          add(columns + above[j]);
-          add(columns + below[j]);
-        }
+        for (int j = 0; j < rows; ++j)
+          add(columns + offsets[j]);
         std::uint32_t even_sums[16], odd_sums[16], running[33];
         hn::StoreU(even, dw, even_sums);
         hn::StoreU(odd, dw, odd_sums);
@@ -259,28 +253,26 @@ void WindowSums16(const std::int16_t* ring, const std::size_t* above, const std:
           sums[k] = running[firsts[k] - start + count] - running[firsts[k] - start];
         continue;
       }
-      auto up = hn::Zero(d32), up_odd = up, down = up, down_odd = up;
+      auto total = hn::Zero(d32), total_other = total;
       for (int j = 0; j < rows; ++j) {
-        up = hn::ReorderWidenMulAccumulate(d32, hn::Abs(hn::LoadU(d, columns + above[j])), ones, up,
-                                           up_odd);
-        down = hn::ReorderWidenMulAccumulate(d32, hn::Abs(hn::LoadU(d, columns + below[j])), ones,
-                                             down, down_odd);
+        total = hn::ReorderWidenMulAccumulate(d32, hn::Abs(hn::LoadU(d, columns + offsets[j])),
+                                              ones, total, total_other);
       }
-      const auto both = hn::Add(hn::Add(up, up_odd), hn::Add(down, down_odd));
-      sums[k] = static_cast<std::uint32_t>(hn::GetLane(hn::SumOfLanes(d32, both)));
+      sums[k] =
+          static_cast<std::uint32_t>(hn::GetLane(hn::SumOfLanes(d32, hn::Add(total, total_other))));
       ++k;
     }
     return;
   }
 #endif
   for (int k = 0; k < n; ++k)
-    sums[k] = WindowSum16(ring, above, below, rows, firsts[k], count);
+    sums[k] = WindowSum16(ring, offsets, rows, firsts[k], count);
 }
 
-void WindowSums32(const std::int32_t* ring, const std::size_t* above, const std::size_t* below,
-                  int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
+void WindowSums32(const std::int32_t* ring, const std::size_t* offsets, int rows,
+                  const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
   for (int k = 0; k < n; ++k)
-    sums[k] = WindowSum32(ring, above, below, rows, firsts[k], count);
+    sums[k] = WindowSum32(ring, offsets, rows, firsts[k], count);
 }
 
 }  // namespace HWY_NAMESPACE
@@ -325,24 +317,24 @@ void peak_bits(const std::int32_t* ring, const std::size_t* slot, int reach, std
   HWY_DYNAMIC_DISPATCH(PeakBits32)(ring, slot, reach, threshold, count, bits);
 }
 
-std::uint64_t window_sum(const std::int16_t* ring, const std::size_t* above,
-                         const std::size_t* below, int rows, int first, int count) {
-  return HWY_DYNAMIC_DISPATCH(WindowSum16)(ring, above, below, rows, first, count);
+std::uint64_t window_sum(const std::int16_t* ring, const std::size_t* offsets, int rows, int first,
+                         int count) {
+  return HWY_DYNAMIC_DISPATCH(WindowSum16)(ring, offsets, rows, first, count);
 }
 
-std::uint64_t window_sum(const std::int32_t* ring, const std::size_t* above,
-                         const std::size_t* below, int rows, int first, int count) {
-  return HWY_DYNAMIC_DISPATCH(WindowSum32)(ring, above, below, rows, first, count);
+std::uint64_t window_sum(const std::int32_t* ring, const std::size_t* offsets, int rows, int first,
+                         int count) {
+  return HWY_DYNAMIC_DISPATCH(WindowSum32)(ring, offsets, rows, first, count);
 }
 
-void window_sums(const std::int16_t* ring, const std::size_t* above, const std::size_t* below,
-                 int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
-  HWY_DYNAMIC_DISPATCH(WindowSums16)(ring, above, below, rows, firsts, n, count, sums);
+void window_sums(const std::int16_t* ring, const std::size_t* offsets, int rows,
+                 const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
+  HWY_DYNAMIC_DISPATCH(WindowSums16)(ring, offsets, rows, firsts, n, count, sums);
 }
 
-void window_sums(const std::int32_t* ring, const std::size_t* above, const std::size_t* below,
-                 int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
-  HWY_DYNAMIC_DISPATCH(WindowSums32)(ring, above, below, rows, firsts, n, count, sums);
+void window_sums(const std::int32_t* ring, const std::size_t* offsets, int rows,
+                 const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
+  HWY_DYNAMIC_DISPATCH(WindowSums32)(ring, offsets, rows, firsts, n, count, sums);
 }
 
 namespace reference {
@@ -378,15 +370,13 @@ void peak_bits_of(const Lane* ring, const std::size_t* slot, int reach, Lane thr
 }
 
 template <class Lane>
-std::uint64_t window_sum_of(const Lane* ring, const std::size_t* above, const std::size_t* below,
-                            int rows, int first, int count) {
+std::uint64_t window_sum_of(const Lane* ring, const std::size_t* offsets, int rows, int first,
+                            int count) {
   std::uint64_t sum = 0;
-  for (const std::size_t* offsets : {above, below}) {
-    for (int j = 0; j < rows; ++j) {
-      const Lane* row = ring + offsets[j] + first;
-      for (int i = 0; i < count; ++i)
-        sum += detail::magnitude(row[i]);
-    }
+  for (int j = 0; j < rows; ++j) {
+    const Lane* row = ring + offsets[j] + first;
+    for (int i = 0; i < count; ++i)
+      sum += detail::magnitude(row[i]);
   }
   return sum;
 }
@@ -417,26 +407,26 @@ void peak_bits(const std::int32_t* ring, const std::size_t* slot, int reach, std
   peak_bits_of(ring, slot, reach, threshold, count, bits);
 }
 
-std::uint64_t window_sum(const std::int16_t* ring, const std::size_t* above,
-                         const std::size_t* below, int rows, int first, int count) {
-  return window_sum_of(ring, above, below, rows, first, count);
+std::uint64_t window_sum(const std::int16_t* ring, const std::size_t* offsets, int rows, int first,
+                         int count) {
+  return window_sum_of(ring, offsets, rows, first, count);
 }
 
-std::uint64_t window_sum(const std::int32_t* ring, const std::size_t* above,
-                         const std::size_t* below, int rows, int first, int count) {
-  return window_sum_of(ring, above, below, rows, first, count);
+std::uint64_t window_sum(const std::int32_t* ring, const std::size_t* offsets, int rows, int first,
+                         int count) {
+  return window_sum_of(ring, offsets, rows, first, count);
 }
 
-void window_sums(const std::int16_t* ring, const std::size_t* above, const std::size_t* below,
-                 int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
+void window_sums(const std::int16_t* ring, const std::size_t* offsets, int rows,
+                 const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
   for (int k = 0; k < n; ++k)
-    sums[k] = window_sum_of(ring, above, below, rows, firsts[k], count);
+    sums[k] = window_sum_of(ring, offsets, rows, firsts[k], count);
 }
 
-void window_sums(const std::int32_t* ring, const std::size_t* above, const std::size_t* below,
-                 int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
+void window_sums(const std::int32_t* ring, const std::size_t* offsets, int rows,
+                 const std::int32_t* firsts, int n, int count, std::uint64_t* sums) {
   for (int k = 0; k < n; ++k)
-    sums[k] = window_sum_of(ring, above, below, rows, firsts[k], count);
+    sums[k] = window_sum_of(ring, offsets, rows, firsts[k], count);
 }
 
 }  // namespace reference

@@ -100,20 +100,20 @@ void peak_bits(const std::int16_t* ring, const std::size_t* slot, int reach, std
 void peak_bits(const std::int32_t* ring, const std::size_t* slot, int reach, std::int32_t threshold,
                int count, std::uint64_t* bits);
 
-// The sum of |x| over columns [first, first + count) of the `rows` rows ring + above[j] and
-// ring + below[j] (a noise window less its guard band; at most 1000 rows each). Exact for
-// |x| < 2^15 (16-bit lanes) or 2^31 (32-bit lanes): the band-pass's range. Reads, and does not use,
-// up to kWindowLanes - 1 lanes past each row's last column: the ring must hold them.
+// The sum of |x| over columns [first, first + count) of the `rows` rows ring + offsets[j] (one
+// side of a noise window, its guard band left out; at most 1000 rows). Exact for |x| < 2^15
+// (16-bit lanes) or 2^31 (32-bit lanes): the band-pass's range. Reads, and does not use, up to
+// kWindowLanes - 1 lanes past each row's last column: the ring must hold them.
 constexpr int kWindowLanes = 32;
-std::uint64_t window_sum(const std::int16_t* ring, const std::size_t* above,
-                         const std::size_t* below, int rows, int first, int count);
-std::uint64_t window_sum(const std::int32_t* ring, const std::size_t* above,
-                         const std::size_t* below, int rows, int first, int count);
+std::uint64_t window_sum(const std::int16_t* ring, const std::size_t* offsets, int rows, int first,
+                         int count);
+std::uint64_t window_sum(const std::int32_t* ring, const std::size_t* offsets, int rows, int first,
+                         int count);
 // window_sum() of the windows [firsts[k], firsts[k] + count) into sums[k], k < n.
-void window_sums(const std::int16_t* ring, const std::size_t* above, const std::size_t* below,
-                 int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums);
-void window_sums(const std::int32_t* ring, const std::size_t* above, const std::size_t* below,
-                 int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums);
+void window_sums(const std::int16_t* ring, const std::size_t* offsets, int rows,
+                 const std::int32_t* firsts, int n, int count, std::uint64_t* sums);
+void window_sums(const std::int32_t* ring, const std::size_t* offsets, int rows,
+                 const std::int32_t* firsts, int n, int count, std::uint64_t* sums);
 
 // ---------------------------------------------------------------------------------------------
 // III-F: sub-pixel refinement of columns whose samples all lie inside the frame and the
@@ -243,14 +243,14 @@ void peak_bits(const std::int16_t* ring, const std::size_t* slot, int reach, std
                int count, std::uint64_t* bits);
 void peak_bits(const std::int32_t* ring, const std::size_t* slot, int reach, std::int32_t threshold,
                int count, std::uint64_t* bits);
-std::uint64_t window_sum(const std::int16_t* ring, const std::size_t* above,
-                         const std::size_t* below, int rows, int first, int count);
-std::uint64_t window_sum(const std::int32_t* ring, const std::size_t* above,
-                         const std::size_t* below, int rows, int first, int count);
-void window_sums(const std::int16_t* ring, const std::size_t* above, const std::size_t* below,
-                 int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums);
-void window_sums(const std::int32_t* ring, const std::size_t* above, const std::size_t* below,
-                 int rows, const std::int32_t* firsts, int n, int count, std::uint64_t* sums);
+std::uint64_t window_sum(const std::int16_t* ring, const std::size_t* offsets, int rows, int first,
+                         int count);
+std::uint64_t window_sum(const std::int32_t* ring, const std::size_t* offsets, int rows, int first,
+                         int count);
+void window_sums(const std::int16_t* ring, const std::size_t* offsets, int rows,
+                 const std::int32_t* firsts, int n, int count, std::uint64_t* sums);
+void window_sums(const std::int32_t* ring, const std::size_t* offsets, int rows,
+                 const std::int32_t* firsts, int n, int count, std::uint64_t* sums);
 }  // namespace reference
 
 // The name of the target the kernels run on (e.g. "AVX2", "NEON"), for logs and benchmarks.
