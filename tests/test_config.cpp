@@ -165,6 +165,14 @@ TEST(Config, DetectorOptionsTakeThePipelinesRanges) {
                    "test.yaml")
           .detector_options.frontend.line_blur_px,
       0.5);
+  EXPECT_EQ(error_of("detector:\n  frontend:\n    noise_side_ratio: 0.5\n"),
+            "test.yaml:3: detector.frontend.noise_side_ratio: must be 0 (off) or between 1 and "
+            "1000, got 0.5");
+  EXPECT_EQ(parse_config(
+                hal::load_yaml_text("detector: {frontend: {noise_side_ratio: 0}}\n", "test.yaml"),
+                "test.yaml")
+                .detector_options.frontend.noise_side_ratio,
+            0.0);
   EXPECT_EQ(error_of("detector:\n  frontend: {min_depth_m: 3}\n"),
             "test.yaml:2: detector.frontend.max_depth_m: must be above min_depth_m");
   EXPECT_EQ(error_of("detector:\n  background:\n    history_frames: 0\n"),
