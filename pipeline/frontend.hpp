@@ -261,12 +261,14 @@ class Frontend {
   // The columns of normalised row r the part's warp blocks cover into out (column 0 at out[0]).
   void normalise_row(Part& part, int r, std::uint16_t* out);
   // The noise window of a row less its guard band: `rows` rows from each of `above` and `below`
-  // (offsets of the rows in a strip's band-pass ring).
+  // (offsets of the rows in a strip's band-pass ring); whether both lie within the frame's rows
+  // (beyond them the band-pass is 0: no quieter side).
  public:
   struct NoiseWindow {
     const std::size_t* above;
     const std::size_t* below;
     int rows;
+    bool inside;
   };
 
  private:
@@ -276,9 +278,9 @@ class Frontend {
   float noise_level(const Lane* ring, const NoiseWindow& window, int u, int begin) const;
   // The noise window's sum from the sums of its rows above and below the pixel: both, or twice
   // the quieter where one is noise_side_ratio times the other (an edge on one side: a
-  // checkerboard's square, the rim of a bright patch).
-  std::uint64_t noise_sum(std::uint64_t above, std::uint64_t below) const {
-    if (noise_side_ratio_ > 0.0 &&
+  // checkerboard's square, the rim of a bright patch) and both sides lie inside the frame.
+  std::uint64_t noise_sum(std::uint64_t above, std::uint64_t below, bool inside) const {
+    if (inside && noise_side_ratio_ > 0.0 &&
         (static_cast<double>(above) > noise_side_ratio_ * static_cast<double>(below) ||
          static_cast<double>(below) > noise_side_ratio_ * static_cast<double>(above)))
       return 2 * std::min(above, below);

@@ -72,7 +72,7 @@ float Frontend::noise_level(const Lane* ring, const NoiseWindow& window, int u, 
       sum_below += kernels::window_sum(ring, window.below, window.rows, column, 1);
     }
   }
-  const std::uint64_t sum = noise_sum(sum_above, sum_below);
+  const std::uint64_t sum = noise_sum(sum_above, sum_below, window.inside);
   // III-D: the minimal noise level is 1.
   return std::max(static_cast<float>(sum) * band_unit_ * noise_norm_, 1.0f);
 }
@@ -285,7 +285,8 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
   const Lane* row = strip.band(r);
   // The noise window of row r, rows [r - nh, r + nh], less its guard band.
   const NoiseWindow noise{strip.band_rows + (r - pass.nh - strip.band_base),
-                          strip.band_rows + (r + pass.gh + 1 - strip.band_base), pass.nh - pass.gh};
+                          strip.band_rows + (r + pass.gh + 1 - strip.band_base), pass.nh - pass.gh,
+                          r - pass.nh >= 0 && r + pass.nh < pass.rows};
   auto noise_at = [&](int u) LASERLINE_ROW_LAMBDA {
     return noise_level(strip.band_ring, noise, u, begin);
   };
@@ -355,8 +356,8 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
     // (At the image's sides the window repeats the edge column: noise_level() sums it so.)
     const float noise_level_at =
         u >= pass.nw && u + pass.nw < width_
-            ? std::max(static_cast<float>(
-                           noise_sum(strip.window_sum_above[k], strip.window_sum_below[k])) *
+            ? std::max(static_cast<float>(noise_sum(strip.window_sum_above[k],
+                                                    strip.window_sum_below[k], noise.inside)) *
                            pass.unit * noise_norm_,
                        1.0f)
             : noise_at(u);

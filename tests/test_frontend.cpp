@@ -284,9 +284,12 @@ void expect_pass_matches_stages_computed_whole(const FrontendOptions& o, int inn
           if (j > r + guard) below += std::abs(band[j * stride + c]);
         }
       }
-      // The quieter side where one side is noise_side_ratio times the other, else the window.
+      // The quieter side where one side is noise_side_ratio times the other and both lie in the
+      // frame, else the window.
       const double ratio = o.noise_side_ratio;
-      const bool one_sided = ratio > 0 && (above > ratio * below || below > ratio * above);
+      const bool inside = r - noise_half >= 0 && r + noise_half < rows;
+      const bool one_sided =
+          inside && ratio > 0 && (above > ratio * below || below > ratio * above);
       const double sum = one_sided ? 2 * std::min(above, below) : above + below;
       const double noise = std::max(sum / (2.0 * (noise_half - guard) * (2 * pad + 1)), 1.0);
       const double expected = band[r * stride + u] / noise;
