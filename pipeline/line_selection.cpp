@@ -221,25 +221,23 @@ void LineSelector::select(std::span<const LineCandidate> candidates,
     for (int i = 0; i < n; ++i) {
       const LineCandidate& c = candidates[static_cast<std::size_t>(line * k + i)];
       unary[i] = std::min(c.amplitude_db - threshold_db, cap);
-      while (previous_first < previous_count && previous[previous_first] < c.position &&
-             std::abs(c.position - previous[previous_first]) > tolerance) {
-        ++previous_first;
-      }
-      bool persistent = false;
-      for (int j = previous_first; j < previous_count; ++j) {
-        if (std::abs(c.position - previous[j]) <= tolerance) {
-          persistent = true;
-          break;
+      if (use_previous) {
+        while (previous_first < previous_count && previous[previous_first] < c.position &&
+               std::abs(c.position - previous[previous_first]) > tolerance) {
+          ++previous_first;
         }
-        if (previous[j] > c.position) break;  // and farther above from here on
-      }
-      if (!use_previous) {
-        // (no bonus this frame)
-      } else if (std::abs(c.position - previous_chosen_[static_cast<std::size_t>(line)]) <=
-                 tolerance) {
-        unary[i] += bonus;
-      } else if (persistent) {
-        unary[i] += other_bonus;
+        bool persistent = false;
+        for (int j = previous_first; j < previous_count; ++j) {
+          if (std::abs(c.position - previous[j]) <= tolerance) {
+            persistent = true;
+            break;
+          }
+          if (previous[j] > c.position) break;  // and farther above from here on
+        }
+        if (std::abs(c.position - previous_chosen_[static_cast<std::size_t>(line)]) <= tolerance)
+          unary[i] += bonus;
+        else if (persistent)
+          unary[i] += other_bonus;
       }
       // A new piece of curve, after the best path that ends on an earlier line (or none), or the
       // continuation of a piece that ended at most max_gap lines before. A new piece far from
