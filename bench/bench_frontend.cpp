@@ -438,6 +438,34 @@ BENCHMARK_CAPTURE(BM_frontend_made_detector, columns, "clean")->Unit(benchmark::
 BENCHMARK_CAPTURE(BM_frontend_made_detector, rows, "beside")->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(BM_frontend_made_detector, oblique, "oblique")->Unit(benchmark::kMillisecond);
 
+// `background` with a still camera in daylight (`hover-daylight`): no earlier frame the scene moved
+// away from, so the previous frame less its own line (argument 1) or none, the frame searched as
+// it is (0): what taking the line out costs.
+void BM_frontend_background_still_camera(benchmark::State& state) {
+  const hal::SimSceneOptions scene = scenario_scene("hover-daylight");
+  hal::SimScene sim(scene);
+  std::vector<std::uint8_t> a(sim.format().bytes()), b(sim.format().bytes());
+  sim.render(10, true, a);
+  sim.render(11, true, b);
+  pipeline::DetectorOptions o;
+  o.geometry = daemon::scanner_geometry(scene.calibration);
+  o.background.remove_own_line = state.range(0) != 0;
+  const std::unique_ptr<pipeline::Detector> detector = pipeline::make_detector("background", o);
+  detector->reset(kWidth, kHeight);
+  pipeline::Profile profile(detector->max_points(kWidth, kHeight));
+  std::uint64_t sequence = 0, line_removed = 0;
+  for (auto _ : state) {
+    detector->detect(view(sequence % 2 == 0 ? a : b), {sequence, true}, profile);
+    ++sequence;
+    line_removed += profile.background_line_removed() ? 1 : 0;
+    benchmark::DoNotOptimize(profile.points().data());
+  }
+  state.counters["points"] = static_cast<double>(profile.size());
+  state.counters["line_removed"] =
+      static_cast<double>(line_removed) / static_cast<double>(std::max<std::uint64_t>(sequence, 1));
+}
+BENCHMARK(BM_frontend_background_still_camera)->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond);
+
 // The `pier` scenario of laserline-evaluate at 2048x1536: relief whose parallax leaves `background`
 // many false candidates, so the validation has work to do.
 hal::SimSceneOptions pier_scene() {

@@ -176,6 +176,7 @@ void read_detector_options(hal::YamlMap& detector, pipeline::DetectorOptions& op
   hal::YamlMap background = detector.map("background");
   read(background, "history_frames", b.history_frames);
   read(background, "min_motion_widths", b.min_motion_widths);
+  b.remove_own_line = background.boolean("remove_own_line", b.remove_own_line);
   checked(background, [&] { b.validate(); });
   background.finish();
 

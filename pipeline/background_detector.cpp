@@ -44,6 +44,10 @@ void BackgroundDetector::reset(int width, int height) {
   for (History& h : history_)
     h.rows.assign(static_cast<std::size_t>(width) * band_rows_, 0);
   incoming_.assign(static_cast<std::size_t>(width) * band_rows_, 0);
+  own_line_removed_.assign(static_cast<std::size_t>(width) * band_rows_, 0);
+  line_kept_.assign(static_cast<std::size_t>(width), 0);
+  for (History& h : history_)
+    h.line.assign(static_cast<std::size_t>(width), std::numeric_limits<float>::quiet_NaN());
   newest_ = -1;
   width_ratios_ = {};
   width_ratio_next_ = width_ratio_count_ = 0;
@@ -78,24 +82,88 @@ BackgroundDetector::Motion BackgroundDetector::motion_across_line(const History&
   return least;
 }
 
-const BackgroundDetector::History* BackgroundDetector::choose_background(
-    const ImageView& image) const {
-  if (newest_ < 0) return nullptr;
+BackgroundDetector::Background BackgroundDetector::choose_background(const ImageView& image) const {
+  if (newest_ < 0) return {};
   const int n = static_cast<int>(history_.size());
   const bool glow = frontend_.water_glows(image);
   // Newest first: a laser-off frame wins outright; else the first laser-on frame the scene moved
-  // far enough from (toward the far side of the line where the water glows).
+  // far enough from (toward the far side of the line where the water glows); else the newest
+  // laser-on frame less its own line (not where the water glows: its glow would stay).
   const History* moved = nullptr;
+  const History* newest_on = nullptr;
   for (int age = 0; age < n; ++age) {
     const History& h = history_[static_cast<std::size_t>((newest_ - age + n) % n)];
     if (!h.usable) break;  // older ones are cut off from the current frame too
-    if (!h.laser_on) return &h;
+    if (!h.laser_on) return {&h, false};
+    if (newest_on == nullptr) newest_on = &h;
     if (moved != nullptr) continue;
     const Motion m = motion_across_line(h);
     const double needed = options_.min_motion_widths;
     if (glow ? m.toward_far >= needed : m.across >= needed) moved = &h;
   }
-  return moved;
+  if (moved != nullptr) return {moved, false};
+  if (options_.remove_own_line && !glow && newest_on != nullptr && newest_on->line_points > 0 &&
+      subtraction_clears(*newest_on, image)) {
+    return {newest_on, true};
+  }
+  return {};
+}
+
+bool BackgroundDetector::subtraction_clears(const History& h, const ImageView& image) const {
+  // At least half of it is taken away: with texture alone that cancels the ratio is 0.1 to 0.3,
+  // with noise alone 1 (plain dark walls, marine snow at night: 0.55 to 0.9).
+  constexpr double kMostLeft = 0.5;
+  const RowNormalisation& rows = frontend_.rows();
+  double residual = 0, texture = 0;
+  for (const auto& [u, v] : frontend_.probes()) {
+    const double width = std::max(rows.width_px(v) * motion_width_scale_, 1.0);
+    const int along = static_cast<int>(std::ceil(2 * width));
+    const int x = static_cast<int>(std::lround(u));
+    for (int k = 2; k <= 8; ++k) {
+      for (const int side : {-1, 1}) {
+        const int y = static_cast<int>(std::lround(v + side * k * width));
+        if (y < 0 || y + along >= image.height) continue;
+        const auto [hu, hv] = h.to_history.map(x, y);
+        const auto bu = static_cast<int>(std::lround(hu));
+        const int bv = static_cast<int>(std::lround(hv)) - band_first_;
+        if (bu < 0 || bu >= width_ || bv < 0 || bv >= band_rows_) continue;
+        const int here = image.at(x, y);
+        residual += std::abs(here - h.rows[static_cast<std::size_t>(bv) * width_ + bu]);
+        texture += std::abs(here - image.at(x, y + along));
+      }
+    }
+  }
+  return residual < kMostLeft * texture;
+}
+
+void BackgroundDetector::remove_own_line(const History& h) {
+  const RowNormalisation& rows = frontend_.rows();
+  // The band about the line on each epipolar line, [first, last] in kept rows (first < 0: none).
+  auto band = [&](int u) -> std::array<int, 2> {
+    const float v = h.line[static_cast<std::size_t>(u)];
+    if (!std::isfinite(v)) return {-1, -1};
+    const double half = std::ceil(std::max(rows.width_px(v) * motion_width_scale_, 1.0)) + 1;
+    const int first = static_cast<int>(std::floor(v - half)) - band_first_;
+    const int last = static_cast<int>(std::ceil(v + half)) - band_first_;
+    if (first < 0 || last >= band_rows_) return {-1, -1};
+    return {first, last};
+  };
+  for (int u = 0; u < width_; ++u)
+    line_kept_[static_cast<std::size_t>(u)] = band(u)[0] >= 0 ? 0xff : 0;
+  for (int r = 0; r < band_rows_; ++r) {
+    const std::size_t row = static_cast<std::size_t>(r) * width_;
+    for (int u = 0; u < width_; ++u)
+      own_line_removed_[row + u] = h.rows[row + u] & line_kept_[static_cast<std::size_t>(u)];
+  }
+  for (int u = 0; u < width_; ++u) {
+    const auto [first, last] = band(u);
+    if (first < 0) continue;
+    std::uint8_t* column = own_line_removed_.data() + u;
+    auto at = [&](int r) -> std::uint8_t& { return column[static_cast<std::size_t>(r) * width_]; };
+    const std::uint8_t surface = std::max(at(first), at(last));
+    for (int r = first + 1; r < last; ++r)
+      at(r) = std::min(at(r), surface);
+  }
 }
 
 void BackgroundDetector::detect(const ImageView& image, const FrameContext& frame, Profile& out) {
@@ -105,6 +173,15 @@ void BackgroundDetector::detect(const ImageView& image, const FrameContext& fram
 
 void BackgroundDetector::select_line(const ImageView& image, Profile& out) {
   frontend_.select_line(out);
+  // Where this frame's line is, for when it is a background the scene did not move away from.
+  if (newest_ >= 0) {
+    History& h = history_[static_cast<std::size_t>(newest_)];
+    for (const ProfilePoint& p : out.points()) {
+      if (!p.valid || p.u < 0 || p.u >= width_) continue;
+      h.line[static_cast<std::size_t>(p.u)] = p.v;
+      ++h.line_points;
+    }
+  }
   measure_line_width(image);
 }
 
@@ -233,20 +310,24 @@ void BackgroundDetector::collect_candidates(const ImageView& image, const FrameC
     if (h.usable) h.to_history = h.to_history.after(to_previous);
   }
   if (frame.laser_on) {
-    const History* background = choose_background(image);
-    if (background != nullptr) {
-      const ImageView rows{background->rows.data(), width_, band_rows_, width_};
+    const Background background = choose_background(image);
+    if (background.history != nullptr) {
+      const History& h = *background.history;
+      if (background.own_line_removed) remove_own_line(h);
+      const ImageView rows{background.own_line_removed ? own_line_removed_.data() : h.rows.data(),
+                           width_, band_rows_, width_};
       // Current pixel -> the background frame -> row within the kept band.
-      Homography to_band = background->to_history;
+      Homography to_band = h.to_history;
       for (int i = 0; i < 3; ++i)
         to_band.h(1, i) -= band_first_ * to_band.h(2, i);
-      frontend_.set_frame_minus_background(image, rows, to_band);
+      frontend_.set_frame_minus_background(image, rows, to_band, !background.own_line_removed);
     } else {
       frontend_.set_frame(image);
     }
     frontend_.collect_candidates(out);
-    if (background != nullptr) {
-      out.set_background(static_cast<std::int64_t>(background->sequence), !background->laser_on);
+    if (background.history != nullptr) {
+      out.set_background(static_cast<std::int64_t>(background.history->sequence),
+                         !background.history->laser_on, background.own_line_removed);
     }
   }
   // This frame joins the history, in place of the oldest.
@@ -257,6 +338,8 @@ void BackgroundDetector::collect_candidates(const ImageView& image, const FrameC
   h.laser_on = frame.laser_on;
   h.usable = true;
   h.to_history = Homography{};
+  std::fill(h.line.begin(), h.line.end(), std::numeric_limits<float>::quiet_NaN());
+  h.line_points = 0;
 }
 
 }  // namespace laserline::pipeline

@@ -61,11 +61,16 @@ struct FrontendOptions {
 struct BackgroundOptions {
   // Frames kept as candidate backgrounds (the newest first): the most recent one exposed with the
   // laser off; else the most recent one the scene moved far enough from (its motion chained
-  // frame to frame); else none, and the frame is searched as it is (as `fir`).
+  // frame to frame); else (remove_own_line) the most recent one with its own line taken out;
+  // else none, and the frame is searched as it is (as `fir`).
   int history_frames = 8;
   // How far the scene must have moved across the line, in laser line widths (the width the
   // calibration gives where the line is).
   double min_motion_widths = 1.0;
+  // A camera holding still (hovering, a fixed rig, a turntable) or just setting off: the newest
+  // frame is subtracted all the same, its own line taken out where it found it, and nothing
+  // subtracted where it did not. (Not where the water glows in front of the line.)
+  bool remove_own_line = true;
 
   // Throws OptionError (pipeline/options.hpp) naming the first field outside what the pipeline
   // supports.

@@ -351,15 +351,17 @@ struct SourceRow {
 
 void Frontend::set_frame(const ImageView& current) {
   current_ = current;
-  subtracting_ = false;
+  subtracting_ = fit_with_background_ = false;
 }
 
 void Frontend::set_frame_minus_background(const ImageView& current, const ImageView& background,
-                                          const Homography& current_to_background) {
+                                          const Homography& current_to_background,
+                                          bool fit_with_background) {
   current_ = current;
   background_ = background;
   to_background_ = current_to_background;
   subtracting_ = true;
+  fit_with_background_ = fit_with_background;
 }
 
 void Frontend::normalise_row(Part& part, int r, std::uint16_t* out) {

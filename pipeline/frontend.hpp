@@ -99,9 +99,12 @@ class Frontend {
   // texture moving in) are clipped to 0: the laser only adds light. The background may be any
   // image (e.g. a band of rows of the previous frame): the homography says where a current pixel
   // is in it. The warp is evaluated exactly once per block of kWarpBlock pixels and as a
-  // translation within it (error bound at kWarpBlock).
+  // translation within it (error bound at kWarpBlock). fit_with_background false: the sub-pixel
+  // fit reads the frame itself (a background whose own line was taken out holds an estimate of
+  // the surface under that line, good enough to find the line against, not to centre it).
   void set_frame_minus_background(const ImageView& current, const ImageView& background,
-                                  const Homography& current_to_background);
+                                  const Homography& current_to_background,
+                                  bool fit_with_background = true);
 
   // Candidates only in `region` (search coordinates; DetectionRegion::whole(): everywhere), from
   // the next pass on: only its columns are searched, and only the normalised rows that reach its
@@ -334,6 +337,7 @@ class Frontend {
   ImageView current_{};
   ImageView background_{};
   bool subtracting_ = false;
+  bool fit_with_background_ = false;  // subtracting_, and the fit reads the background too
   Homography to_background_;
 
   // The pass goes down the rows in blocks of kRowBlock and, within a block, across the image in

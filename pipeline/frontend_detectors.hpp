@@ -73,9 +73,29 @@ class BackgroundDetector final : public Detector {
     bool laser_on = false;
     bool usable = false;    // its motion to the current frame is known
     Homography to_history;  // a current frame's pixel -> where it was in this frame
+    // Per epipolar line: where this frame's own line was found, NaN where it was not; and on
+    // how many lines it was.
+    std::vector<float> line;
+    int line_points = 0;
   };
-  // The background for the current frame `image` (nullptr: none).
-  const History* choose_background(const ImageView& image) const;
+  // The background for the current frame `image`: none (history nullptr), a kept frame as it
+  // is, or the newest kept frame less its own line.
+  struct Background {
+    const History* history = nullptr;
+    bool own_line_removed = false;
+  };
+  Background choose_background(const ImageView& image) const;
+  // `h`'s rows into own_line_removed_: about its line (a band of twice the width the line moves
+  // by, plus a row either side), no brighter than the brighter of the rows just beyond (the
+  // surface there, without the laser's light); on epipolar lines where it found no line, or where
+  // the band leaves the rows kept, 0 (nothing is subtracted there: a line it missed would
+  // otherwise take this frame's away, and the next frame's, for as long as the scene holds).
+  void remove_own_line(const History& h);
+  // Whether subtracting `h` from `image` takes away more of what lies beside the line than it
+  // adds: beside the points where the line was last found, the frame less the warped background
+  // against the frame less itself two line widths along (texture and noise). Where the scene holds
+  // still, texture cancels; where it is dark and plain, the background only adds its noise.
+  bool subtraction_clears(const History& h, const ImageView& image) const;
   // How far the scene moved across the line between `h` and the current frame, in line widths,
   // at the points where the line was last seen (or across the rows searched): the least, and the
   // least toward the far side of the line (negative where it moved toward the near side).
@@ -100,6 +120,8 @@ class BackgroundDetector final : public Detector {
   // The current frame's kept rows, copied in parts while its detection runs; then a History's
   // (the buffers are swapped).
   std::vector<std::uint8_t> incoming_;
+  std::vector<std::uint8_t> own_line_removed_;  // remove_own_line()'s rows
+  std::vector<std::uint8_t> line_kept_;         // remove_own_line(): per line, 0xff or 0
   PartRunner* runner_ = &one_part();
   int parts_ = 1;
   int newest_ = -1;                       // index in history_ of the last frame kept

@@ -256,10 +256,11 @@ float Frontend::refine_row(int u, float v_guess) const {
   // Where the background does not lie under every sample the fit may read (at the frame's edge,
   // after motion), the fit is made on the frame itself: a sample with nothing to subtract is 0, and
   // a fit through such samples lands on the window's first row, off the line.
-  const ColumnSampler with_background(current_, subtracting_ ? &background_ : nullptr,
+  const ColumnSampler with_background(current_, fit_with_background_ ? &background_ : nullptr,
                                       to_background_, u, centre);
-  const bool covered = subtracting_ && with_background.covers(std::max(lo - 2 * edge - 2, 0),
-                                                              std::min(hi + 2 * edge + 2, last));
+  const bool covered =
+      fit_with_background_ &&
+      with_background.covers(std::max(lo - 2 * edge - 2, 0), std::min(hi + 2 * edge + 2, last));
   const ColumnSampler at(current_, covered ? &background_ : nullptr, to_background_, u, centre);
 
   // The samples of the search window are kept for the fit below (its inner samples are usually
@@ -285,7 +286,7 @@ float Frontend::refine_row(int u, float v_guess) const {
   // A clipped core (real green lasers saturate): the centre of the run, located on its flanks.
   if (current_.at(u, best) >= options_.saturation_level) {
     return clipped_core_centre(current_, u, best, options_.saturation_level,
-                               subtracting_ ? &with_background : nullptr);
+                               fit_with_background_ ? &with_background : nullptr);
   }
 
   // Gaussian 3-point fit (exact for a sampled Gaussian) on samples about one sigma apart, so a
@@ -373,7 +374,7 @@ float Frontend::refine_row(int u, float v_guess) const {
   // surface), less than its flank on a darker side: the brightest sample and the fit are on that
   // flank, and the run beside it is the line's core.
   const int fitted_row = std::clamp(static_cast<int>(std::lround(fitted)), 0, last);
-  if (subtracting_ && current_.at(u, fitted_row) >= options_.saturation_level) {
+  if (fit_with_background_ && current_.at(u, fitted_row) >= options_.saturation_level) {
     return clipped_core_centre(current_, u, fitted_row, options_.saturation_level,
                                &with_background);
   }
@@ -391,7 +392,7 @@ void Frontend::refine(std::span<ProfilePoint> points, std::size_t count) {
 }
 
 void Frontend::refine_range(std::span<ProfilePoint> points, std::size_t first, std::size_t end) {
-  if (!subtracting_ || glowing_) {
+  if (!fit_with_background_ || glowing_) {
     for (std::size_t k = first; k < end; ++k)
       points[refine_points_[k]].v = refine_row(refine_columns_[k], refine_guesses_[k]);
     return;

@@ -36,6 +36,7 @@ class Profile {
       : axes_(other.axes_),
         background_sequence_(other.background_sequence_),
         background_laser_off_(other.background_laser_off_),
+        background_line_removed_(other.background_line_removed_),
         overflowed_(other.overflowed_) {
     points_.reserve(other.capacity());
     points_ = other.points_;
@@ -47,6 +48,7 @@ class Profile {
       axes_ = other.axes_;
       background_sequence_ = other.background_sequence_;
       background_laser_off_ = other.background_laser_off_;
+      background_line_removed_ = other.background_line_removed_;
       overflowed_ = other.overflowed_;
     }
     return *this;
@@ -59,6 +61,7 @@ class Profile {
     overflowed_ = false;
     background_sequence_ = -1;
     background_laser_off_ = false;
+    background_line_removed_ = false;
   }
   // Adds a point unless full; returns false (and marks the overflow) when full.
   bool add(const ProfilePoint& point) {
@@ -88,12 +91,15 @@ class Profile {
   bool overflowed() const { return overflowed_; }
 
   // The frame subtracted as the background (paper III-A): its sequence number, -1 for none (the
-  // frame was searched as it is), and whether it was exposed with the laser off.
+  // frame was searched as it is), whether it was exposed with the laser off, and whether its own
+  // laser line was taken out of it first (the scene had not moved away from that line).
   std::int64_t background_sequence() const { return background_sequence_; }
   bool background_laser_off() const { return background_laser_off_; }
-  void set_background(std::int64_t sequence, bool laser_off) {
+  bool background_line_removed() const { return background_line_removed_; }
+  void set_background(std::int64_t sequence, bool laser_off, bool line_removed = false) {
     background_sequence_ = sequence;
     background_laser_off_ = laser_off;
+    background_line_removed_ = line_removed;
   }
 
   // How (u, v) of the points map to the frame's pixels; set by the detector.
@@ -109,6 +115,7 @@ class Profile {
   SearchAxes axes_;
   std::int64_t background_sequence_ = -1;
   bool background_laser_off_ = false;
+  bool background_line_removed_ = false;
   bool overflowed_ = false;
 };
 

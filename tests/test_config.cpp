@@ -177,6 +177,12 @@ TEST(Config, DetectorOptionsTakeThePipelinesRanges) {
             "test.yaml:2: detector.frontend.max_depth_m: must be above min_depth_m");
   EXPECT_EQ(error_of("detector:\n  background:\n    history_frames: 0\n"),
             "test.yaml:3: detector.background.history_frames: must be between 1 and 64, got 0");
+  EXPECT_FALSE(parse_config(hal::load_yaml_text(
+                                "detector: {background: {remove_own_line: false}}\n", "test.yaml"),
+                            "test.yaml")
+                   .detector_options.background.remove_own_line);
+  EXPECT_EQ(error_of("detector:\n  background: {remove_own_line: 1}\n"),
+            "test.yaml:2: detector.background.remove_own_line: must be true or false, got '1'");
 }
 
 TEST(Config, CameraMotionOptions) {
