@@ -124,6 +124,57 @@ TEST(Kernels, DifferenceRowMatchesTheReference) {
   });
 }
 
+// A still camera: the frame's columns fall on the background's own, the last one on its last
+// column, whose right neighbours (weight 0 there; at most a pixel beyond it) are taken as it is.
+// Every pixel, the last included, is the frame less the background, on every target.
+TEST(Kernels, DifferenceOfAStillFrameReachesTheLastColumn) {
+  for_each_target([] {
+    constexpr int kWarp = WarpRow::kWarpBlock;
+    for (const int width : {64, 77, 250}) {
+      const int blocks = (width + kWarp - 1) / kWarp, height = 4;
+      std::vector<std::uint8_t> background(static_cast<std::size_t>(width) * height);
+      for (std::size_t i = 0; i < background.size(); ++i)
+        background[i] = static_cast<std::uint8_t>(40 + i % 97);
+      std::vector<std::uint8_t> frame(background.begin(), background.begin() + width);
+      for (std::uint8_t& value : frame)
+        value = static_cast<std::uint8_t>(value + 20);
+      std::vector<std::int32_t> left(blocks), top(blocks, 0), whole(blocks), offset(blocks);
+      std::vector<std::int32_t> w00(blocks, kFixedOne), w01(blocks, 0), w10(blocks, 0),
+          w11(blocks, 0);
+      int partial = 0;
+      for (int j = 0; j < blocks; ++j) {
+        left[j] = j * kWarp;
+        whole[j] = std::min(kWarp, width - j * kWarp) == kWarp && left[j] + kWarp <= width - 1;
+        partial += 1 - whole[j];
+        offset[j] = left[j];
+      }
+      std::vector<std::uint16_t> out(width, 7);
+      const WarpRow warp{frame.data(),
+                         frame.data(),
+                         0,
+                         0,
+                         out.data(),
+                         background.data(),
+                         width,
+                         left.data(),
+                         top.data(),
+                         whole.data(),
+                         offset.data(),
+                         w00.data(),
+                         w01.data(),
+                         w10.data(),
+                         w11.data(),
+                         blocks,
+                         width,
+                         width - 1,
+                         height - 1,
+                         partial};
+      difference_row(warp);
+      ASSERT_EQ(out, std::vector<std::uint16_t>(width, 20 * kFixedOne)) << "width " << width;
+    }
+  });
+}
+
 // Homographies near the identity (rolls, shifts, some perspective), and degenerate ones: a
 // denominator through 0 (infinite and NaN positions), positions far outside.
 TEST(Kernels, WarpBlocksMatchTheReference) {

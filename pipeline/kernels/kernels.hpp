@@ -231,6 +231,18 @@ void difference_row(const WarpRow& row);
 int warp_blocks(const WarpLine& line, int first, int end, const WarpBlocks& out);
 // Pixels [u, u + count) of a row against background rows p (under pixel u) and p + stride.
 void difference_pixels(const WarpRow& row, int u, const std::uint8_t* p, int block, int count);
+// Pixel u against a background whose last column p is (its right neighbours taken to be as p, the
+// border replicated: under a still camera the frame's last column falls on the background's
+// own, less than a pixel short of the column beyond it that bilinear weights read).
+void difference_last_column(const WarpRow& row, int u, const std::uint8_t* p, int block);
+// Of a block partly outside the background (left ix, top iy, `count` pixels from u0): its pixels
+// [first, end) have their four neighbours inside; the pixel at `end`, when it lies on the
+// background's last column, its left two. Neither: no signal (0).
+struct PartialBlock {
+  int first = 0, end = 0;
+  bool last_column = false;
+};
+PartialBlock partial_block(const WarpRow& row, int ix, int iy, int count);
 int band_pass_row(std::uint16_t* inner, const std::uint16_t* inner_in,
                   const std::uint16_t* inner_out, std::uint16_t* outer,
                   const std::uint16_t* outer_in, const std::uint16_t* outer_out, std::uint16_t a,

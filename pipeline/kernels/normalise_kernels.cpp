@@ -98,17 +98,15 @@ void DifferenceRow(const WarpRow& row) {
     const int u0 = j * kWarp;
     const int count = std::min(kWarp, row.width - u0);
     const int ix = row.left[j], iy = row.top[j];
-    const bool rows_inside = iy >= 0 && iy < row.last_row;
-    const int f = rows_inside ? std::clamp(-ix, 0, count) : count;
-    const int e = rows_inside ? std::clamp(row.last_column - ix, f, count) : count;
+    const auto [f, e, last_column] = reference::partial_block(row, ix, iy, count);
     std::fill(row.out + u0, row.out + u0 + f, std::uint16_t{0});
     std::fill(row.out + u0 + e, row.out + u0 + count, std::uint16_t{0});
+    const std::uint8_t* p = row.background + static_cast<std::ptrdiff_t>(iy) * row.stride + ix;
     if (f < e) {
       // (Narrower vectors: the part of a block inside is often short.)
-      DifferencePixels(hn::CappedTag<std::uint16_t, 8>(), row, u0 + f,
-                       row.background + static_cast<std::ptrdiff_t>(iy) * row.stride + ix + f, j,
-                       e - f);
+      DifferencePixels(hn::CappedTag<std::uint16_t, 8>(), row, u0 + f, p + f, j, e - f);
     }
+    if (last_column) reference::difference_last_column(row, u0 + e, p + e, j);
   }
 }
 
@@ -284,17 +282,29 @@ void difference_row(const WarpRow& row) {
       continue;
     }
     const int ix = row.left[j], iy = row.top[j];
-    const bool rows_inside = iy >= 0 && iy < row.last_row;
-    const int f = rows_inside ? std::clamp(-ix, 0, count) : count;
-    const int e = rows_inside ? std::clamp(row.last_column - ix, f, count) : count;
+    const auto [f, e, last_column] = partial_block(row, ix, iy, count);
     std::fill(row.out + u0, row.out + u0 + f, std::uint16_t{0});
     std::fill(row.out + u0 + e, row.out + u0 + count, std::uint16_t{0});
-    if (f < e) {
-      difference_pixels(row, u0 + f,
-                        row.background + static_cast<std::ptrdiff_t>(iy) * row.stride + ix + f, j,
-                        e - f);
-    }
+    const std::uint8_t* p = row.background + static_cast<std::ptrdiff_t>(iy) * row.stride + ix;
+    if (f < e) difference_pixels(row, u0 + f, p + f, j, e - f);
+    if (last_column) difference_last_column(row, u0 + e, p + e, j);
   }
+}
+
+PartialBlock partial_block(const WarpRow& row, int ix, int iy, int count) {
+  if (iy < 0 || iy >= row.last_row) return {count, count, false};
+  const int first = std::clamp(-ix, 0, count);
+  const int end = std::clamp(row.last_column - ix, first, count);
+  return {first, end, end < count && ix + end == row.last_column && ix + end >= 0};
+}
+
+void difference_last_column(const WarpRow& row, int u, const std::uint8_t* p, int block) {
+  const auto fa = static_cast<std::uint16_t>(kFixedOne - row.fb);
+  const auto j = static_cast<std::size_t>(block);
+  const auto current = static_cast<std::uint16_t>(row.a[u] * fa + row.b[u] * row.fb);
+  const auto warped = static_cast<std::uint16_t>(p[0] * (row.w00[j] + row.w01[j]) +
+                                                 p[row.stride] * (row.w10[j] + row.w11[j]));
+  row.out[u] = rounded(current > warped ? current - warped : 0u, row.shift);
 }
 
 }  // namespace reference
