@@ -1,3 +1,6 @@
+// The simulator's scenarios, their scoring against its ground truth, the turbidity sweep (the
+// paper's Fig. 7) and overlays: what laserline-evaluate and the scenario tests share.
+// Over 600 lines: the scenarios' table alone is about 300 lines of data.
 #include "tools/evaluation.hpp"
 
 #include <algorithm>
