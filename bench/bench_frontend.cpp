@@ -411,28 +411,40 @@ void BM_naive_search_image(benchmark::State& state, const char* scenario) {
 BENCHMARK_CAPTURE(BM_naive_search_image, rows, "beside")->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(BM_naive_search_image, oblique, "oblique")->Unit(benchmark::kMillisecond);
 
-// The whole detector as the daemon makes it (make_detector: search axes, triangulation) on a
-// scenario's consecutive frames, so that a laser across the image (`clean`: epipolar lines along
-// the columns), beside the camera (`beside`: along the rows, the frame transposed) and turned
-// (`oblique`: sampled along slanted lines) can be compared.
-void BM_frontend_made_detector(benchmark::State& state, const char* scenario) {
+// `background` as the daemon makes it (make_detector: search axes, triangulation) over two
+// consecutive frames of a scenario, in turn; `options` with the scenario's geometry. The share of
+// frames that subtracted the previous frame less its own line into `line_removed`.
+void run_made_detector(benchmark::State& state, const char* scenario,
+                       pipeline::DetectorOptions options, double* line_removed = nullptr) {
   const hal::SimSceneOptions scene = scenario_scene(scenario);
   hal::SimScene sim(scene);
   std::vector<std::uint8_t> a(sim.format().bytes()), b(sim.format().bytes());
   sim.render(10, true, a);
   sim.render(11, true, b);
-  pipeline::DetectorOptions o;
-  o.geometry = daemon::scanner_geometry(scene.calibration);
-  const std::unique_ptr<pipeline::Detector> detector = pipeline::make_detector("background", o);
+  options.geometry = daemon::scanner_geometry(scene.calibration);
+  const std::unique_ptr<pipeline::Detector> detector =
+      pipeline::make_detector("background", options);
   detector->reset(kWidth, kHeight);
   pipeline::Profile profile(detector->max_points(kWidth, kHeight));
-  std::uint64_t sequence = 0;
+  std::uint64_t sequence = 0, removed = 0;
   for (auto _ : state) {
     detector->detect(view(sequence % 2 == 0 ? a : b), {sequence, true}, profile);
     ++sequence;
+    removed += profile.background_line_removed() ? 1 : 0;
     benchmark::DoNotOptimize(profile.points().data());
   }
   state.counters["points"] = static_cast<double>(profile.size());
+  if (line_removed != nullptr) {
+    *line_removed =
+        static_cast<double>(removed) / static_cast<double>(std::max<std::uint64_t>(sequence, 1));
+  }
+}
+
+// The whole detector on a laser across the image (`clean`: epipolar lines along the columns),
+// beside the camera (`beside`: along the rows, the frame transposed) and turned (`oblique`:
+// sampled along slanted lines), to be compared.
+void BM_frontend_made_detector(benchmark::State& state, const char* scenario) {
+  run_made_detector(state, scenario, {});
 }
 BENCHMARK_CAPTURE(BM_frontend_made_detector, columns, "clean")->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(BM_frontend_made_detector, rows, "beside")->Unit(benchmark::kMillisecond);
@@ -442,27 +454,11 @@ BENCHMARK_CAPTURE(BM_frontend_made_detector, oblique, "oblique")->Unit(benchmark
 // away from, so the previous frame less its own line (argument 1) or none, the frame searched as
 // it is (0): what taking the line out costs.
 void BM_frontend_background_still_camera(benchmark::State& state) {
-  const hal::SimSceneOptions scene = scenario_scene("hover-daylight");
-  hal::SimScene sim(scene);
-  std::vector<std::uint8_t> a(sim.format().bytes()), b(sim.format().bytes());
-  sim.render(10, true, a);
-  sim.render(11, true, b);
-  pipeline::DetectorOptions o;
-  o.geometry = daemon::scanner_geometry(scene.calibration);
-  o.background.remove_own_line = state.range(0) != 0;
-  const std::unique_ptr<pipeline::Detector> detector = pipeline::make_detector("background", o);
-  detector->reset(kWidth, kHeight);
-  pipeline::Profile profile(detector->max_points(kWidth, kHeight));
-  std::uint64_t sequence = 0, line_removed = 0;
-  for (auto _ : state) {
-    detector->detect(view(sequence % 2 == 0 ? a : b), {sequence, true}, profile);
-    ++sequence;
-    line_removed += profile.background_line_removed() ? 1 : 0;
-    benchmark::DoNotOptimize(profile.points().data());
-  }
-  state.counters["points"] = static_cast<double>(profile.size());
-  state.counters["line_removed"] =
-      static_cast<double>(line_removed) / static_cast<double>(std::max<std::uint64_t>(sequence, 1));
+  pipeline::DetectorOptions options;
+  options.background.remove_own_line = state.range(0) != 0;
+  double line_removed = 0;
+  run_made_detector(state, "hover-daylight", options, &line_removed);
+  state.counters["line_removed"] = line_removed;
 }
 BENCHMARK(BM_frontend_background_still_camera)->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond);
 
