@@ -66,8 +66,9 @@ with N added to its seed; the table above is seed 0, the one the tests hold. The
 $seed_table
 
 Where it falls short is \`hover-daylight\` on some draws: holding station in daylight nothing moves
-between frames, so no background can be subtracted (\`hover-daylight-alternate\`, the laser off every
-other frame, has one). Where the line runs along the rim of a bright patch, or through a narrow dark gap beside
+between frames, so the previous frame is subtracted less its own line, and about that line the
+surface is only estimated from the rows beside it (\`hover-daylight-alternate\`, the laser off every
+other frame, has the surface itself). Where the line runs along the rim of a bright patch, or through a narrow dark gap beside
 one, it adds only a few grey levels to the rim's rise and the band-pass, whose outer box sees the
 patch, has no candidate there: nearly every column missed has none within 2 px. Most of the points
 counted false are the line itself 2 to 5 px off, along such rims; a stretch of still texture where
