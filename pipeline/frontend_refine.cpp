@@ -58,7 +58,7 @@ class ColumnSampler {
     const float x = x0_ + dx_ * k, y = y0_ + dy_ * k;
     if (!inside(x, y)) return 0.0f;
     // (A select that compiles to maxss: as a branch its random outcome mispredicts.)
-    const float difference = value - bilinear(*background_, x, y);
+    const float difference = value - background_at(x, y);
     return difference > 0.0f ? difference : 0.0f;
   }
 
@@ -96,8 +96,19 @@ class ColumnSampler {
   Line line() const { return {x0_, y0_, dx_, dy_}; }
 
  private:
-  // The four neighbours of background position (x, y) lie inside the background.
-  bool inside(float x, float y) const { return x >= 0.0f && x < x_max_ && y >= 0.0f && y < y_max_; }
+  // The four neighbours of background position (x, y) lie inside the background, or the left two
+  // on its last column (the right two taken as they are, as the difference kernel does:
+  // kernels::reference::difference_last_column()).
+  bool inside(float x, float y) const {
+    return x >= 0.0f && x < x_max_ + 1.0f && y >= 0.0f && y < y_max_;
+  }
+  float background_at(float x, float y) const {
+    if (x < x_max_) return bilinear(*background_, x, y);
+    const auto iy = static_cast<int>(y);
+    const float fy = y - static_cast<float>(iy);
+    const std::uint8_t* p = background_->row(iy) + background_->width - 1;
+    return p[0] + fy * (static_cast<float>(p[background_->stride]) - p[0]);
+  }
 
   const ImageView& current_;
   const ImageView* background_;
