@@ -151,6 +151,7 @@ void read_detector_options(hal::YamlMap& detector, pipeline::DetectorOptions& op
   read(frontend, "noise_columns", f.noise_columns);
   read(frontend, "noise_side_ratio", f.noise_side_ratio);
   read(frontend, "snr_threshold_db", f.snr_threshold_db);
+  read(frontend, "snr_hysteresis_db", f.snr_hysteresis_db);
   read(frontend, "max_candidates_per_column", f.max_candidates_per_column);
   read(frontend, "saturation_level", f.saturation_level);
   pipeline::LineSelectionOptions& l = f.selection;

@@ -42,6 +42,11 @@ struct FrontendOptions {
   // differ so much between the sides. 0: always the whole window (paper III-D).
   double noise_side_ratio = 8.0;
   double snr_threshold_db = 6.0;  // III-E: paper 3 - 6 dB
+  // Hysteresis in time: within selection.previous_tolerance_px of where the previous frame found
+  // the line, a candidate needs this much less SNR. The line stays where it was while clutter
+  // beside it (a caustic, a texture ridge moving past) fills its noise window and pulls its SNR
+  // under the threshold for a few frames; elsewhere the threshold keeps noise out. 0: none.
+  double snr_hysteresis_db = 6.0;
   int max_candidates_per_column = 16;
   // A run at or above this is a clipped core: its centre is the peak. Below 255: a camera's
   // processing (white balance after the sensor clipped, lossy compression) leaves clipped pixels a

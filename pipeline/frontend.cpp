@@ -246,6 +246,7 @@ void Frontend::reset(int width, int height) {
   chosen_.assign(static_cast<std::size_t>(width), -1);
   selector_.reset(width, options_.max_candidates_per_column);
   probe_count_ = 0;
+  previous_line_.assign(static_cast<std::size_t>(width), kNoPreviousLine);
   refine_columns_.assign(static_cast<std::size_t>(width), 0);
   refine_guesses_.assign(static_cast<std::size_t>(width), 0.0f);
   refine_points_.assign(static_cast<std::size_t>(width), 0);
@@ -542,8 +543,13 @@ void Frontend::select_line(Profile& out) {
     ++waiting;
   }
   refine(points, waiting);
-  // Where the line is now: where the next frame looks for the glow (and the background detector
-  // measures the motion across the line).
+  // Where the line is now: where the next frame's threshold is lower (hysteresis), where it looks
+  // for the glow (and the background detector measures the motion across the line).
+  std::fill(previous_line_.begin(), previous_line_.end(), kNoPreviousLine);
+  for (std::size_t k = 0; k < waiting; ++k) {
+    const ProfilePoint& p = points[refine_points_[k]];
+    previous_line_[static_cast<std::size_t>(p.u)] = p.v;
+  }
   if (waiting > 0) {
     const std::size_t step = std::max<std::size_t>(1, waiting / kProbes);
     probe_count_ = 0;

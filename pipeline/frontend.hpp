@@ -1,8 +1,10 @@
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <span>
 #include <type_traits>
 #include <vector>
@@ -134,6 +136,7 @@ class Frontend {
   void forget_previous_frame() {
     selector_.forget();
     probe_count_ = 0;
+    std::fill(previous_line_.begin(), previous_line_.end(), kNoPreviousLine);
   }
 
   // Whether the water in front of the surface glows (backscatter) in `frame` (the original
@@ -317,6 +320,10 @@ class Frontend {
   bool glowing_ = false;  // the frame's water glows in front of the line (water_glows())
   std::array<std::array<float, 2>, kProbes> probes_{};
   std::size_t probe_count_ = 0;
+  // Per epipolar line: the previous frame's point on it (original pixels), where the SNR
+  // threshold is lower by snr_hysteresis_db; kNoPreviousLine none.
+  static constexpr float kNoPreviousLine = std::numeric_limits<float>::quiet_NaN();
+  std::vector<float> previous_line_;
   int margin_ = 6;  // normalised rows beyond the depth range on each side (for the filters)
   float noise_norm_ = 1;
   double noise_side_ratio_ = 0;

@@ -90,7 +90,9 @@ struct Frontend::RollPass {
   int edge = 0;            // rows nearer the ends are outside the depth range: no candidates there
   bool near_down = false;  // glow below the line (see water_glows())
   std::size_t image_stride = 0;
-  float threshold = 0;      // SNR, as an amplitude ratio
+  float threshold = 0;            // SNR, as an amplitude ratio
+  float near_line_threshold = 0;  // ... within near_line_px of the previous frame's line
+  float near_line_px = 0;
   Lane lane_threshold = 0;  // in band-pass units: at or above it where the band-pass is
   float unit = 1;           // grey levels of a band-pass unit
   Sum a = 0, b = 0;         // the band-pass coefficients
@@ -146,6 +148,9 @@ LASERLINE_ROW_KERNEL Frontend::RollPass<Lane> Frontend::roll_pass() const {
   pass.near_down = rows_.near_side() > 0;
   pass.image_stride = static_cast<std::size_t>(stride_);
   pass.threshold = std::pow(10.0f, static_cast<float>(options_.snr_threshold_db) / 20.0f);
+  pass.near_line_threshold =
+      pass.threshold / std::pow(10.0f, static_cast<float>(options_.snr_hysteresis_db) / 20.0f);
+  pass.near_line_px = static_cast<float>(options_.selection.previous_tolerance_px);
   // (Beyond the lanes' range, as a high threshold in 16-bit lanes can be: never reached.)
   const float lanes = std::ceil(pass.threshold / band_unit_);
   constexpr Lane kMostLane = std::numeric_limits<Lane>::max();
@@ -364,7 +369,11 @@ LASERLINE_ROW_KERNEL void Frontend::row_candidates(const RollPass<Lane>& pass,
     const float snr = value / noise_level_at;
     // (A short clipped run is taken whatever its SNR: texture ridges beside the laser's crossing
     // of a bright patch raise the noise measured around it far above the light clipping left.)
-    if (!(snr >= pass.threshold) && strip.peak_clipped[k] == 0) continue;
+    const bool near_line =
+        std::abs(rows_.source_row(r) - previous_line_[static_cast<std::size_t>(u)]) <=
+        pass.near_line_px;  // (false where there was none: NaN)
+    const float snr_needed = near_line ? pass.near_line_threshold : pass.threshold;
+    if (!(snr >= snr_needed) && strip.peak_clipped[k] == 0) continue;
     // A ridge, not an edge: the band-pass an eighth of the peak below zero on both sides (a
     // line gives a half to three quarters, a line lying on a texture edge less on the edge's
     // bright side; an edge nothing on its bright side).

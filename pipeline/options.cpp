@@ -115,6 +115,7 @@ void FrontendOptions::validate() const {
                       "must be 0 (off) or between 1 and 1000, got " + text(noise_side_ratio));
   }
   within("snr_threshold_db", snr_threshold_db, 0.0, 60.0);
+  within("snr_hysteresis_db", snr_hysteresis_db, 0.0, 60.0);
   // Candidates are counted per column in a byte.
   within("max_candidates_per_column", max_candidates_per_column, 1, 255);
   within("saturation_level", saturation_level, 1, 255);

@@ -173,6 +173,13 @@ TEST(Config, DetectorOptionsTakeThePipelinesRanges) {
                 "test.yaml")
                 .detector_options.frontend.noise_side_ratio,
             0.0);
+  EXPECT_EQ(error_of("detector:\n  frontend:\n    snr_hysteresis_db: -1\n"),
+            "test.yaml:3: detector.frontend.snr_hysteresis_db: must be between 0 and 60, got -1");
+  EXPECT_EQ(parse_config(
+                hal::load_yaml_text("detector: {frontend: {snr_hysteresis_db: 0}}\n", "test.yaml"),
+                "test.yaml")
+                .detector_options.frontend.snr_hysteresis_db,
+            0.0);
   EXPECT_EQ(error_of("detector:\n  frontend: {min_depth_m: 3}\n"),
             "test.yaml:2: detector.frontend.max_depth_m: must be above min_depth_m");
   EXPECT_EQ(error_of("detector:\n  background:\n    history_frames: 0\n"),

@@ -231,6 +231,50 @@ TEST(Frontend, AnEdgeBesideTheLineIsNoNoiseOnIt) {
   EXPECT_LE(passing(0.0), 0.05);
 }
 
+// A line at row 128, then the same line with two narrow ridges 3.5 px either side of it (clutter
+// passing by: caustics, texture moving past), whose band-pass in the noise window pulls the line's
+// SNR from 19 to 3.5 dB, between 0 and 6 (the noise is 0 to 3 grey levels). Alone, the cluttered
+// frame has no candidate on the line; after the clear frame it does, within previous_tolerance_px
+// of where that frame found the line (hysteresis in time), and the line is chosen.
+TEST(Frontend, ALineClutterHidesIsKeptWhereThePreviousFrameFoundIt) {
+  const ScannerGeometry g = small_geometry();
+  auto render = [&](double clutter) {
+    Image image(g.width, g.height, 12);
+    std::uint32_t state = 7;
+    for (auto& p : image.pixels) {
+      state = state * 1664525u + 1013904223u;
+      p = static_cast<std::uint8_t>(p + (state >> 30));  // 0..3 grey levels
+    }
+    image.add_line([](int) { return 128.0; }, 24.0, 0.5);
+    for (const double side : {-3.5, 3.5})
+      image.add_line([&](int) { return 128.0 + side; }, clutter, 0.5);
+    return image;
+  };
+  const Image clear = render(0.0), cluttered = render(50.0);
+  // The share of columns whose chosen point is on the line, in the cluttered frame.
+  auto on_line = [&](double hysteresis_db, bool after_clear) {
+    FrontendOptions o;
+    o.snr_hysteresis_db = hysteresis_db;
+    Frontend frontend(g, o);
+    frontend.reset(g.width, g.height);
+    Profile out(static_cast<std::size_t>(g.width) * o.max_candidates_per_column);
+    if (after_clear) {
+      frontend.set_frame(clear.view());
+      frontend.find_candidates(out);
+    }
+    frontend.set_frame(cluttered.view());
+    frontend.find_candidates(out);
+    int found = 0;
+    for (const ProfilePoint& p : out.points())
+      found += p.valid && std::abs(p.v - 128.0) <= 1.0 ? 1 : 0;
+    return static_cast<double>(found) / g.width;
+  };
+  const double hysteresis = FrontendOptions{}.snr_hysteresis_db;
+  EXPECT_LE(on_line(hysteresis, false), 0.05);
+  EXPECT_LE(on_line(0.0, true), 0.05);
+  EXPECT_GE(on_line(hysteresis, true), 0.95);
+}
+
 // The pass goes down the rows in blocks and across in strips of columns, with running sums; the
 // same images computed directly, whole, from their definitions (III-C, III-D) must agree, across
 // strip edges and the cut-short boxes at the ends. `inner` and `outer` are the box sizes the
@@ -773,7 +817,7 @@ TEST(Accuracy, BackgroundSubtractionWinsUnderStrongAmbientLight) {
   // Where the maximum-value assumption fails, the brightest pixel visibly does, and the band-pass
   // on the frame itself (texture as bright as the laser, no background taken away) falls short.
   EXPECT_LT(score("ambient", "maxvalue").recall(), 0.6);
-  EXPECT_LT(score("ambient", "fir").recall(), 0.95);
+  EXPECT_LT(score("ambient", "fir").recall(), score("ambient", "background").recall() - 0.02);
 }
 
 TEST(Accuracy, ParallaxOnThePierLeavesFewFalsePoints) {

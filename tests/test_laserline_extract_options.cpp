@@ -507,8 +507,9 @@ TEST_F(LaserlineExtract, SheetWidthMeasuredWhereTheCalibrationMisstatesIt) {
     EXPECT_NE(said.find("times as wide as laser.sheet_width_m"), std::string::npos) << out;
     EXPECT_NE(said.find("--keep-sheet-width keeps"), std::string::npos) << out;
     EXPECT_GE(measured, right - 0.07) << stated;
-    // (A quarter as wide is held up by the pixel's own width, line_blur_px: 96 % kept.)
-    EXPECT_LT(kept, measured - (stated > 1.0 ? 0.05 : 0.02)) << stated;
+    // (A quarter as wide is held up by the pixel's own width, line_blur_px, and after the first
+    // frame by the threshold's hysteresis where that frame found the line: 98.7 % kept.)
+    EXPECT_LT(kept, measured - (stated > 1.0 ? 0.05 : 0.005)) << stated;
   }
 }
 
