@@ -9,10 +9,12 @@
 namespace laserline::tools {
 namespace {
 
-cv::Mat convert(const cv::Mat& raw, const std::string& channel, int clipped_from = 255) {
+cv::Mat convert(const cv::Mat& raw, const std::string& channel, int clipped_from = 255,
+                int sample_bits = 16) {
   cv::Mat out;
   std::string problem;
-  EXPECT_TRUE(to_laser_mono8(raw, hal::parse_laser_channel(channel), clipped_from, out, problem))
+  EXPECT_TRUE(to_laser_mono8(raw, hal::parse_laser_channel(channel), clipped_from, sample_bits, out,
+                             problem))
       << problem;
   EXPECT_EQ(out.type(), CV_8UC1);
   return out;
@@ -93,14 +95,39 @@ TEST(FrameChannel, MonoAnd16Bit) {
   EXPECT_EQ(convert(deep_colour, "red - green / 2").at<std::uint8_t>(0, 0), 128);
 }
 
+// A 12-bit camera's 16-bit file (samples 0..4095): its range onto 0..255, larger samples at the
+// top; the bits found from the largest sample.
+TEST(FrameChannel, SixteenBitFilesOfFewerBits) {
+  cv::Mat twelve(1, 4, CV_16UC1);
+  twelve.at<std::uint16_t>(0, 0) = 4095;
+  twelve.at<std::uint16_t>(0, 1) = 2048;  // 127.5 -> 128
+  twelve.at<std::uint16_t>(0, 2) = 16;    // 0.996 -> 1
+  twelve.at<std::uint16_t>(0, 3) = 0;
+  EXPECT_EQ(significant_bits(twelve), 12);
+  const cv::Mat read = convert(twelve, "green", 255, 12);
+  EXPECT_EQ(read.at<std::uint8_t>(0, 0), 255);
+  EXPECT_EQ(read.at<std::uint8_t>(0, 1), 128);
+  EXPECT_EQ(read.at<std::uint8_t>(0, 2), 1);
+  EXPECT_EQ(read.at<std::uint8_t>(0, 3), 0);
+  EXPECT_EQ(convert(twelve, "green", 255, 16).at<std::uint8_t>(0, 0), 16);   // 4095 / 257
+  EXPECT_EQ(convert(twelve, "green", 255, 10).at<std::uint8_t>(0, 1), 255);  // beyond 10 bits
+  cv::Mat colour(1, 1, CV_16UC3, cv::Scalar(0, 0, 1023));  // red at the top of 10 bits
+  EXPECT_EQ(significant_bits(colour), 10);
+  EXPECT_EQ(convert(colour, "red", 255, 10).at<std::uint8_t>(0, 0), 255);
+  EXPECT_EQ(significant_bits(cv::Mat(2, 2, CV_16UC1, cv::Scalar(255))), 8);
+  EXPECT_EQ(significant_bits(cv::Mat(2, 2, CV_16UC1, cv::Scalar(16383))), 14);
+  EXPECT_EQ(significant_bits(cv::Mat(2, 2, CV_16UC1, cv::Scalar(16384))), 16);
+  EXPECT_EQ(significant_bits(cv::Mat(2, 2, CV_8UC1, cv::Scalar(3))), 8);
+}
+
 TEST(FrameChannel, Problems) {
   cv::Mat out;
   std::string problem;
-  EXPECT_FALSE(to_laser_mono8(cv::Mat(), {}, 255, out, problem));
+  EXPECT_FALSE(to_laser_mono8(cv::Mat(), {}, 255, 16, out, problem));
   EXPECT_EQ(problem, "empty image");
-  EXPECT_FALSE(to_laser_mono8(cv::Mat(2, 2, CV_32FC1), {}, 255, out, problem));
+  EXPECT_FALSE(to_laser_mono8(cv::Mat(2, 2, CV_32FC1), {}, 255, 16, out, problem));
   EXPECT_EQ(problem, "unsupported pixel type (only 8 and 16 bit unsigned integers)");
-  EXPECT_FALSE(to_laser_mono8(cv::Mat(2, 2, CV_8UC(5)), {}, 255, out, problem));
+  EXPECT_FALSE(to_laser_mono8(cv::Mat(2, 2, CV_8UC(5)), {}, 255, 16, out, problem));
   EXPECT_EQ(problem, "unsupported number of channels (5)");
 }
 

@@ -154,6 +154,68 @@ TEST_F(LaserlineExtract, SaturatedColourAndSixteenBit) {
   }
 }
 
+// A 12-bit camera's frames in 16-bit PNG files (samples 0..4095 in the low bits): read on their
+// own range, as the same frames in 8 bit are; a frame that needs more bits raises them, and
+// --bit-depth fixes them.
+TEST_F(LaserlineExtract, SixteenBitFilesOfATwelveBitCamera) {
+  hal::SimScene scene(options_);
+  fs::create_directories(dir_ / "eight");
+  fs::create_directories(dir_ / "twelve");
+  for (int k = 0; k < 3; ++k) {
+    const cv::Mat frame = render(scene, k);
+    ASSERT_TRUE(cv::imwrite(path("eight/" + std::to_string(k) + ".png"), frame));
+    cv::Mat twelve;
+    frame.convertTo(twelve, CV_16U, 4095.0 / 255.0);
+    ASSERT_TRUE(cv::imwrite(path("twelve/" + std::to_string(k) + ".png"), twelve));
+  }
+  RunResult r = extract(path("eight"), "fir");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const Csv eight = read_csv(path("points.csv"));
+  r = extract(path("twelve"), "fir");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("0.png: 16-bit samples of at most 12 bits: read as 12-bit"),
+            std::string::npos)
+      << r.out;
+  const Csv twelve = read_csv(path("points.csv"));
+  ASSERT_EQ(twelve.frames.size(), 3u);
+  expect_frames_match(twelve, {{0, 0}, {1, 1}, {2, 2}}, scene);
+  for (long frame = 0; frame < 3; ++frame) {
+    ASSERT_EQ(twelve.frames.at(frame).size(), eight.frames.at(frame).size()) << frame;
+    for (std::size_t i = 0; i < eight.frames.at(frame).size(); ++i)
+      EXPECT_EQ(twelve.frames.at(frame)[i].v, eight.frames.at(frame)[i].v) << frame << " " << i;
+  }
+
+  // Told 16 bits, the tool takes them so (16 times darker) and says nothing of its own choice.
+  r = extract("--bit-depth 16 " + path("twelve"), "fir");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_EQ(r.out.find("read as 12-bit"), std::string::npos) << r.out;
+
+  // A first frame of 10 bits, then 12-bit ones: from the second frame on, 12 bits.
+  fs::create_directories(dir_ / "mixed");
+  for (int k = 0; k < 3; ++k) {
+    cv::Mat sixteen;
+    render(scene, k).convertTo(sixteen, CV_16U, (k == 0 ? 1023.0 : 4095.0) / 255.0);
+    ASSERT_TRUE(cv::imwrite(path("mixed/" + std::to_string(k) + ".png"), sixteen));
+  }
+  r = extract(path("mixed"), "fir");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("0.png: 16-bit samples of at most 10 bits: read as 10-bit"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("1.png: samples beyond the 10 bits of the frames before: read as 12-bit "
+                       "from here on"),
+            std::string::npos)
+      << r.out;
+  expect_frames_match(read_csv(path("points.csv")), {{0, 0}, {1, 1}, {2, 2}}, scene);
+
+  r = extract("--bit-depth 7 " + path("twelve"), "fir");
+  EXPECT_EQ(r.exit_code, 2) << r.out;
+  EXPECT_NE(r.out.find("--bit-depth '7': the bits of the camera's samples in 16-bit frames, a "
+                       "whole number from 8 to 16"),
+            std::string::npos)
+      << r.out;
+}
+
 // Lossless FFV1 in Matroska: the decoded frames are the rendered ones, so the 0.5 px bound
 // holds as for PNG. Debian's OpenCV writes it through FFmpeg.
 TEST_F(LaserlineExtract, Video) {

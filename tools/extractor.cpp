@@ -58,8 +58,8 @@ void Extractor::frame(const cv::Mat& raw, const std::string& where,
   const bool laser_on = recorded_laser_on ? *recorded_laser_on : pattern_laser_on();
   ++position_;
   std::string problem;
-  if (!laserline::tools::to_laser_mono8(raw, options_.channel, options_.clipped_from, mono_,
-                                        problem)) {
+  if (!laserline::tools::to_laser_mono8(raw, options_.channel, options_.clipped_from,
+                                        sample_bits(raw, where), mono_, problem)) {
     fail(where + ": " + problem + "; skipped");
     return;
   }
@@ -92,6 +92,28 @@ void Extractor::frame(const cv::Mat& raw, const std::string& where,
   ++processed_;
   if (!laser_on) ++(recorded_laser_on ? laser_off_recorded_ : laser_off_by_pattern_);
   if (!options_.overlay_dir.empty()) write_overlay(index, where);
+}
+
+int Extractor::sample_bits(const cv::Mat& raw, const std::string& where) {
+  if (raw.depth() != CV_16U) return 8;
+  if (options_.bit_depth != 0) return options_.bit_depth;
+  const int needed = laserline::tools::significant_bits(raw);
+  if (sample_bits_ == 0) {
+    sample_bits_ = needed;
+    if (needed < 16) {
+      progress_.message("laserline-extract: " + where + ": 16-bit samples of at most " +
+                        std::to_string(needed) + " bits: read as " + std::to_string(needed) +
+                        "-bit (--bit-depth N to say how many bits the camera gives)");
+    }
+  } else if (needed > sample_bits_) {
+    progress_.message("laserline-extract: " + where + ": samples beyond the " +
+                      std::to_string(sample_bits_) + " bits of the frames before: read as " +
+                      std::to_string(needed) +
+                      "-bit from here on, the detector starting afresh (--bit-depth N to fix it)");
+    sample_bits_ = needed;
+    detector_->reset(width_, height_);
+  }
+  return sample_bits_;
 }
 
 void Extractor::unreadable_frame(const std::string& message) {

@@ -74,6 +74,7 @@ struct Options {
   std::string threshold, roi, mask, depth_range;
   laserline::hal::LaserChannel channel;  // the laser's light in colour frames
   int clipped_from = 255;     // colours at this level or above are clipped (the detector's)
+  int bit_depth = 0;          // 16-bit frames' sample bits (--bit-depth); 0: from the frames
   std::string laser_pattern;  // as given, for messages
   std::vector<bool> laser_on_pattern;  // empty: every frame the input says nothing of is "on"
   bool all_candidates = false;
@@ -155,6 +156,7 @@ class Extractor {
   void start_sequence() {
     detector_->reset(width_, height_);
     position_ = 0;
+    sample_bits_ = 0;
     ++sequence_;
   }
 
@@ -191,6 +193,10 @@ class Extractor {
 
  private:
   bool pattern_laser_on() const;
+  // The bits of a 16-bit frame's samples (--bit-depth, else chosen at the sequence's first 16-bit
+  // frame and raised where a later one needs more, the detector then starting afresh: its
+  // background would be in other units).
+  int sample_bits(const cv::Mat& raw, const std::string& where);
 
   // The points every output takes from this frame: none with the laser off (whatever a detector
   // makes of such a frame is not the laser); those in the region; rejected ones only when asked.
@@ -222,6 +228,7 @@ class Extractor {
   std::int64_t points_written_ = 0, valid_written_ = 0, accepted_ = 0;
   std::int64_t cloud_accepted_ = 0, cloud_triangulated_ = 0, overflowed_frames_ = 0;
   std::int64_t sequence_ = -1;  // sequences started
+  int sample_bits_ = 0;         // this sequence's 16-bit frames' (0: none yet)
   laserline::tools::LineWidthMeter* width_meter_ = nullptr;
   std::vector<FrameEvidence>* evidence_ = nullptr;
   double evidence_threshold_db_ = 0;

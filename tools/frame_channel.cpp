@@ -1,5 +1,7 @@
 #include "tools/frame_channel.hpp"
 
+#include <algorithm>
+
 #include <zlib.h>
 
 #include <cerrno>
@@ -122,8 +124,17 @@ bool read_image_file(const std::string& path, cv::Mat& out, std::string& problem
   return true;
 }
 
+int significant_bits(const cv::Mat& raw) {
+  if (raw.depth() != CV_16U || raw.empty()) return 8;
+  double largest = 0;
+  cv::minMaxLoc(raw.reshape(1), nullptr, &largest);
+  for (const int bits : {8, 10, 12, 14})
+    if (largest <= static_cast<double>((1 << bits) - 1)) return bits;
+  return 16;
+}
+
 bool to_laser_mono8(const cv::Mat& raw, const hal::LaserChannel& channel, int clipped_from,
-                    cv::Mat& out, std::string& problem) {
+                    int sample_bits, cv::Mat& out, std::string& problem) {
   constexpr int kWhiteMargin = 5;
   if (raw.empty()) {
     problem = "empty image";
@@ -138,8 +149,10 @@ bool to_laser_mono8(const cv::Mat& raw, const hal::LaserChannel& channel, int cl
     problem = "unsupported number of channels (" + std::to_string(channels) + ")";
     return false;
   }
-  // 16 bit: the full range onto 0..255.
-  const double scale = raw.depth() == CV_16U ? 255.0 / 65535.0 : 1.0;
+  // 16 bit: the range of sample_bits onto 0..255 (beyond it: 255).
+  const double scale = raw.depth() == CV_16U
+                           ? 255.0 / static_cast<double>((1 << std::clamp(sample_bits, 8, 16)) - 1)
+                           : 1.0;
   if (channels <= 2) {
     cv::Mat grey;
     if (channels == 2) {

@@ -72,7 +72,7 @@ cv::Mat load_image(const std::string& path, const hal::LaserChannel& channel) {
   // A damaged file (cut short) decodes with grey where data is missing: refused, not measured.
   if (!read_image_file(path, raw, problem)) fail(path + ": " + problem);
   cv::Mat out;
-  if (!to_laser_mono8(raw, channel, 255, out, problem))
+  if (!to_laser_mono8(raw, channel, 255, significant_bits(raw), out, problem))
     fail(path + ": " + problem);  // (read only to check it)
   return raw;
 }

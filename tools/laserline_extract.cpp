@@ -52,7 +52,7 @@ constexpr const char* kUsage =
     "                         --detector NAME [--threshold VALUE] [--depth-range MIN,MAX]\n"
     "                         [--channel NAME|EXPR] [--roi x,y,w,h] [--mask FILE]\n"
     "                         [--laser-pattern BITS] [--overlay-dir DIR] [--all-candidates]\n"
-    "                         [--keep-sheet-width]\n"
+    "                         [--keep-sheet-width] [--bit-depth N]\n"
     "                         [--output points.csv] [--ply cloud.ply [--poses poses.csv]]\n"
     "                         INPUT...\n"
     "  --calib FILE       calibration (camera and laser); images must have its size. Without\n"
@@ -96,6 +96,8 @@ constexpr const char* kUsage =
     "                     line in the first frames of the images and videos is over 1.5\n"
     "                     times as wide or under 2/3 as wide, they are sized for the width\n"
     "                     measured (and it is said). This keeps the calibration's width\n"
+    "  --bit-depth N      16-bit frames hold N-bit samples (8 to 16): 0..2^N-1 is scaled onto\n"
+    "                     the detectors' 0..255. Default: from the frames (see below)\n"
     "  --output FILE      CSV: frame,source,u,v,x,y,snr_db,segment,valid (source: the image\n"
     "                     file, or the video's frame or the log's event; u the epipolar line and\n"
     "                     v the position along it, x y the frame pixel: for a laser above or\n"
@@ -118,8 +120,10 @@ constexpr const char* kUsage =
     "                     laserline.image_t messages (damaged records are skipped, reported\n"
     "                     with their byte offsets, and reading resumes at the next whole event;\n"
     "                     a damaged or cut-short log counts as a failed input: exit status 1)\n"
-    "Colour frames: the green channel is used unless --channel; 16-bit frames are scaled to\n"
-    "8 bit.\n"
+    "Colour frames: the green channel is used unless --channel. 16-bit frames are scaled to\n"
+    "8 bit from the range their samples use: the fewest of 8, 10, 12, 14 or 16 bits that hold\n"
+    "the first 16-bit frame of each sequence (a 12-bit camera's 0..4095: said on stderr), more\n"
+    "where a later frame needs it; --bit-depth N fixes it (larger samples are taken as the top).\n"
     "Exit status: 0 all frames processed; 1 some input or frame failed (the others are\n"
     "still written); 2 bad arguments, configuration or calibration (nothing read); 3 frames\n"
     "were read but no point was accepted, or more than half of the accepted points had no 3-D\n"
@@ -160,6 +164,7 @@ Options parse_arguments(int argc, char** argv) {
                                   {"poses", true},
                                   {"all-candidates", false},
                                   {"keep-sheet-width", false},
+                                  {"bit-depth", true},
                                   {"override-log-calibration", false}});
   while (args.next()) {
     const std::string& arg = args.name();
@@ -214,6 +219,15 @@ Options parse_arguments(int argc, char** argv) {
       o.all_candidates = true;
     } else if (arg == "--keep-sheet-width") {
       o.keep_sheet_width = true;
+    } else if (arg == "--bit-depth") {
+      const std::string text = value();
+      if (text.empty() || text.size() > 2 ||
+          text.find_first_not_of("0123456789") != std::string::npos || std::stoi(text) < 8 ||
+          std::stoi(text) > 16) {
+        fatal("--bit-depth '" + text +
+              "': the bits of the camera's samples in 16-bit frames, a whole number from 8 to 16");
+      }
+      o.bit_depth = std::stoi(text);
     } else if (arg == "--override-log-calibration") {
       o.override_log_calibration = true;
     }

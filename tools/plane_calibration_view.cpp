@@ -249,9 +249,13 @@ ViewImages images_of(const CalibrationView& v, const hal::LaserChannel& laser,
                      const hal::LaserChannel& board, int clipped_from) {
   ViewImages im;
   std::string problem;
+  // A 10- to 14-bit camera's 16-bit files read on its own range; the view's two images alike, so
+  // that one is subtracted from the other.
+  const int bits = std::max(significant_bits(v.laser_on),
+                            v.laser_off.empty() ? 8 : significant_bits(v.laser_off));
   auto convert = [&](const cv::Mat& raw, const hal::LaserChannel& channel, cv::Mat& out,
                      const char* which) {
-    if (!to_laser_mono8(raw, channel, clipped_from, out, problem)) {
+    if (!to_laser_mono8(raw, channel, clipped_from, bits, out, problem)) {
       throw PlaneCalibrationError(v.name + which + ": " + problem);
     }
   };
