@@ -144,8 +144,15 @@ const std::vector<std::string> kOpenCvInformationalKeys = {"calibration_time",
                                                            "image_points",
                                                            "grid_points"};
 
+// ROS's camera_info layout (camera_calibration's ost.yaml) is OpenCV's with these besides: the
+// model's name, and the rectification and projection of a rectified stream, which laserline does
+// not use (it reads the camera's raw frames: camera_matrix and the distortion apply).
+const std::vector<std::string> kRosInformationalKeys = {"camera_name", "rectification_matrix",
+                                                        "projection_matrix"};
+
 // OpenCV's calibration layout (samples/cpp/calibration.cpp, cv::FileStorage): image_width,
-// image_height, camera_matrix (3x3) and distortion_coefficients (k1 k2 p1 p2 [k3 [k4 k5 k6 ...]]).
+// image_height, camera_matrix (3x3) and distortion_coefficients (k1 k2 p1 p2 [k3 [k4 k5 k6 ...]]);
+// also as ROS writes it (kRosInformationalKeys, distortion_model).
 void read_opencv_camera(YamlMap& cam, CameraIntrinsics& c) {
   // The size is required here: a camera matrix is only valid for the image size it was
   // calibrated at, and the native defaults belong to another camera.
@@ -202,7 +209,14 @@ void read_opencv_camera(YamlMap& cam, CameraIntrinsics& c) {
   if (cam.integer("fisheye_model", 0, 0, 1) != 0) {
     cam.fail("fisheye_model", "the fisheye model is not supported");
   }
+  // ROS: plumb_bob is k1 k2 p1 p2 k3, rational_polynomial adds k4 k5 k6 (accepted as zero above).
+  if (cam.choice("distortion_model", "plumb_bob",
+                 {"plumb_bob", "rational_polynomial", "equidistant"}) == "equidistant") {
+    cam.fail("distortion_model", "the equidistant (fisheye) model is not supported");
+  }
   for (const auto& key : kOpenCvInformationalKeys)
+    cam.node(key);
+  for (const auto& key : kRosInformationalKeys)
     cam.node(key);
 }
 

@@ -171,6 +171,55 @@ TEST_F(CalibrationFile, OpenCvLayoutInsideTheCameraSection) {
   EXPECT_DOUBLE_EQ((*c.laser.plane)[2], -0.2);
 }
 
+// ROS's camera_info file (camera_calibration writes ost.yaml so), with a laser section added.
+TEST_F(CalibrationFile, RosCameraInfo) {
+  const std::string ros =
+      "image_width: 1280\n"
+      "image_height: 1024\n"
+      "camera_name: ptu_camera\n"
+      "camera_matrix:\n"
+      "  rows: 3\n"
+      "  cols: 3\n"
+      "  data: [1402.5, 0.0, 641.25, 0.0, 1398.75, 509.5, 0.0, 0.0, 1.0]\n"
+      "distortion_model: plumb_bob\n"
+      "distortion_coefficients:\n"
+      "  rows: 1\n"
+      "  cols: 5\n"
+      "  data: [-0.125, 0.0625, 0.001, -0.002, 0.0]\n"
+      "rectification_matrix:\n"
+      "  rows: 3\n"
+      "  cols: 3\n"
+      "  data: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]\n"
+      "projection_matrix:\n"
+      "  rows: 3\n"
+      "  cols: 4\n"
+      "  data: [1380.0, 0.0, 640.0, 0.0, 0.0, 1380.0, 510.0, 0.0, 0.0, 0.0, 1.0, 0.0]\n";
+  const Calibration c = load_calibration_file(
+      write("ost.yaml", ros + "laser: {baseline_m: 0.25, plane: [0, 0.98, -0.17, 0.25]}\n"));
+  EXPECT_EQ(c.camera.width, 1280);
+  EXPECT_DOUBLE_EQ(c.camera.fx, 1402.5);  // camera_matrix, not projection_matrix
+  EXPECT_DOUBLE_EQ(c.camera.fy, 1398.75);
+  EXPECT_DOUBLE_EQ(c.camera.cx, 641.25);
+  EXPECT_DOUBLE_EQ(c.camera.distortion[0], -0.125);
+  EXPECT_DOUBLE_EQ(c.camera.distortion[3], -0.002);
+  ASSERT_TRUE(c.laser.plane.has_value());
+
+  std::string rational = ros;
+  rational.replace(rational.find("plumb_bob"), 9, "rational_polynomial");
+  rational.replace(rational.find("cols: 5"), 7, "cols: 8");
+  rational.replace(rational.find("0.0]\nrect"), 4, "0.0, 0.0, 0.0, 0.0]");
+  EXPECT_EQ(error_of(rational + "laser: {angle_deg: 80}\n"), "");
+  std::string fisheye = ros;
+  fisheye.replace(fisheye.find("plumb_bob"), 9, "equidistant");
+  EXPECT_EQ(error_of(fisheye),
+            "calib.yaml:8: distortion_model: the equidistant (fisheye) model is not supported");
+  std::string unknown = ros;
+  unknown.replace(unknown.find("plumb_bob"), 9, "brown");
+  EXPECT_EQ(error_of(unknown),
+            "calib.yaml:8: distortion_model: must be one of plumb_bob, rational_polynomial, "
+            "equidistant, got 'brown'");
+}
+
 TEST_F(CalibrationFile, OpenCvLayoutErrorsNameFileLineAndKey) {
   const std::string k =
       "  camera_matrix: {rows: 3, cols: 3, dt: d, data: [1400, 0, 639.5, 0, "
