@@ -220,11 +220,77 @@ void read_opencv_camera(YamlMap& cam, CameraIntrinsics& c) {
     cam.node(key);
 }
 
+// Kalibr's camchain layout (camera-IMU and multi-camera calibration in ROS): cam0's pinhole model,
+// intrinsics [fu, fv, pu, pv], resolution [width, height] and radtan distortion [k1, k2, p1, p2].
+// Its other keys (the IMU and the other cameras' poses, the topic) are read past.
+const std::vector<std::string> kKalibrInformationalKeys = {
+    "rostopic", "T_cam_imu", "timeshift_cam_imu", "cam_overlaps", "T_cn_cnm1", "line_delay"};
+
+void read_kalibr_camera(YamlMap& cam, CameraIntrinsics& c) {
+  const std::string model =
+      cam.choice("camera_model", "pinhole", {"pinhole", "omni", "eucm", "ds"});
+  if (model != "pinhole") {
+    cam.fail("camera_model", "the " + model + " model is not supported (pinhole only)");
+  }
+  if (!cam.has("resolution")) cam.fail("resolution", "is required: [width, height]");
+  const std::vector<double> size = cam.numbers("resolution", {2});
+  for (const double side : size) {
+    if (side != std::floor(side) || side < 16 || side > 16384) {
+      cam.fail("resolution", "must be two whole numbers from 16 to 16384");
+    }
+  }
+  c.width = static_cast<int>(size[0]);
+  c.height = static_cast<int>(size[1]);
+  if (!cam.has("intrinsics")) cam.fail("intrinsics", "is required: [fu, fv, pu, pv]");
+  const std::vector<double> k = cam.numbers("intrinsics", {4});
+  if (!(k[0] >= 1.0 && k[0] <= 1e6 && k[1] >= 1.0 && k[1] <= 1e6)) {
+    cam.fail("intrinsics", "fu and fv must be between 1 and 1e+06");
+  }
+  if (!(std::abs(k[2]) <= 1e5 && std::abs(k[3]) <= 1e5)) {
+    cam.fail("intrinsics", "pu and pv must be between -1e+05 and 1e+05");
+  }
+  c.fx = k[0];
+  c.fy = k[1];
+  c.cx = k[2];
+  c.cy = k[3];
+  const std::string distortion =
+      cam.choice("distortion_model", "radtan", {"radtan", "none", "equidistant", "fov"});
+  if (distortion == "equidistant" || distortion == "fov") {
+    cam.fail("distortion_model", "the " + distortion + " model is not supported (radtan only)");
+  }
+  const std::vector<double> d = cam.numbers("distortion_coeffs", {0, 4});
+  if (distortion == "radtan" && d.size() != 4) {
+    cam.fail("distortion_coeffs", "radtan needs 4 numbers: [k1, k2, p1, p2]");
+  }
+  if (distortion == "none" && std::any_of(d.begin(), d.end(), [](double x) { return x != 0; })) {
+    cam.fail("distortion_coeffs", "must be empty or zero with distortion_model none");
+  }
+  c.distortion = {};
+  for (std::size_t i = 0; i < d.size(); ++i)
+    c.distortion[i] = d[i];
+  for (const auto& key : kKalibrInformationalKeys)
+    cam.node(key);
+}
+
 }  // namespace
 
 Calibration read_calibration(YamlMap& map) {
   Calibration cal;
-  if (map.has("camera_matrix")) {
+  if (map.has("cam0")) {
+    for (const char* other : {"camera", "camera_matrix"}) {
+      if (map.has(other)) {
+        map.fail(other, "give the camera once: Kalibr's cam0 or this, not both");
+      }
+    }
+    if (map.has("cam1")) {
+      map.fail("cam1",
+               "a second camera: laserline uses one; keep the scanner's camera as cam0 and "
+               "remove the others");
+    }
+    YamlMap cam = map.map("cam0");
+    read_kalibr_camera(cam, cal.camera);
+    cam.finish();
+  } else if (map.has("camera_matrix")) {
     // The mapping itself is OpenCV's calibration output (possibly with a laser section added).
     if (map.has("camera")) {
       map.fail("camera",
@@ -266,11 +332,12 @@ Calibration load_calibration_file(const std::string& path, CalibrationParts requ
   Calibration cal = read_calibration(root);
   root.finish();
   // Checked after every given value was: a wrong value is named before a missing one.
-  if (!root.has("camera_matrix")) {
+  if (!root.has("camera_matrix") && !root.has("cam0")) {
     if (!root.has("camera")) {
       root.fail("camera",
                 "is required: the camera's width, height, fx and fy (cx, cy, distortion "
-                "optional), or OpenCV's image_width, image_height and camera_matrix");
+                "optional), or OpenCV's image_width, image_height and camera_matrix, or Kalibr's "
+                "cam0");
     }
     YamlMap camera = root.map("camera");
     if (!camera.has("camera_matrix")) {

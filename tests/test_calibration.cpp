@@ -220,6 +220,63 @@ TEST_F(CalibrationFile, RosCameraInfo) {
             "equidistant, got 'brown'");
 }
 
+// Kalibr's camchain file (its cam0), with a laser section added.
+TEST_F(CalibrationFile, KalibrCamchain) {
+  const std::string cam0 =
+      "cam0:\n"
+      "  T_cam_imu:\n"
+      "  - [0.0, -1.0, 0.0, 0.05]\n"
+      "  - [1.0, 0.0, 0.0, 0.0]\n"
+      "  - [0.0, 0.0, 1.0, -0.02]\n"
+      "  - [0.0, 0.0, 0.0, 1.0]\n"
+      "  cam_overlaps: []\n"
+      "  camera_model: pinhole\n"
+      "  distortion_coeffs: [-0.25, 0.125, 0.0005, -0.001]\n"
+      "  distortion_model: radtan\n"
+      "  intrinsics: [1401.5, 1399.25, 640.75, 509.5]\n"
+      "  resolution: [1280, 1024]\n"
+      "  rostopic: /ptu/camera/image_raw\n"
+      "  timeshift_cam_imu: 0.0021\n";
+  const std::string laser = "laser: {baseline_m: 0.25, angle_deg: 80}\n";
+  const Calibration c = load_calibration_file(write("camchain.yaml", cam0 + laser));
+  EXPECT_EQ(c.camera.width, 1280);
+  EXPECT_EQ(c.camera.height, 1024);
+  EXPECT_DOUBLE_EQ(c.camera.fx, 1401.5);
+  EXPECT_DOUBLE_EQ(c.camera.fy, 1399.25);
+  EXPECT_DOUBLE_EQ(c.camera.cx, 640.75);
+  EXPECT_DOUBLE_EQ(c.camera.cy, 509.5);
+  EXPECT_DOUBLE_EQ(c.camera.distortion[0], -0.25);
+  EXPECT_DOUBLE_EQ(c.camera.distortion[3], -0.001);
+  EXPECT_DOUBLE_EQ(c.camera.distortion[4], 0.0);
+
+  auto with = [&](const std::string& from, const std::string& to) {
+    std::string text = cam0;
+    text.replace(text.find(from), from.size(), to);
+    return error_of(text + laser);
+  };
+  EXPECT_EQ(with("camera_model: pinhole", "camera_model: omni"),
+            "calib.yaml:8: cam0.camera_model: the omni model is not supported (pinhole only)");
+  EXPECT_EQ(with("distortion_model: radtan", "distortion_model: equidistant"),
+            "calib.yaml:10: cam0.distortion_model: the equidistant model is not supported "
+            "(radtan only)");
+  EXPECT_EQ(with("[-0.25, 0.125, 0.0005, -0.001]", "[-0.25, 0.125]"),
+            "calib.yaml:9: cam0.distortion_coeffs: must have 0 or 4 numbers, got 2");
+  EXPECT_EQ(with("resolution: [1280, 1024]", "resolution: [1280.5, 1024]"),
+            "calib.yaml:12: cam0.resolution: must be two whole numbers from 16 to 16384");
+  EXPECT_EQ(with("intrinsics: [1401.5, ", "intrinsics: [0, "),
+            "calib.yaml:11: cam0.intrinsics: fu and fv must be between 1 and 1e+06");
+  EXPECT_EQ(with("distortion_model: radtan", "distortion_model: none"),
+            "calib.yaml:9: cam0.distortion_coeffs: must be empty or zero with distortion_model "
+            "none");
+  EXPECT_EQ(error_of(cam0 + "cam1:\n  camera_model: pinhole\n" + laser),
+            "calib.yaml:16: cam1: a second camera: laserline uses one; keep the scanner's camera "
+            "as cam0 and remove the others");
+  EXPECT_EQ(error_of(cam0 + "camera: {fx: 1}\n" + laser),
+            "calib.yaml:15: camera: give the camera once: Kalibr's cam0 or this, not both");
+  const std::string unknown = error_of("cam0:\n  focal: 3\n" + laser);
+  EXPECT_EQ(unknown.rfind("calib.yaml:", 0), 0u) << unknown;
+}
+
 TEST_F(CalibrationFile, OpenCvLayoutErrorsNameFileLineAndKey) {
   const std::string k =
       "  camera_matrix: {rows: 3, cols: 3, dt: d, data: [1400, 0, 639.5, 0, "
@@ -285,7 +342,8 @@ TEST_F(CalibrationFile, RequiredPartsAreNamed) {
   EXPECT_EQ(error_of(camera + laser), "");
   EXPECT_EQ(error_of(laser),
             "calib.yaml:1: camera: is required: the camera's width, height, fx and fy (cx, cy, "
-            "distortion optional), or OpenCV's image_width, image_height and camera_matrix");
+            "distortion optional), or OpenCV's image_width, image_height and camera_matrix, or "
+            "Kalibr's cam0");
   EXPECT_EQ(error_of("camera: {width: 640, height: 480, fx: 700}\n" + laser),
             "calib.yaml:1: camera.fy: is required in a calibration file (the defaults are another "
             "camera's)");
