@@ -628,6 +628,29 @@ TEST_F(Calibrate, ToolOnImageFiles) {
   EXPECT_LT(err.angle_deg, 0.1);
   EXPECT_LT(err.offset_mm, 1.0);
 
+  // The same views from a 10-bit camera, in 16-bit files (0..1023): read over their 10 bits
+  // (over 16, they would be 64 times darker: 0..4, no board found).
+  fs::create_directories(dir / "on10");
+  fs::create_directories(dir / "off10");
+  for (std::size_t i = 0; i < views_->size(); ++i) {
+    char name[32];
+    std::snprintf(name, sizeof name, "pose_%02zu.png", i);
+    cv::Mat on, off;
+    (*views_)[i].laser_on.convertTo(on, CV_16U, 1023.0 / 255.0);
+    (*views_)[i].laser_off.convertTo(off, CV_16U, 1023.0 / 255.0);
+    ASSERT_TRUE(cv::imwrite((dir / "on10" / name).string(), on));
+    ASSERT_TRUE(cv::imwrite((dir / "off10" / name).string(), off));
+  }
+  const RunResult ten = run_command(common + " --laser-off " + (dir / "off10").string() + " " +
+                                    (dir / "on10").string());
+  ASSERT_EQ(ten.exit_code, 0) << ten.out;
+  const hal::Calibration from_ten = hal::load_calibration_file((dir / "calibration.yaml").string());
+  ASSERT_TRUE(from_ten.laser.plane.has_value());
+  const PlaneError err_ten =
+      plane_error(*from_ten.laser.plane, true_calibration().laser.plane_coefficients());
+  EXPECT_LT(err_ten.angle_deg, 0.1);
+  EXPECT_LT(err_ten.offset_mm, 1.0);
+
   // A view without the board among laser-on images alone: left out, one line, and in the
   // report; the calibration goes on.
   hal::SimSceneOptions plain = view_options(kPoses[0]);
