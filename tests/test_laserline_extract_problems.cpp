@@ -15,6 +15,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -353,6 +354,39 @@ TEST_F(LaserlineExtract, WriteFailureEndsTheRunWithStatusOne) {
             std::string::npos)
       << r.out;
   EXPECT_EQ(r.out.find("frames from"), std::string::npos) << r.out;
+}
+
+// --output - writes the CSV to standard output (for a pipe), the same bytes as to a file; the
+// messages stay on standard error. A full disk there is said as for a file.
+TEST_F(LaserlineExtract, CsvToStandardOutput) {
+  hal::SimScene scene(options_);
+  ASSERT_TRUE(cv::imwrite(path("f0.png"), render(scene, 0)));
+  ASSERT_TRUE(cv::imwrite(path("f1.png"), render(scene, 1)));
+  const std::string inputs = " " + path("f0.png") + " " + path("f1.png");
+  RunResult r = extract(inputs);
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  const std::string command =
+      std::string(LASERLINE_EXTRACT_PATH) + " --calib " + calib_ + " --detector maxvalue";
+  r = run_command("(" + command + " --output -" + inputs + " > " + path("piped.csv") + ")");
+  ASSERT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(
+      r.out.find("points written (" + std::to_string(kWidth * 2) + " valid) to standard output\n"),
+      std::string::npos)
+      << r.out;
+  auto bytes = [](const std::string& file) {
+    std::ifstream in(file, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  EXPECT_EQ(bytes(path("piped.csv")), bytes(path("points.csv")));
+  EXPECT_EQ(bytes(path("piped.csv")).rfind("frame,source,u,v,x,y,snr_db,segment,valid\n", 0), 0u);
+
+  if (!fs::exists("/dev/full")) GTEST_SKIP() << "no /dev/full";
+  r = run_command("(" + command + " --output -" + inputs + " > /dev/full)");
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(
+      r.out.find("laserline-extract: standard output: write failed: No space left on device\n"),
+      std::string::npos)
+      << r.out;
 }
 
 // A calibration the camera cannot work with stops the run before any frame, naming the file; one

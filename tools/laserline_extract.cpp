@@ -102,7 +102,7 @@ constexpr const char* kUsage =
     "                     file, or the video's frame or the log's event; u the epipolar line and\n"
     "                     v the position along it, x y the frame pixel: for a laser above or\n"
     "                     below the camera u = x the column, v = y the row; beside it, u = y\n"
-    "                     the row, v = x the column)\n"
+    "                     the row, v = x the column); - for standard output\n"
     "  --ply FILE         the valid points of all frames as one point cloud: binary PLY,\n"
     "                     float x y z (metres) and scalar_snr (SNR in dB; CloudCompare shows\n"
     "                     it as the scalar field \"snr\"), for CloudCompare, MeshLab, PCL;\n"
@@ -609,11 +609,17 @@ int run_extract(int argc, char** argv) {
     fatal(e.what());
   }
   FILE* csv = nullptr;
-  if (!options.output.empty()) {
+  const bool csv_to_stdout = options.output == "-";
+  const std::string csv_name = csv_to_stdout ? "standard output" : options.output;
+  if (csv_to_stdout) {
+    csv = stdout;
+  } else if (!options.output.empty()) {
     csv = std::fopen(options.output.c_str(), "w");
     if (csv == nullptr) {
       fatal("--output " + options.output + ": cannot be written: " + std::strerror(errno));
     }
+  }
+  if (csv != nullptr) {
     std::fputs("frame,source,u,v,x,y,snr_db,segment,valid\n", csv);
     std::fflush(csv);
   }
@@ -632,13 +638,21 @@ int run_extract(int argc, char** argv) {
               poses ? &*poses : nullptr);
   laserline::tools::extract::extract_inputs(x, options.inputs, kinds, in_use);
   x.progress().clear();
-  if (csv != nullptr) std::fclose(csv);
+  bool csv_whole = true;
+  if (csv != nullptr) {
+    // A full disk: the CSV is not whole, which the summary must not hide.
+    csv_whole = std::ferror(csv) == 0 && (csv_to_stdout ? std::fflush(csv) : std::fclose(csv)) == 0;
+    if (!csv_whole) {
+      std::fprintf(stderr, "laserline-extract: --output %s: could not be written completely\n",
+                   csv_name.c_str());
+    }
+  }
   const std::string problems =
       x.failures() > 0 ? ", " + std::to_string(x.failures()) + " problems (see above)" : "";
   std::string written;
   if (csv != nullptr) {
     written = ", " + std::to_string(x.points_written()) + " points written (" +
-              std::to_string(x.valid_written()) + " valid) to " + options.output;
+              std::to_string(x.valid_written()) + " valid) to " + csv_name;
   }
   std::fprintf(stderr,
                "laserline-extract: %lld frames from %zu inputs, %lld processed with %s%s%s\n",
@@ -690,7 +704,7 @@ int run_extract(int argc, char** argv) {
     empty_result = true;
   }
   if (empty_result) return 3;
-  return x.failures() > 0 ? 1 : 0;
+  return x.failures() > 0 || !csv_whole ? 1 : 0;
 }
 
 }  // namespace
