@@ -252,5 +252,25 @@ int main(int argc, char** argv) {
         << "{"
         << "baseline_m" << 0.25 << "angle_deg" << 80 << "sheet_width_m" << 0.003 << "}";
   }
+  // ROS's camera_info file and Kalibr's camchain file, each with a laser section.
+  std::ofstream(dir / "calibration/ros.yaml")
+      << "image_width: 1280\nimage_height: 1024\ncamera_name: ptu_camera\n"
+         "camera_matrix:\n  rows: 3\n  cols: 3\n"
+         "  data: [1402.5, 0.0, 641.25, 0.0, 1398.75, 509.5, 0.0, 0.0, 1.0]\n"
+         "distortion_model: plumb_bob\n"
+         "distortion_coefficients:\n  rows: 1\n  cols: 5\n"
+         "  data: [-0.12, 0.034, 0.0011, -0.0007, 0.0021]\n"
+         "rectification_matrix:\n  rows: 3\n  cols: 3\n"
+         "  data: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]\n"
+         "projection_matrix:\n  rows: 3\n  cols: 4\n"
+         "  data: [1380.0, 0.0, 640.0, 0.0, 0.0, 1380.0, 510.0, 0.0, 0.0, 0.0, 1.0, 0.0]\n"
+         "laser: {baseline_m: 0.25, angle_deg: 80}\n";
+  std::ofstream(dir / "calibration/kalibr.yaml")
+      << "cam0:\n  T_cam_imu:\n  - [0.0, -1.0, 0.0, 0.05]\n  - [1.0, 0.0, 0.0, 0.0]\n"
+         "  - [0.0, 0.0, 1.0, -0.02]\n  - [0.0, 0.0, 0.0, 1.0]\n  cam_overlaps: []\n"
+         "  camera_model: pinhole\n  distortion_coeffs: [-0.25, 0.125, 0.0005, -0.001]\n"
+         "  distortion_model: radtan\n  intrinsics: [1401.5, 1399.25, 640.75, 509.5]\n"
+         "  resolution: [1280, 1024]\n  rostopic: /ptu/camera/image_raw\n"
+         "laser: {plane: [0, 0.98, -0.17, 0.25]}\n";
   return 0;
 }
