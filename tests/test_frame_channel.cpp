@@ -118,6 +118,9 @@ TEST(FrameChannel, SixteenBitFilesOfFewerBits) {
   EXPECT_EQ(significant_bits(cv::Mat(2, 2, CV_16UC1, cv::Scalar(16383))), 14);
   EXPECT_EQ(significant_bits(cv::Mat(2, 2, CV_16UC1, cv::Scalar(16384))), 16);
   EXPECT_EQ(significant_bits(cv::Mat(2, 2, CV_8UC1, cv::Scalar(3))), 8);
+  // An opaque alpha channel does not count.
+  EXPECT_EQ(significant_bits(cv::Mat(2, 2, CV_16UC4, cv::Scalar(4000, 100, 5, 65535))), 12);
+  EXPECT_EQ(significant_bits(cv::Mat(2, 2, CV_16UC2, cv::Scalar(1000, 65535))), 10);
 }
 
 TEST(FrameChannel, Problems) {

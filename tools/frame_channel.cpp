@@ -126,8 +126,17 @@ bool read_image_file(const std::string& path, cv::Mat& out, std::string& problem
 
 int significant_bits(const cv::Mat& raw) {
   if (raw.depth() != CV_16U || raw.empty()) return 8;
+  // Grey + alpha and BGRA: the alpha channel (often all 65535) says nothing of the camera.
+  const int colours =
+      raw.channels() == 2 || raw.channels() == 4 ? raw.channels() - 1 : raw.channels();
   double largest = 0;
-  cv::minMaxLoc(raw.reshape(1), nullptr, &largest);
+  for (int c = 0; c < colours; ++c) {
+    cv::Mat plane;
+    cv::extractChannel(raw, plane, c);
+    double most = 0;
+    cv::minMaxLoc(plane, nullptr, &most);
+    largest = std::max(largest, most);
+  }
   for (const int bits : {8, 10, 12, 14})
     if (largest <= static_cast<double>((1 << bits) - 1)) return bits;
   return 16;
