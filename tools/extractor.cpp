@@ -158,8 +158,7 @@ void Extractor::write_csv_points(std::int64_t index, const std::string& where) {
     valid_written_ += p.valid ? 1 : 0;
   }
   if (std::fflush(csv_) != 0 || std::ferror(csv_) != 0) {
-    progress_.message("laserline-extract: " +
-                      (options_.output == "-" ? std::string("standard output") : options_.output) +
+    progress_.message("laserline-extract: " + output_name(options_) +
                       ": write failed: " + std::strerror(errno));
     throw laserline::cli::Exit(1);
   }

@@ -82,6 +82,11 @@ struct Options {
   std::vector<std::string> inputs;
 };
 
+// --output as messages name it: "-" is standard output.
+inline std::string output_name(const Options& o) {
+  return o.output == "-" ? "standard output" : o.output;
+}
+
 // Where points are kept: a rectangle, a mask image, or both. Points elsewhere are left out of
 // every output; the pixels are not touched (a zeroed border would be a step edge the band-pass
 // filter answers with candidates).

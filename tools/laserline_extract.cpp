@@ -610,7 +610,7 @@ int run_extract(int argc, char** argv) {
   }
   FILE* csv = nullptr;
   const bool csv_to_stdout = options.output == "-";
-  const std::string csv_name = csv_to_stdout ? "standard output" : options.output;
+  const std::string csv_name = laserline::tools::extract::output_name(options);
   if (csv_to_stdout) {
     csv = stdout;
   } else if (!options.output.empty()) {
