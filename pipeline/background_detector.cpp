@@ -60,12 +60,21 @@ BackgroundDetector::Motion BackgroundDetector::motion_across_line(const History&
   const RowNormalisation& rows = frontend_.rows();
   const int far = -rows.near_side();
   Motion least{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
+  // The signed motion's extremes: where it goes both ways along the line (a scene turning under
+  // it), it is zero somewhere between two of the line's points, and there that frame's line lies
+  // on this one's. (Not across the rows searched: a scene coming nearer moves away from the
+  // middle both ways, and the line lies at one of those rows only.)
+  double most_down = -std::numeric_limits<double>::infinity();
+  double most_up = std::numeric_limits<double>::infinity();
   auto probe = [&](double u, double v) {
     const auto [hu, hv] = h.to_history.map(u, v);
     (void)hu;
     const double width = std::max(rows.width_px(v) * motion_width_scale_, 1.0);
-    least.across = std::min(least.across, std::abs(hv - v) / width);
-    least.toward_far = std::min(least.toward_far, far * (hv - v) / width);
+    const double moved = (hv - v) / width;
+    least.across = std::min(least.across, std::abs(moved));
+    least.toward_far = std::min(least.toward_far, far * moved);
+    most_down = std::max(most_down, moved);
+    most_up = std::min(most_up, moved);
   };
   const auto probes = frontend_.probes();
   if (!probes.empty()) {
@@ -79,6 +88,7 @@ BackgroundDetector::Motion BackgroundDetector::motion_across_line(const History&
         probe(u, top + t * (bottom - top));
     }
   }
+  if (!probes.empty() && most_down > 0 && most_up < 0) least.across = 0;
   return least;
 }
 

@@ -97,8 +97,9 @@ class BackgroundDetector final : public Detector {
   // still, texture cancels; where it is dark and plain, the background only adds its noise.
   bool subtraction_clears(const History& h, const ImageView& image) const;
   // How far the scene moved across the line between `h` and the current frame, in line widths,
-  // at the points where the line was last seen (or across the rows searched): the least, and the
-  // least toward the far side of the line (negative where it moved toward the near side).
+  // at the points where the line was last seen (or across the rows searched): the least (0 where
+  // it moved one way at some points and the other way at others), and the least toward the far
+  // side of the line (negative where it moved toward the near side).
   struct Motion {
     double across = 0, toward_far = 0;
   };

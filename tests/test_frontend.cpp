@@ -783,6 +783,64 @@ TEST(Detectors, GiveNoPointsOnALaserOffFrame) {
   }
 }
 
+TEST(Detectors, BackgroundKeepsTheLineWhereTheSceneTurnsUnderIt) {
+  // A turntable under a fixed rig: the scene (texture as bright as the laser) turns 6 degrees a
+  // frame about the image's centre, the line stays. The scene moves across the line by tens of
+  // widths toward its ends, one way on the left and the other on the right, and not at all at
+  // the centre: an earlier frame that moved far from the line at every point where it was looked
+  // at, a few columns apart, would lay its own line on this one's between them and take it away.
+  tools::Scenario scenario;
+  for (const tools::Scenario& s : tools::standard_scenarios(640, 512))
+    if (s.name == "ambient") scenario = s;
+  ASSERT_EQ(scenario.name, "ambient");
+  hal::SimScene scene(scenario.scene);
+  constexpr int kWidth = 640, kHeight = 512;
+  std::vector<std::uint8_t> lit(kWidth * kHeight), unlit(kWidth * kHeight);
+  scene.render(0, true, lit);
+  scene.render(0, false, unlit);
+  hal::SimGroundTruth truth;
+  scene.ground_truth(0, true, truth);
+  const double cx = scenario.scene.calibration.camera.cx, cy = scenario.scene.calibration.camera.cy;
+  // The unlit frame turned by `degrees` about the centre (bilinear, edges repeated), plus the
+  // laser's light where it was.
+  auto turned = [&](double degrees, std::vector<std::uint8_t>& out) {
+    const double c = std::cos(degrees * M_PI / 180.0), s = std::sin(degrees * M_PI / 180.0);
+    auto at = [&](int u, int v) { return static_cast<double>(unlit[v * kWidth + u]); };
+    for (int y = 0; y < kHeight; ++y) {
+      for (int x = 0; x < kWidth; ++x) {
+        const double sx = std::clamp(cx + c * (x - cx) + s * (y - cy), 0.0, kWidth - 1.001);
+        const double sy = std::clamp(cy - s * (x - cx) + c * (y - cy), 0.0, kHeight - 1.001);
+        const int ix = static_cast<int>(sx), iy = static_cast<int>(sy);
+        const double fx = sx - ix, fy = sy - iy;
+        const double scene_light = (1 - fy) * ((1 - fx) * at(ix, iy) + fx * at(ix + 1, iy)) +
+                                   fy * ((1 - fx) * at(ix, iy + 1) + fx * at(ix + 1, iy + 1));
+        const int laser = lit[y * kWidth + x] - unlit[y * kWidth + x];
+        out[y * kWidth + x] =
+            static_cast<std::uint8_t>(std::clamp(std::lround(scene_light) + laser, 0L, 255L));
+      }
+    }
+  };
+  auto detector = make_detector("background", options_for_640x512(scenario));
+  detector->reset(kWidth, kHeight);
+  Profile out(detector->max_points(kWidth, kHeight));
+  std::vector<std::uint8_t> frame(kWidth * kHeight);
+  constexpr int kNear = 12;  // columns either side of the centre
+  for (std::uint64_t k = 0; k < 10; ++k) {
+    turned(6.0 * static_cast<double>(k), frame);
+    detector->detect({frame.data(), kWidth, kHeight, kWidth}, {k, true}, out);
+    int visible = 0, found = 0;
+    for (int u = static_cast<int>(cx) - kNear; u <= static_cast<int>(cx) + kNear; ++u)
+      visible += std::isnan(truth.position[static_cast<std::size_t>(u)]) ? 0 : 1;
+    for (const ProfilePoint& p : out.points()) {
+      if (p.valid && std::abs(p.u - cx) <= kNear &&
+          std::abs(p.v - truth.position[static_cast<std::size_t>(p.u)]) <= 2.0f) {
+        ++found;
+      }
+    }
+    EXPECT_GE(found, visible - 3) << "frame " << k << ": " << found << " of " << visible;
+  }
+}
+
 // ---- Accuracy against the simulator's exact ground truth ---------------------------------------
 
 tools::Score score(const std::string& scenario_name, const std::string& detector,
