@@ -98,8 +98,8 @@ class BackgroundDetector final : public Detector {
   bool subtraction_clears(const History& h, const ImageView& image) const;
   // How far the scene moved across the line between `h` and the current frame, in line widths,
   // at the points where the line was last seen (or across the rows searched): the least (0 where
-  // it moved one way at some points and the other way at others), and the least toward the far
-  // side of the line (negative where it moved toward the near side).
+  // the line's points moved one way at some and the other way at others), and the least toward
+  // the far side of the line (negative where it moved toward the near side).
   struct Motion {
     double across = 0, toward_far = 0;
   };
