@@ -14,6 +14,7 @@
 #include <vector>
 
 #include <hwy/targets.h>
+#include <opencv2/imgproc.hpp>
 
 #include "allocation_counter.hpp"
 #include "pipeline/frontend_detectors.hpp"
@@ -789,6 +790,8 @@ TEST(Detectors, BackgroundKeepsTheLineWhereTheSceneTurnsUnderIt) {
   // widths toward its ends, one way on the left and the other on the right, and not at all at
   // the centre: an earlier frame that moved far from the line at every point where it was looked
   // at, a few columns apart, would lay its own line on this one's between them and take it away.
+  // (Turned the other way, the centre still loses 2 to 7 of its 25 columns in some frames, with
+  // or without that rule: a loss of its own, not mended.)
   tools::Scenario scenario;
   for (const tools::Scenario& s : tools::standard_scenarios(640, 512))
     if (s.name == "ambient") scenario = s;
@@ -801,23 +804,17 @@ TEST(Detectors, BackgroundKeepsTheLineWhereTheSceneTurnsUnderIt) {
   hal::SimGroundTruth truth;
   scene.ground_truth(0, true, truth);
   const double cx = scenario.scene.calibration.camera.cx, cy = scenario.scene.calibration.camera.cy;
-  // The unlit frame turned by `degrees` about the centre (bilinear, edges repeated), plus the
-  // laser's light where it was.
+  // The unlit frame turned by `degrees` about the centre (clockwise as the image shows it;
+  // bilinear, edges repeated), plus the laser's light where it was.
+  const cv::Mat unlit_image(kHeight, kWidth, CV_8UC1, unlit.data());
   auto turned = [&](double degrees, std::vector<std::uint8_t>& out) {
-    const double c = std::cos(degrees * M_PI / 180.0), s = std::sin(degrees * M_PI / 180.0);
-    auto at = [&](int u, int v) { return static_cast<double>(unlit[v * kWidth + u]); };
-    for (int y = 0; y < kHeight; ++y) {
-      for (int x = 0; x < kWidth; ++x) {
-        const double sx = std::clamp(cx + c * (x - cx) + s * (y - cy), 0.0, kWidth - 1.001);
-        const double sy = std::clamp(cy - s * (x - cx) + c * (y - cy), 0.0, kHeight - 1.001);
-        const int ix = static_cast<int>(sx), iy = static_cast<int>(sy);
-        const double fx = sx - ix, fy = sy - iy;
-        const double scene_light = (1 - fy) * ((1 - fx) * at(ix, iy) + fx * at(ix + 1, iy)) +
-                                   fy * ((1 - fx) * at(ix, iy + 1) + fx * at(ix + 1, iy + 1));
-        const int laser = lit[y * kWidth + x] - unlit[y * kWidth + x];
-        out[y * kWidth + x] =
-            static_cast<std::uint8_t>(std::clamp(std::lround(scene_light) + laser, 0L, 255L));
-      }
+    cv::Mat scene_light;
+    cv::warpAffine(unlit_image, scene_light,
+                   cv::getRotationMatrix2D(cv::Point2d(cx, cy), -degrees, 1.0), unlit_image.size(),
+                   cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+    for (std::size_t i = 0; i < out.size(); ++i) {
+      const int laser = lit[i] - unlit[i];
+      out[i] = static_cast<std::uint8_t>(std::clamp(scene_light.data[i] + laser, 0, 255));
     }
   };
   auto detector = make_detector("background", options_for_640x512(scenario));
